@@ -1,0 +1,170 @@
+"""Pinhole camera model, depth units and robust depth look-up.
+
+Frames: 3-D points are in the camera optical frame (x right, y down, z forward, metres), as in
+`sensor_msgs/CameraInfo`. Pixel (u, v) is column, row, with (0, 0) the centre of the top-left
+pixel. Depth images inside `core` are float32 metres with NaN where there is no reading; use
+`depth_to_metres` at the boundary (REP-118: `16UC1` millimetres or `32FC1` metres, 0 or NaN =
+no reading).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+
+# CAD-60 / OpenNI constants at 320x240 (the dataset's README; focal lengths double at 640x480).
+CAD60_FX = 285.171
+CAD60_FY = 285.117
+CAD60_CX = 160.0
+CAD60_CY = 120.0
+
+
+@dataclass(frozen=True)
+class Intrinsics:
+    """Pinhole intrinsics of an undistorted image (pixels)."""
+
+    fx: float
+    fy: float
+    cx: float
+    cy: float
+    width: int
+    height: int
+
+    def __post_init__(self) -> None:
+        if not (self.fx > 0 and self.fy > 0):
+            raise ValueError(f'focal lengths must be positive, got fx={self.fx}, fy={self.fy}')
+        if self.width <= 0 or self.height <= 0:
+            raise ValueError(f'image size must be positive, got {self.width}x{self.height}')
+
+    @property
+    def k(self) -> NDArray[np.float64]:
+        """The 3x3 camera matrix K."""
+        return np.array([[self.fx, 0.0, self.cx], [0.0, self.fy, self.cy], [0.0, 0.0, 1.0]])
+
+    def scaled(self, width: int, height: int) -> Intrinsics:
+        """The same camera at another resolution."""
+        sx, sy = width / self.width, height / self.height
+        return Intrinsics(self.fx * sx, self.fy * sy, self.cx * sx, self.cy * sy, width, height)
+
+
+def cad60_intrinsics(width: int = 320, height: int = 240) -> Intrinsics:
+    """The OpenNI perspective model used by CAD-60, at `width` x `height`."""
+    return Intrinsics(CAD60_FX, CAD60_FY, CAD60_CX, CAD60_CY, 320, 240).scaled(width, height)
+
+
+def project(points: NDArray[np.floating], intrinsics: Intrinsics) -> NDArray[np.float64]:
+    """Project 3-D points to pixels.
+
+    Parameters
+    ----------
+    points : (N, 3) float, metres, optical frame.
+    intrinsics : the camera.
+
+    Returns
+    -------
+    (N, 2) float64 pixel (u, v); NaN for points that are NaN or not in front of the camera.
+    """
+    p = np.asarray(points, dtype=np.float64).reshape(-1, 3)
+    z = p[:, 2]
+    with np.errstate(invalid='ignore', divide='ignore'):
+        front = z > 0
+        u = np.where(front, intrinsics.cx + intrinsics.fx * p[:, 0] / z, np.nan)
+        v = np.where(front, intrinsics.cy + intrinsics.fy * p[:, 1] / z, np.nan)
+    return np.stack([u, v], axis=1)
+
+
+def backproject(uv: NDArray[np.floating], depth_m: NDArray[np.floating],
+                intrinsics: Intrinsics) -> NDArray[np.float64]:
+    """Lift pixels with depth to 3-D points.
+
+    Parameters
+    ----------
+    uv : (N, 2) float pixel (u, v).
+    depth_m : (N,) float, metres along the optical axis (z); NaN or <= 0 = unknown.
+    intrinsics : the camera.
+
+    Returns
+    -------
+    (N, 3) float64 metres, optical frame; NaN rows where the depth is unknown.
+    """
+    uv = np.asarray(uv, dtype=np.float64).reshape(-1, 2)
+    z = np.asarray(depth_m, dtype=np.float64).reshape(-1)
+    if len(z) != len(uv):
+        raise ValueError(f'{len(uv)} pixels but {len(z)} depths')
+    z = np.where(z > 0, z, np.nan)
+    x = (uv[:, 0] - intrinsics.cx) * z / intrinsics.fx
+    y = (uv[:, 1] - intrinsics.cy) * z / intrinsics.fy
+    return np.stack([x, y, z], axis=1)
+
+
+def depth_to_metres(depth: NDArray) -> NDArray[np.float32]:
+    """Convert a depth image to float32 metres with NaN for no reading.
+
+    Parameters
+    ----------
+    depth : (H, W) uint16 millimetres (0 = no reading), or float32/float64 metres (0 or NaN =
+        no reading), as REP-118's `16UC1` and `32FC1`.
+    """
+    depth = np.asarray(depth)
+    if depth.ndim != 2:
+        raise ValueError(f'depth image must be 2-D, got shape {depth.shape}')
+    if depth.dtype == np.uint16:
+        out = depth.astype(np.float32) * np.float32(0.001)
+        out[depth == 0] = np.nan
+        return out
+    if depth.dtype in (np.float32, np.float64):
+        out = depth.astype(np.float32, copy=True)
+        out[~(out > 0)] = np.nan  # 0, negative, NaN; +inf (too far) stays inf -> see below
+        out[np.isinf(out)] = np.nan
+        return out
+    raise ValueError(f'depth must be uint16 millimetres or float metres, got dtype {depth.dtype}')
+
+
+def depth_to_millimetres(depth_m: NDArray[np.floating]) -> NDArray[np.uint16]:
+    """Convert float metres (NaN = no reading) to uint16 millimetres (0 = no reading)."""
+    d = np.asarray(depth_m, dtype=np.float64)
+    mm = np.where(np.isfinite(d) & (d > 0), np.rint(d * 1000.0), 0.0)
+    return np.clip(mm, 0, 65535).astype(np.uint16)
+
+
+def robust_depth(depth_m: NDArray[np.floating], uv: NDArray[np.floating], *,
+                 radius: int = 3, mask: NDArray[np.bool_] | None = None) -> NDArray[np.float64]:
+    """Median depth of the valid pixels in a small window around each pixel.
+
+    Holes (NaN) are ignored, and when a foreground `mask` is given only the person's pixels
+    count, so that joints on an edge do not fall into the background.
+
+    Parameters
+    ----------
+    depth_m : (H, W) float, metres, NaN = no reading.
+    uv : (N, 2) float pixel (u, v); NaN rows give NaN.
+    radius : half-size of the square window, pixels.
+    mask : (H, W) bool, optional; True = person.
+
+    Returns
+    -------
+    (N,) float64 metres; NaN where the window holds no valid pixel or uv is outside the image.
+    """
+    if radius < 0:
+        raise ValueError(f'radius must be >= 0, got {radius}')
+    depth_m = np.asarray(depth_m)
+    h, w = depth_m.shape
+    uv = np.asarray(uv, dtype=np.float64).reshape(-1, 2)
+    out = np.full(len(uv), np.nan)
+    for i, (u, v) in enumerate(uv):
+        if not (np.isfinite(u) and np.isfinite(v)):
+            continue
+        c, r = int(round(u)), int(round(v))
+        if not (0 <= c < w and 0 <= r < h):
+            continue
+        r0, r1, c0, c1 = max(r - radius, 0), min(r + radius + 1, h), max(c - radius, 0), \
+            min(c + radius + 1, w)
+        window = depth_m[r0:r1, c0:c1]
+        valid = np.isfinite(window) & (window > 0)
+        if mask is not None:
+            valid &= mask[r0:r1, c0:c1]
+        if valid.any():
+            out[i] = float(np.median(window[valid]))
+    return out

@@ -1,0 +1,157 @@
+"""Pose estimation metrics of the paper's tables (after Yang & Ramanan, PAMI 2013).
+
+- PCK: a predicted joint is correct when it lies within `alpha * max(h, w)` of the ground
+  truth, h and w being the size of the tight box around the frame's visible ground-truth
+  joints. A missing prediction (NaN) counts as wrong.
+- APK: each predicted joint is a detection with a score; detections are sorted by score and a
+  detection is a true positive when within the same distance of its ground truth, otherwise a
+  false positive. Average precision over the precision-recall curve (all points, VOC style),
+  recall relative to the number of visible ground-truth joints.
+- Error: mean pixel distance to the ground truth, over the joints that were predicted.
+
+Left and right joints are pooled into groups (`skeleton.JOINT_GROUPS`) and the average is taken
+over the groups of the paper's tables that are present.
+"""
+
+from __future__ import annotations
+
+import warnings
+
+import numpy as np
+from numpy.typing import NDArray
+
+from pose4d_ros.core.skeleton import JOINT_GROUPS, TABLE_GROUPS
+
+
+def reference_size(gt: NDArray[np.floating], visible: NDArray[np.bool_]) -> NDArray[np.float64]:
+    """max(h, w) of the tight box around each frame's visible ground-truth joints.
+
+    Parameters
+    ----------
+    gt : (F, J, 2) float pixels.
+    visible : (F, J) bool.
+
+    Returns
+    -------
+    (F,) float64 pixels; NaN for frames without two visible joints.
+    """
+    gt = np.asarray(gt, dtype=np.float64)
+    vis = np.asarray(visible, dtype=bool) & np.isfinite(gt).all(axis=2)
+    pts = np.where(vis[..., None], gt, np.nan)
+    with warnings.catch_warnings():
+        warnings.simplefilter('ignore', RuntimeWarning)  # all-NaN frames
+        span = np.nanmax(pts, axis=1) - np.nanmin(pts, axis=1)
+    size = np.max(span, axis=1)
+    size[vis.sum(axis=1) < 2] = np.nan
+    return size
+
+
+def _distances(pred: NDArray, gt: NDArray) -> NDArray[np.float64]:
+    d = np.asarray(pred, np.float64) - np.asarray(gt, np.float64)
+    return np.hypot(d[..., 0], d[..., 1])
+
+
+def _check(pred: NDArray, gt: NDArray, visible: NDArray) -> None:
+    if np.shape(pred) != np.shape(gt) or np.shape(gt)[-1:] != (2,) or np.ndim(gt) != 3:
+        raise ValueError(f'pred {np.shape(pred)} and gt {np.shape(gt)} must both be (F, J, 2)')
+    if np.shape(visible) != np.shape(gt)[:2]:
+        raise ValueError(f'visible {np.shape(visible)} must be (F, J) = {np.shape(gt)[:2]}')
+
+
+def correct(pred: NDArray, gt: NDArray, visible: NDArray, *, alpha: float = 0.1
+            ) -> tuple[NDArray[np.bool_], NDArray[np.bool_]]:
+    """Per-joint correctness under the PCK rule.
+
+    Returns
+    -------
+    hit : (F, J) bool, prediction within `alpha * size` of the ground truth.
+    counted : (F, J) bool, the ground truth is visible in a frame with a reference size.
+    """
+    _check(pred, gt, visible)
+    size = reference_size(gt, visible)
+    counted = np.asarray(visible, bool) & np.isfinite(gt).all(axis=2) & np.isfinite(size)[:, None]
+    with np.errstate(invalid='ignore'):
+        hit = _distances(pred, gt) <= alpha * size[:, None]
+    return hit & counted, counted
+
+
+def average_precision(scores: NDArray, true_positive: NDArray[np.bool_], n_positives: int
+                      ) -> float:
+    """All-point interpolated average precision of scored detections, in [0, 1]."""
+    if n_positives <= 0:
+        return float('nan')
+    order = np.argsort(-np.asarray(scores, np.float64), kind='stable')
+    tp = np.asarray(true_positive, bool)[order]
+    ctp = np.cumsum(tp)
+    recall = ctp / n_positives
+    precision = ctp / np.arange(1, len(tp) + 1)
+    # precision envelope, then area under the step curve
+    mrec = np.concatenate([[0.0], recall, [recall[-1] if len(recall) else 0.0]])
+    mpre = np.concatenate([[0.0], precision, [0.0]])
+    mpre = np.maximum.accumulate(mpre[::-1])[::-1]
+    steps = np.nonzero(mrec[1:] != mrec[:-1])[0]
+    return float(np.sum((mrec[steps + 1] - mrec[steps]) * mpre[steps + 1]))
+
+
+def score_groups(pred: NDArray, scores: NDArray, gt: NDArray, visible: NDArray,
+                 names: list[str] | tuple[str, ...], *, alphas: tuple[float, ...] = (0.1, 0.2)
+                 ) -> dict[str, dict[str, float]]:
+    """The paper's table for one method: PCK, APK and pixel error per joint group.
+
+    Parameters
+    ----------
+    pred : (F, J, 2) float predicted pixels, NaN = not predicted.
+    scores : (F, J) float detection scores (higher = more confident), for APK.
+    gt : (F, J, 2) float ground-truth pixels, same joint order as `names`.
+    visible : (F, J) bool, ground truth visible / labelled.
+    names : J joint names (skeleton names; see `skeleton.JOINT_GROUPS`).
+    alphas : PCK thresholds; the first is the main one (`pck`, `apk`), each also gives
+        `pck@<alpha>`.
+
+    Returns
+    -------
+    {'pck': {group: percent, ..., 'average': percent}, 'pck@0.2': {...}, 'apk': {...},
+    'error_px': {...}} over the groups present in `names`; `average` is over the paper's
+    table groups present (head, shoulder, wrist, hip, ankle).
+    """
+    _check(pred, gt, visible)
+    scores = np.asarray(scores, np.float64)
+    if scores.shape != np.shape(gt)[:2]:
+        raise ValueError(f'scores {scores.shape} must be (F, J) = {np.shape(gt)[:2]}')
+    if len(names) != np.shape(gt)[1]:
+        raise ValueError(f'{len(names)} names for {np.shape(gt)[1]} joints')
+    predicted = np.isfinite(np.asarray(pred, np.float64)).all(axis=2)
+    dist = _distances(pred, gt)
+    groups = {g: [names.index(n) for n in members if n in names]
+              for g, members in JOINT_GROUPS.items()}
+    groups = {g: idx for g, idx in groups.items() if idx}
+
+    table: dict[str, dict[str, float]] = {}
+    for k, alpha in enumerate(alphas):
+        hit, counted = correct(pred, gt, visible, alpha=alpha)
+        pck = {g: 100.0 * float(hit[:, idx].sum()) / max(int(counted[:, idx].sum()), 1)
+               for g, idx in groups.items()}
+        table['pck' if k == 0 else f'pck@{alpha:g}'] = _with_average(pck)
+        if k == 0:
+            apk = {}
+            for g, idx in groups.items():
+                det = predicted[:, idx] & np.isfinite(scores[:, idx])
+                apk[g] = 100.0 * average_precision(
+                    scores[:, idx][det], hit[:, idx][det], int(counted[:, idx].sum()))
+            table['apk'] = _with_average(apk)
+    err = {}
+    for g, idx in groups.items():
+        ok = predicted[:, idx] & np.asarray(visible, bool)[:, idx] & np.isfinite(dist[:, idx])
+        err[g] = float(dist[:, idx][ok].mean()) if ok.any() else float('nan')
+    table['error_px'] = _with_average(err)
+    # main alpha first for readers: pck, pck@0.2, apk, error_px
+    if len(alphas) > 1:
+        table = {'pck': table['pck'], **{k: v for k, v in table.items() if k != 'pck'}}
+    return table
+
+
+def _with_average(values: dict[str, float]) -> dict[str, float]:
+    core = [values[g] for g in TABLE_GROUPS if g in values and np.isfinite(values[g])]
+    out = {g: values[g] for g in JOINT_GROUPS if g in values}
+    out['average'] = float(np.mean(core)) if core else float('nan')
+    return out

@@ -1,0 +1,1 @@
+"""Shipped, trained part models (.npz) and their training notes."""
