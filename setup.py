@@ -13,6 +13,8 @@ PACKAGE = 'pose4d_ros'
 # One executable per node, plus the offline `pose4d` command. `ros2 run pose4d_ros <name>`.
 EXECUTABLES = {
     'pose4d': 'pose4d_ros.cli.main:main',
+    'replay': 'pose4d_ros.nodes.replay:main',
+    'recorder': 'pose4d_ros.nodes.recorder:main',
 }
 
 setup(

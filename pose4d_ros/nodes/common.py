@@ -1,0 +1,111 @@
+"""What every pose4d node shares: its `main()`, throttled error counting, and diagnostics.
+
+Each stage publishes a `diagnostic_msgs/DiagnosticArray` on `/diagnostics` once a second (the
+diagnostics aggregator listens on that absolute name): frames in and out, rate, processing
+time p50/p95, latency from the input stamp p50/p95, frames dropped and bad inputs.
+"""
+
+from __future__ import annotations
+
+import time
+from collections import deque
+from collections.abc import Callable
+
+import numpy as np
+import rclpy
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+from rclpy.executors import ExternalShutdownException
+from rclpy.node import Node
+from std_msgs.msg import Header
+
+from pose4d_ros.nodes.params import ParameterError
+
+DIAGNOSTICS_TOPIC = '/diagnostics'
+
+
+def run(factory: Callable[[], Node], args: list[str] | None = None,
+        body: Callable[[Node], None] = rclpy.spin) -> int:
+    """Jazzy's main(): init, spin (or `body`), clean shutdown on Ctrl-C/SIGTERM.
+
+    Returns the exit status: 0, or 2 when a parameter was refused (logged as FATAL).
+    """
+    rclpy.init(args=args)
+    node = None
+    code = 0
+    try:
+        node = factory()
+        body(node)
+    except (KeyboardInterrupt, ExternalShutdownException):
+        pass
+    except ParameterError as exc:
+        rclpy.logging.get_logger('pose4d').fatal(str(exc))
+        code = 2
+    finally:
+        if node is not None:
+            close = getattr(node, 'close', None)
+            if close is not None:
+                close()
+            node.destroy_node()
+        rclpy.try_shutdown()
+    return code
+
+
+class StageMonitor:
+    """Counts and times one stage's frames and publishes them as diagnostics.
+
+    `frame(stamp_ns, processing_s)` after each processed frame; `dropped(n)` for frames skipped
+    on purpose; `bad_input(text)` for refused input (logged, throttled, counted).
+    """
+
+    def __init__(self, node: Node, stage: str, *, window: int = 300,
+                 period_s: float = 1.0) -> None:
+        self._node = node
+        self.stage = stage
+        self.frames = 0
+        self.dropped_frames = 0
+        self.bad_inputs = 0
+        self._proc: deque[float] = deque(maxlen=window)
+        self._latency: deque[float] = deque(maxlen=window)
+        self._times: deque[float] = deque(maxlen=window)
+        self._pub = node.create_publisher(DiagnosticArray, DIAGNOSTICS_TOPIC, 10)
+        self._timer = node.create_timer(period_s, self.publish)
+
+    def frame(self, stamp_ns: int, processing_s: float) -> None:
+        now = time.monotonic()
+        self.frames += 1
+        self._proc.append(processing_s)
+        self._times.append(now)
+        latency = (self._node.get_clock().now().nanoseconds - stamp_ns) * 1e-9
+        self._latency.append(latency)
+
+    def dropped(self, n: int = 1) -> None:
+        self.dropped_frames += n
+
+    def bad_input(self, text: str) -> None:
+        self.bad_inputs += 1
+        self._node.get_logger().warning(f'{text} ({self.bad_inputs} bad inputs so far)',
+                                        throttle_duration_sec=5.0)
+
+    def publish(self) -> None:
+        rate = 0.0
+        if len(self._times) >= 2 and self._times[-1] > self._times[0]:
+            rate = (len(self._times) - 1) / (self._times[-1] - self._times[0])
+        values = {'frames': self.frames, 'dropped': self.dropped_frames,
+                  'bad_inputs': self.bad_inputs, 'rate_hz': round(rate, 2)}
+        for key, data in (('processing_ms', self._proc), ('latency_ms', self._latency)):
+            if data:
+                p50, p95 = np.percentile(np.asarray(data) * 1e3, [50, 95])
+                values[f'{key}_p50'] = round(float(p50), 2)
+                values[f'{key}_p95'] = round(float(p95), 2)
+        level = DiagnosticStatus.OK
+        message = 'ok'
+        if self.bad_inputs or self.dropped_frames:
+            level = DiagnosticStatus.WARN
+            message = f'{self.bad_inputs} bad inputs, {self.dropped_frames} dropped'
+        status = DiagnosticStatus(
+            level=level, name=f'pose4d: {self.stage}', message=message,
+            hardware_id=self._node.get_fully_qualified_name(),
+            values=[KeyValue(key=k, value=str(v)) for k, v in values.items()])
+        self._pub.publish(DiagnosticArray(
+            header=Header(stamp=self._node.get_clock().now().to_msg()), status=[status]))
+

@@ -1,0 +1,167 @@
+"""The one place where messages become arrays and back (after cv_bridge and image_geometry).
+
+- `sensor_msgs/Image` <-> numpy: row stride (`step`) and endianness honoured; colour as RGB
+  uint8; depth per REP-118: `16UC1`/`mono16` millimetres or `32FC1` metres, 0/NaN = no reading,
+  returned in the core's convention (float32 metres, NaN = no reading) by `depth_from_msg`.
+- `sensor_msgs/CameraInfo` <-> `core.camera.Intrinsics`.
+- `pose4d_msgs/JointArray` <-> `core.joints.JointSet`.
+- Stamps: `builtin_interfaces/Time` <-> integer nanoseconds.
+"""
+
+from __future__ import annotations
+
+import array
+import importlib
+import sys
+
+import numpy as np
+from builtin_interfaces.msg import Time
+from geometry_msgs.msg import Point
+from numpy.typing import NDArray
+from pose4d_msgs.msg import Joint, JointArray
+from sensor_msgs.msg import CameraInfo, Image
+from std_msgs.msg import Header
+
+from pose4d_ros.core.camera import Intrinsics, depth_to_metres
+from pose4d_ros.core.joints import JointSet
+
+# encoding -> (dtype, channels)
+_ENCODINGS: dict[str, tuple[str, int]] = {
+    'rgb8': ('u1', 3), 'bgr8': ('u1', 3), 'rgba8': ('u1', 4), 'bgra8': ('u1', 4),
+    'mono8': ('u1', 1), '8UC1': ('u1', 1), '8UC3': ('u1', 3),
+    'mono16': ('u2', 1), '16UC1': ('u2', 1), '32FC1': ('f4', 1),
+}
+
+
+def stamp_to_ns(stamp: Time) -> int:
+    return int(stamp.sec) * 1_000_000_000 + int(stamp.nanosec)
+
+
+def ns_to_stamp(ns: int) -> Time:
+    return Time(sec=int(ns // 1_000_000_000), nanosec=int(ns % 1_000_000_000))
+
+
+def image_to_array(msg: Image) -> NDArray:
+    """Pixels of an Image as a (H, W) or (H, W, C) array (a copy), in the message's encoding.
+
+    Raises ValueError naming the encoding or size that is wrong.
+    """
+    if msg.encoding not in _ENCODINGS:
+        raise ValueError(f'unsupported image encoding {msg.encoding!r} '
+                         f'(supported: {", ".join(_ENCODINGS)})')
+    kind, channels = _ENCODINGS[msg.encoding]
+    dtype = np.dtype(kind).newbyteorder('>' if msg.is_bigendian else '<')
+    h, w, step = int(msg.height), int(msg.width), int(msg.step)
+    row = w * channels * dtype.itemsize
+    if h == 0 or w == 0:
+        raise ValueError(f'empty image ({w}x{h})')
+    if step < row:
+        raise ValueError(f'image step {step} is smaller than a row ({row} bytes, {w}x{channels} '
+                         f'{msg.encoding})')
+    buf = np.frombuffer(msg.data, dtype=np.uint8)
+    if buf.size < step * h:
+        raise ValueError(f'image data has {buf.size} bytes, expected {step * h} '
+                         f'({h} rows of {step})')
+    rows = buf[: step * h].reshape(h, step)[:, :row]
+    out = np.ascontiguousarray(rows).view(dtype).reshape((h, w, channels) if channels > 1
+                                                         else (h, w))
+    return out.astype(dtype.newbyteorder('='), copy=False) if not dtype.isnative else out
+
+
+def color_from_msg(msg: Image) -> NDArray[np.uint8]:
+    """Colour image as (H, W, 3) uint8 RGB."""
+    img = image_to_array(msg)
+    enc = msg.encoding
+    if enc in ('rgb8', '8UC3'):
+        return img
+    if enc == 'bgr8':
+        return np.ascontiguousarray(img[..., ::-1])
+    if enc == 'rgba8':
+        return np.ascontiguousarray(img[..., :3])
+    if enc == 'bgra8':
+        return np.ascontiguousarray(img[..., 2::-1])
+    if enc in ('mono8', '8UC1'):
+        return np.repeat(img[..., None], 3, axis=2)
+    raise ValueError(f'colour image has a depth encoding {enc!r}')
+
+
+def depth_from_msg(msg: Image) -> NDArray[np.float32]:
+    """Depth image as (H, W) float32 metres, NaN = no reading (16UC1/mono16 mm or 32FC1 m)."""
+    if msg.encoding not in ('16UC1', 'mono16', '32FC1'):
+        raise ValueError(f'depth image encoding must be 16UC1 (mm) or 32FC1 (m), '
+                         f'got {msg.encoding!r}')
+    return depth_to_metres(image_to_array(msg))
+
+
+def array_to_image(img: NDArray, encoding: str, header: Header) -> Image:
+    """An Image message holding `img` (a copy), rows packed (step = width x pixel size)."""
+    if encoding not in _ENCODINGS:
+        raise ValueError(f'unsupported image encoding {encoding!r}')
+    kind, channels = _ENCODINGS[encoding]
+    img = np.ascontiguousarray(img, dtype=np.dtype(kind))
+    if img.ndim != (3 if channels > 1 else 2) or (channels > 1 and img.shape[2] != channels):
+        raise ValueError(f'array of shape {img.shape} does not fit encoding {encoding}')
+    msg = Image(header=header, height=img.shape[0], width=img.shape[1], encoding=encoding,
+                is_bigendian=int(sys.byteorder == 'big'),
+                step=img.shape[1] * channels * img.dtype.itemsize)
+    msg.data = array.array('B', img.tobytes())
+    return msg
+
+
+def intrinsics_from_msg(msg: CameraInfo) -> Intrinsics:
+    """Pinhole intrinsics from CameraInfo's K (rectified images assumed)."""
+    k = msg.k
+    if k[0] <= 0 or k[4] <= 0:
+        raise ValueError(f'camera_info K has non-positive focal length (fx={k[0]}, fy={k[4]}); '
+                         'is the camera calibrated?')
+    return Intrinsics(float(k[0]), float(k[4]), float(k[2]), float(k[5]), int(msg.width),
+                      int(msg.height))
+
+
+def intrinsics_to_msg(intr: Intrinsics, header: Header) -> CameraInfo:
+    fx, fy, cx, cy = intr.fx, intr.fy, intr.cx, intr.cy
+    return CameraInfo(
+        header=header, width=intr.width, height=intr.height, distortion_model='plumb_bob',
+        d=[0.0] * 5, k=[fx, 0.0, cx, 0.0, fy, cy, 0.0, 0.0, 1.0],
+        r=[1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0],
+        p=[fx, 0.0, cx, 0.0, 0.0, fy, cy, 0.0, 0.0, 0.0, 1.0, 0.0])
+
+
+def joints_to_msg(joints: JointSet, header: Header) -> JointArray:
+    msg = JointArray(header=header, track_id=int(joints.track_id), score=float(joints.score))
+    out = []
+    for i, name in enumerate(joints.names):
+        x, y, z = (float(c) for c in joints.xyz[i])
+        out.append(Joint(
+            name=name, u=float(joints.uv[i, 0]), v=float(joints.uv[i, 1]),
+            position=Point(x=x, y=y, z=z), confidence=float(joints.confidence[i]),
+            source=int(joints.source[i]),
+            position_covariance=joints.covariance[i].reshape(9).tolist()))
+    msg.joints = out
+    return msg
+
+
+def joints_from_msg(msg: JointArray) -> JointSet:
+    js = msg.joints
+    n = len(js)
+    uv = np.array([[j.u, j.v] for j in js], dtype=np.float64).reshape(n, 2)
+    xyz = np.array([[j.position.x, j.position.y, j.position.z] for j in js],
+                   dtype=np.float64).reshape(n, 3)
+    cov = np.array([np.asarray(j.position_covariance, dtype=np.float64) for j in js]
+                   ).reshape(n, 3, 3)
+    return JointSet(tuple(j.name for j in js), uv, xyz,
+                    confidence=np.array([j.confidence for j in js], dtype=np.float32),
+                    source=np.array([j.source for j in js], dtype=np.uint8), covariance=cov,
+                    score=float(msg.score), track_id=int(msg.track_id))
+
+
+def message_type(name: str) -> type:
+    """The rclpy message class of a type name like 'sensor_msgs/msg/Image'."""
+    parts = name.split('/')
+    if len(parts) != 3 or parts[1] != 'msg':
+        raise ValueError(f'not a message type name: {name!r} (expected pkg/msg/Name)')
+    try:
+        module = importlib.import_module(f'{parts[0]}.msg')
+        return getattr(module, parts[2])
+    except (ImportError, AttributeError):
+        raise ValueError(f'message type {name} is not installed') from None

@@ -1,0 +1,116 @@
+"""Declared, described and validated node parameters.
+
+Each node lists its parameters once as `Param` specs; `declare` declares them with a
+`ParameterDescriptor` (description, range, read-only), validates the start-up values and returns
+them, and refuses bad runtime changes of the writable ones with a message that names the
+parameter, the value and the rule. `config/<node>.yaml` holds the same defaults (a test checks).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+from typing import Any
+
+from rcl_interfaces.msg import (
+    FloatingPointRange,
+    IntegerRange,
+    ParameterDescriptor,
+    SetParametersResult,
+)
+from rclpy.node import Node
+from rclpy.parameter import Parameter
+
+Value = bool | int | float | str | list[str]
+
+
+class ParameterError(ValueError):
+    """A parameter value was refused; the message names the parameter and the rule."""
+
+
+@dataclass(frozen=True)
+class Param:
+    """One node parameter.
+
+    `range` is inclusive (numbers); `choices` restricts strings; `check` is an extra rule that
+    returns an error text or None. Read-only parameters are read once at start-up; the others
+    may change at runtime (validated).
+    """
+
+    name: str
+    default: Value
+    description: str
+    range: tuple[float, float] | None = None
+    choices: tuple[str, ...] | None = None
+    read_only: bool = True
+    check: Callable[[Any], str | None] | None = None
+
+    def descriptor(self) -> ParameterDescriptor:
+        text = self.description
+        if self.choices:
+            text += f' One of: {", ".join(self.choices)}.'
+        d = ParameterDescriptor(description=text, read_only=self.read_only)
+        if self.range is not None:
+            lo, hi = self.range
+            if isinstance(self.default, bool):
+                raise TypeError(f'{self.name}: a bool parameter takes no range')
+            if isinstance(self.default, int):
+                d.integer_range = [IntegerRange(from_value=int(lo), to_value=int(hi), step=0)]
+            else:
+                d.floating_point_range = [FloatingPointRange(from_value=float(lo),
+                                                             to_value=float(hi), step=0.0)]
+        if self.choices:
+            d.additional_constraints = f'one of {list(self.choices)}'
+        return d
+
+    def validate(self, value: Any) -> str | None:
+        """Why `value` is refused, or None if it is fine."""
+        if self.range is not None and not (self.range[0] <= value <= self.range[1]):
+            return f'{value!r} is outside [{self.range[0]}, {self.range[1]}]'
+        if self.choices is not None and value not in self.choices:
+            return f'{value!r} is not one of {list(self.choices)}'
+        if self.check is not None:
+            return self.check(value)
+        return None
+
+
+def declare(node: Node, params: Sequence[Param],
+            on_change: Callable[[dict[str, Any]], None] | None = None) -> dict[str, Any]:
+    """Declare and validate `params` on `node`; return {name: value}.
+
+    Raises ParameterError for a start-up value that breaks a rule (rclpy's own type and range
+    checks raise their exceptions, which `common.run` reports the same way). Runtime changes of
+    writable parameters are validated; accepted ones are passed to `on_change`.
+    """
+    values: dict[str, Any] = {}
+    specs = {p.name: p for p in params}
+    for p in params:
+        try:
+            param = node.declare_parameter(p.name, p.default, p.descriptor())
+        except Exception as exc:  # rclpy's InvalidParameterValue/TypeException
+            raise ParameterError(f'parameter {p.name}: {exc}') from None
+        value = param.value
+        if isinstance(value, list | tuple) and not isinstance(value, str):
+            value = list(value)
+        problem = p.validate(value)
+        if problem:
+            raise ParameterError(f'parameter {p.name}: {problem}')
+        values[p.name] = value
+
+    def _on_set(changes: list[Parameter]) -> SetParametersResult:
+        accepted: dict[str, Any] = {}
+        for change in changes:
+            spec = specs.get(change.name)
+            if spec is None:
+                continue
+            problem = spec.validate(change.value)
+            if problem:
+                return SetParametersResult(successful=False,
+                                           reason=f'parameter {change.name}: {problem}')
+            accepted[change.name] = change.value
+        if accepted and on_change is not None:
+            on_change(accepted)
+        return SetParametersResult(successful=True)
+
+    node.add_on_set_parameters_callback(_on_set)
+    return values

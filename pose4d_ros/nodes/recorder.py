@@ -1,0 +1,112 @@
+"""`recorder`: write named topics to an mcap rosbag2, losing nothing.
+
+Finds each topic's type and its publishers' QoS on the graph (like `ros2 bag record`: reliable
+only when every publisher is reliable), subscribes to the raw CDR bytes and writes them with
+their receive time. On SIGINT or SIGTERM the bag is closed cleanly and moved into place; until
+then it lives under a hidden temporary name, so a bag under the final name is always complete.
+
+Subscriptions
+    every topic in `recorder.topics` (relative names; namespaces and remapping apply)
+
+Parameters (config/recorder.yaml)
+    recorder.output, recorder.topics, recorder.storage, recorder.compress, recorder.depth
+"""
+
+from __future__ import annotations
+
+import os
+from typing import Any
+
+import rclpy
+from rclpy.node import Node
+from rclpy.qos import DurabilityPolicy, ReliabilityPolicy
+
+from pose4d_ros.datasets import bag
+from pose4d_ros.nodes import qos
+from pose4d_ros.nodes.common import run
+from pose4d_ros.nodes.convert import message_type
+from pose4d_ros.nodes.params import Param, ParameterError, declare
+
+
+def _new_path(path: str) -> str | None:
+    if not path:
+        return 'no output given (set recorder.output:=/path/to/new_bag)'
+    if os.path.exists(path):
+        return f'{path!r} exists already; the recorder never overwrites a bag'
+    parent = os.path.dirname(os.path.abspath(path))
+    return None if os.path.isdir(parent) else f'{parent!r}: no such directory'
+
+
+PARAMS = (
+    Param('recorder.output', '', 'Directory of the new rosbag2 to write; must not exist.',
+          check=_new_path),
+    Param('recorder.topics', ['pose4d/skeleton'], 'Topics to record (relative names).',
+          check=lambda v: None if v and all(v) else 'give at least one topic name'),
+    Param('recorder.storage', 'mcap', 'rosbag2 storage plugin.', choices=('mcap', 'sqlite3')),
+    Param('recorder.compress', True, 'zstd chunk compression (mcap).'),
+    Param('recorder.depth', 1000, 'Subscription queue depth, messages.', range=(1, 100000)),
+)
+
+
+class RecorderNode(Node):
+    """Bag recorder. Subscribes to `recorder.topics`; see the module docstring."""
+
+    def __init__(self) -> None:
+        super().__init__('recorder')
+        p = declare(self, PARAMS)
+        self.depth = p['recorder.depth']
+        self.topics = [self.resolve_topic_name(t.lstrip('/')) for t in p['recorder.topics']]
+        try:
+            self.writer = bag.BagWriter(p['recorder.output'], storage=p['recorder.storage'],
+                                        compress=p['recorder.compress'])
+        except (OSError, ValueError) as exc:
+            raise ParameterError(f'parameter recorder.output: {exc}') from None
+        self.subscriptions_: dict[str, Any] = {}
+        self.received = 0
+        self.closed = False
+        self.timer = self.create_timer(0.2, self.discover)
+        self.get_logger().info(f'recording {", ".join(self.topics)} to {self.writer.path}')
+        self.discover()
+
+    def discover(self) -> None:
+        """Subscribe to each wanted topic once its type is known on the graph."""
+        types = dict(self.get_topic_names_and_types())
+        for topic in self.topics:
+            if topic in self.subscriptions_ or topic not in types:
+                continue
+            msgtype = types[topic][0]
+            pubs = self.get_publishers_info_by_topic(topic)
+            if not pubs:
+                continue
+            profile = qos.matching_subscription([i.qos_profile for i in pubs], self.depth)
+            offered = bag.make_qos(
+                reliable=profile.reliability == ReliabilityPolicy.RELIABLE,
+                depth=pubs[0].qos_profile.depth or 10,
+                transient_local=profile.durability == DurabilityPolicy.TRANSIENT_LOCAL)
+            self.writer.add_topic(topic, msgtype, [offered])
+            self.subscriptions_[topic] = self.create_subscription(
+                message_type(msgtype), topic, self._writer_for(topic), profile, raw=True)
+            self.get_logger().info(f'subscribed to {topic} [{msgtype}] '
+                                   f'({profile.reliability.name.lower()})')
+        if len(self.subscriptions_) == len(self.topics):
+            self.timer.cancel()
+
+    def _writer_for(self, topic: str):
+        def write(data: bytes) -> None:
+            self.writer.write(topic, self.get_clock().now().nanoseconds, data)
+            self.received += 1
+        return write
+
+    def close(self) -> None:
+        if self.closed:
+            return
+        self.closed = True
+        path = self.writer.close()
+        counts = ', '.join(f'{t} {n}' for t, n in self.writer.counts.items()) or 'nothing'
+        # the context may be shut down already (signal): log without rosout
+        rclpy.logging.get_logger(self.get_logger().name).info(
+            f'wrote {self.received} messages to {path}: {counts}')
+
+
+def main(args: list[str] | None = None) -> int:
+    return run(RecorderNode, args)

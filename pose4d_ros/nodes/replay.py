@@ -1,0 +1,161 @@
+"""`replay`: play a rosbag2 (mcap or sqlite3) as a camera driver would.
+
+Publishes each message's raw CDR bytes exactly as recorded, on its recorded topic with its
+recorded QoS, paced by the recorded (bag) timestamps at `replay.rate`. This is what stands in for
+the Kinect driver.
+
+Publications
+    every selected topic of the bag (names relative, so namespaces and remapping apply);
+    /clock (rosgraph_msgs/Clock) when `replay.publish_clock` is true.
+
+Parameters (config/replay.yaml)
+    replay.bag, replay.rate, replay.loop, replay.start_offset_s, replay.topics,
+    replay.publish_clock, replay.wait_for_subscribers, replay.wait_timeout_s
+"""
+
+from __future__ import annotations
+
+import fnmatch
+import os
+import time
+from typing import Any
+
+import rclpy
+from rclpy.duration import Duration
+from rclpy.node import Node
+from rclpy.qos import ReliabilityPolicy
+from rosgraph_msgs.msg import Clock
+
+from pose4d_ros.datasets import bag
+from pose4d_ros.nodes import qos
+from pose4d_ros.nodes.common import run
+from pose4d_ros.nodes.convert import message_type, ns_to_stamp
+from pose4d_ros.nodes.params import Param, ParameterError, declare
+
+
+def _exists(path: str) -> str | None:
+    if not path:
+        return 'no bag given (set replay.bag:=/path/to/bag)'
+    return None if os.path.exists(path) else f'{path!r}: no such bag'
+
+
+PARAMS = (
+    Param('replay.bag', '', 'Path of the rosbag2 directory (mcap or sqlite3) to play.',
+          check=_exists),
+    Param('replay.rate', 1.0, 'Playback speed factor; 1.0 = as recorded, 0 = as fast as '
+          'possible.', range=(0.0, 100.0)),
+    Param('replay.loop', False, 'Start again from the beginning when the bag ends.'),
+    Param('replay.start_offset_s', 0.0, 'Skip this many seconds at the start of the bag.',
+          range=(0.0, 1e6)),
+    Param('replay.topics', ['*'], 'Topics to play: names or shell patterns (camera/*), '
+          'without leading slash.'),
+    Param('replay.publish_clock', False, 'Publish /clock with the bag time of each message '
+          '(for use_sim_time).'),
+    Param('replay.wait_for_subscribers', 0, 'Before playing, wait until every played topic has '
+          'at least this many subscribers.', range=(0, 100)),
+    Param('replay.wait_timeout_s', 10.0, 'Longest wait for subscribers, seconds.',
+          range=(0.0, 3600.0)),
+)
+
+
+class ReplayNode(Node):
+    """Bag player. Publishes the bag's topics; see the module docstring."""
+
+    def __init__(self) -> None:
+        super().__init__('replay')
+        p = declare(self, PARAMS)
+        self.cfg: dict[str, Any] = p
+        self.path: str = p['replay.bag']
+        try:
+            infos = bag.topics(self.path)
+        except (OSError, ValueError) as exc:
+            raise ParameterError(f'parameter replay.bag: {exc}') from None
+        patterns = [t.lstrip('/') for t in p['replay.topics']]
+        self.selected = [name for name in infos
+                         if any(fnmatch.fnmatchcase(name.lstrip('/'), pat) for pat in patterns)]
+        if not self.selected:
+            raise ParameterError(f'parameter replay.topics: {patterns} match none of the bag\'s '
+                                 f'topics {sorted(infos)}')
+        self.publishers_: dict[str, Any] = {}
+        for name in self.selected:
+            info = infos[name]
+            profile = qos.from_bag(info.qos[0]) if info.qos else qos.OUTPUT_QOS
+            self.publishers_[name] = self.create_publisher(
+                message_type(info.msgtype), name.lstrip('/'), profile)
+        self.clock_pub = (self.create_publisher(Clock, '/clock', 10)
+                          if p['replay.publish_clock'] else None)
+        self.sent: dict[str, int] = dict.fromkeys(self.selected, 0)
+        self.get_logger().info(
+            f'replaying {self.path} at rate {p["replay.rate"]} '
+            f'(loop={p["replay.loop"]}, offset {p["replay.start_offset_s"]} s): '
+            + ', '.join(f'{n} [{infos[n].count}]' for n in self.selected))
+
+    def _sleep_until(self, deadline: float) -> None:
+        """Wait on the wall clock while still serving the node's services."""
+        while True:
+            remaining = deadline - time.monotonic()
+            if remaining <= 0:
+                return
+            rclpy.spin_once(self, timeout_sec=min(remaining, 0.05))
+
+    def wait_for_subscribers(self) -> bool:
+        need = self.cfg['replay.wait_for_subscribers']
+        if need <= 0:
+            return True
+        deadline = time.monotonic() + self.cfg['replay.wait_timeout_s']
+        while time.monotonic() < deadline:
+            if all(pub.get_subscription_count() >= need for pub in self.publishers_.values()):
+                return True
+            self._sleep_until(time.monotonic() + 0.05)
+        lacking = [n for n, pub in self.publishers_.items()
+                   if pub.get_subscription_count() < need]
+        self.get_logger().warning(f'playing although {lacking} have fewer than {need} '
+                                  'subscribers')
+        return False
+
+    def play_once(self) -> int:
+        """Play the bag once; returns the number of messages published."""
+        rate = self.cfg['replay.rate']
+        first_ns: int | None = None
+        start_wall = 0.0
+        count = 0
+        offset_ns = int(self.cfg['replay.start_offset_s'] * 1e9)
+        start_ns = None
+        for message in bag.read_messages(self.path, self.selected):
+            if first_ns is None:
+                first_ns = message.timestamp_ns
+                start_ns = first_ns + offset_ns
+                start_wall = time.monotonic()
+            if message.timestamp_ns < start_ns:
+                continue
+            if rate > 0:
+                self._sleep_until(start_wall + (message.timestamp_ns - start_ns) * 1e-9 / rate)
+            if self.clock_pub is not None:
+                self.clock_pub.publish(Clock(clock=ns_to_stamp(message.timestamp_ns)))
+            self.publishers_[message.topic].publish(message.data)
+            self.sent[message.topic] += 1
+            count += 1
+        return count
+
+    def play(self) -> None:
+        self.wait_for_subscribers()
+        t0 = time.monotonic()
+        rounds = 0
+        while rclpy.ok():
+            self.play_once()
+            rounds += 1
+            if not self.cfg['replay.loop']:
+                break
+        # Reliable subscribers must have everything before we go.
+        for pub in self.publishers_.values():
+            if pub.qos_profile.reliability == ReliabilityPolicy.RELIABLE:
+                pub.wait_for_all_acked(Duration(seconds=5))
+        total = sum(self.sent.values())
+        elapsed = time.monotonic() - t0
+        self.get_logger().info(
+            f'sent {total} messages in {elapsed:.2f} s ({rounds} pass(es)): '
+            + ', '.join(f'{n} {c}' for n, c in self.sent.items()))
+
+
+def main(args: list[str] | None = None) -> int:
+    return run(ReplayNode, args, body=ReplayNode.play)

@@ -1,0 +1,65 @@
+"""Test set-up shared by the whole suite.
+
+Before anything imports rclpy: DDS stays on this machine (ROS_AUTOMATIC_DISCOVERY_RANGE), and
+this test run gets a ROS_DOMAIN_ID of its own, held by a lock file, so parallel runs on the same
+machine cannot hear each other. AMENT_PREFIX_PATH defaults to this interpreter's prefix (the
+project venv), where `make setup` installed the packages.
+"""
+
+from __future__ import annotations
+
+import fcntl
+import os
+import sys
+import tempfile
+from pathlib import Path
+
+import pytest
+
+os.environ['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
+os.environ.setdefault('AMENT_PREFIX_PATH', sys.prefix)
+os.environ.setdefault('RCUTILS_COLORIZED_OUTPUT', '0')
+
+
+def _claim_domain_id() -> int:
+    """The first free domain id in 11..100 (ids held by other runs are skipped)."""
+    for domain in range(11, 101):
+        path = Path(tempfile.gettempdir()) / f'pose4d_ros_test_domain_{domain}.lock'
+        handle = path.open('a')
+        try:
+            fcntl.flock(handle, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except OSError:
+            handle.close()
+            continue
+        _held.append(handle)  # keep the lock for the life of this process
+        return domain
+    raise RuntimeError('no free ROS_DOMAIN_ID in 11..100 for the test run')
+
+
+_held: list = []
+if 'POSE4D_TEST_DOMAIN_ID' not in os.environ:
+    os.environ['POSE4D_TEST_DOMAIN_ID'] = str(_claim_domain_id())
+os.environ['ROS_DOMAIN_ID'] = os.environ['POSE4D_TEST_DOMAIN_ID']
+
+REPO = Path(__file__).resolve().parents[1]
+SHARED_DATA = REPO.parent / 'shared' / 'data'
+
+
+@pytest.fixture
+def shared_data() -> Path:
+    """../shared/data, or skip the test when this checkout has none."""
+    if not SHARED_DATA.is_dir():
+        pytest.skip(f'needs the shared data at {SHARED_DATA} (absent in this checkout)')
+    return SHARED_DATA
+
+
+@pytest.fixture
+def ros():
+    """An rclpy context and a test node on this run's domain; yields a `harness.RosPeer`."""
+    from harness import RosPeer
+
+    peer = RosPeer()
+    try:
+        yield peer
+    finally:
+        peer.close()

@@ -1,0 +1,134 @@
+"""Node-level test harness: run installed executables as `ros2 run` would, talk over Fast DDS.
+
+`start(exe, params)` runs `<prefix>/lib/pose4d_ros/<exe> --ros-args -p name:=value ...` as a
+subprocess (no launch files), found through the ament index exactly as `ros2 run` finds it;
+`RunningNode.stop()` sends SIGINT and returns the exit status. `RosPeer` is the test's own
+rclpy node with helpers to publish, collect and wait.
+"""
+
+from __future__ import annotations
+
+import os
+import signal
+import subprocess
+import time
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+PACKAGE = 'pose4d_ros'
+
+
+def executable(name: str) -> Path:
+    """Path of an installed executable, looked up as `ros2 run pose4d_ros <name>` does."""
+    from ament_index_python.packages import get_package_prefix
+
+    return Path(get_package_prefix(PACKAGE)) / 'lib' / PACKAGE / name
+
+
+def _format(value: Any) -> str:
+    if isinstance(value, bool):
+        return 'true' if value else 'false'
+    if isinstance(value, list | tuple):
+        return '[' + ','.join(_format(v) for v in value) + ']'
+    if isinstance(value, str):
+        return f"'{value}'" if value == '' or any(c in value for c in ',[]') else value
+    return repr(value)
+
+
+class RunningNode:
+    """A node executable running as a subprocess; its output goes to a log file."""
+
+    def __init__(self, exe: str, params: dict[str, Any] | None = None,
+                 remaps: dict[str, str] | None = None, *, log_dir: Path,
+                 extra: list[str] | None = None) -> None:
+        self.exe = exe
+        cmd = [str(executable(exe)), '--ros-args']
+        for key, value in (params or {}).items():
+            cmd += ['-p', f'{key}:={_format(value)}']
+        for src, dst in (remaps or {}).items():
+            cmd += ['-r', f'{src}:={dst}']
+        cmd += extra or []
+        self.cmd = cmd
+        log_dir.mkdir(parents=True, exist_ok=True)
+        self.log_path = log_dir / f'{exe}-{time.monotonic_ns()}.log'
+        self._log = self.log_path.open('w')
+        self.proc = subprocess.Popen(cmd, stdout=self._log, stderr=subprocess.STDOUT,
+                                     env=dict(os.environ))
+
+    def output(self) -> str:
+        self._log.flush()
+        return self.log_path.read_text()
+
+    def wait(self, timeout: float) -> int:
+        try:
+            return self.proc.wait(timeout=timeout)
+        except subprocess.TimeoutExpired:
+            self.kill()
+            raise AssertionError(f'{self.exe} did not exit within {timeout} s:\n'
+                                 f'{self.output()}') from None
+
+    def stop(self, sig: int = signal.SIGINT, timeout: float = 15.0) -> int:
+        """Send `sig` (SIGINT = Ctrl-C) and return the exit status."""
+        if self.proc.poll() is None:
+            self.proc.send_signal(sig)
+        return self.wait(timeout)
+
+    def kill(self) -> None:
+        if self.proc.poll() is None:
+            self.proc.kill()
+            self.proc.wait(5)
+        self._log.close()
+
+
+def start(exe: str, params: dict[str, Any] | None = None, *, log_dir: Path,
+          remaps: dict[str, str] | None = None) -> RunningNode:
+    return RunningNode(exe, params, remaps, log_dir=log_dir)
+
+
+class RosPeer:
+    """The test's side of the graph: one rclpy node in its own context."""
+
+    def __init__(self, name: str = 'pose4d_test_peer') -> None:
+        import rclpy
+        from rclpy.executors import SingleThreadedExecutor
+
+        self.context = rclpy.Context()
+        rclpy.init(context=self.context)
+        self.node = rclpy.create_node(name, context=self.context)
+        self.executor = SingleThreadedExecutor(context=self.context)
+        self.executor.add_node(self.node)
+
+    def spin_until(self, done: Callable[[], bool], timeout: float, what: str = '') -> None:
+        """Spin until `done()`; AssertionError after `timeout` seconds."""
+        deadline = time.monotonic() + timeout
+        while not done():
+            if time.monotonic() > deadline:
+                raise AssertionError(f'timed out after {timeout} s waiting for {what or done}')
+            self.executor.spin_once(timeout_sec=0.02)
+
+    def spin_for(self, seconds: float) -> None:
+        deadline = time.monotonic() + seconds
+        while time.monotonic() < deadline:
+            self.executor.spin_once(timeout_sec=0.02)
+
+    def collect(self, msg_type: type, topic: str, qos: Any = 10) -> list:
+        """Subscribe and return the list that received messages are appended to."""
+        received: list = []
+        self.node.create_subscription(msg_type, topic, received.append, qos)
+        return received
+
+    def wait_for_subscribers(self, publisher: Any, count: int = 1, timeout: float = 10.0) -> None:
+        self.spin_until(lambda: publisher.get_subscription_count() >= count, timeout,
+                        f'{count} subscriber(s) on {publisher.topic_name}')
+
+    def wait_for_publishers(self, topic: str, count: int = 1, timeout: float = 10.0) -> None:
+        self.spin_until(lambda: self.node.count_publishers(topic) >= count, timeout,
+                        f'{count} publisher(s) on {topic}')
+
+    def close(self) -> None:
+        import rclpy
+
+        self.executor.shutdown()
+        self.node.destroy_node()
+        rclpy.try_shutdown(context=self.context)

@@ -1,0 +1,153 @@
+"""pose4d_msgs over Fast DDS, and the one place where messages become arrays."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from harness import RosPeer
+from numpy.testing import assert_allclose, assert_array_equal
+
+from pose4d_ros.core import joints as cj
+from pose4d_ros.core.camera import cad60_intrinsics
+
+
+def _joint_array():
+    from geometry_msgs.msg import Point
+    from pose4d_msgs.msg import Joint, JointArray
+    from std_msgs.msg import Header
+
+    from pose4d_ros.nodes.convert import ns_to_stamp
+
+    rng = np.random.default_rng(0)
+    joints = []
+    for i, (name, src) in enumerate([('head', Joint.DETECTED), ('neck', Joint.TRACKED),
+                                     ('left_elbow', Joint.INFERRED),
+                                     ('left_wrist', Joint.MISSING)]):
+        cov = rng.normal(size=(3, 3))
+        joints.append(Joint(
+            name=name, u=float(10 * i + 0.25), v=float('nan') if src == Joint.MISSING else 7.5,
+            position=Point(x=0.1 * i, y=-0.2, z=float('nan') if i == 3 else 2.5),
+            confidence=0.25 * i, source=src, position_covariance=(cov @ cov.T).ravel().tolist()))
+    return JointArray(header=Header(stamp=ns_to_stamp(1_234_567_890_123), frame_id='cam_optical'),
+                      track_id=7, score=-0.5, joints=joints)
+
+
+def test_joint_array_round_trip_over_dds():
+    from pose4d_msgs.msg import JointArray
+
+    sender, receiver = RosPeer('sender'), RosPeer('receiver')
+    try:
+        pub = sender.node.create_publisher(JointArray, 'pose4d/test_joints', 10)
+        received = receiver.collect(JointArray, 'pose4d/test_joints')
+        sender.wait_for_subscribers(pub)
+        sent = _joint_array()
+        pub.publish(sent)
+        receiver.spin_until(lambda: received, 10, 'the JointArray')
+    finally:
+        sender.close()
+        receiver.close()
+    got = received[0]
+    assert got.header == sent.header and got.track_id == 7 and got.score == -0.5
+    assert [j.name for j in got.joints] == [j.name for j in sent.joints]
+    for a, b in zip(got.joints, sent.joints, strict=True):
+        assert a.source == b.source
+        assert (a.u, a.confidence) == (b.u, pytest.approx(b.confidence))
+        assert a.v == b.v or (math.isnan(a.v) and math.isnan(b.v))
+        assert_array_equal([a.position.x, a.position.y, a.position.z],
+                           [b.position.x, b.position.y, b.position.z])  # NaN == NaN here
+        assert_array_equal(a.position_covariance, b.position_covariance)
+
+
+def test_source_constants_match_core():
+    from pose4d_msgs.msg import Joint
+
+    assert (Joint.DETECTED, Joint.TRACKED, Joint.INFERRED, Joint.MISSING) == \
+        (cj.DETECTED, cj.TRACKED, cj.INFERRED, cj.MISSING)
+
+
+def test_joint_set_message_round_trip():
+    from pose4d_ros.nodes.convert import joints_from_msg, joints_to_msg
+
+    msg = _joint_array()
+    js = joints_from_msg(msg)
+    assert js.names == ('head', 'neck', 'left_elbow', 'left_wrist')
+    assert_array_equal(js.source, [cj.DETECTED, cj.TRACKED, cj.INFERRED, cj.MISSING])
+    back = joints_to_msg(js, msg.header)
+    again = joints_from_msg(back)
+    assert_array_equal(again.uv, js.uv)
+    assert_array_equal(again.xyz, js.xyz)
+    assert_allclose(again.covariance, js.covariance)
+    assert back.track_id == 7 and back.header == msg.header
+
+
+@pytest.mark.parametrize('encoding', ['16UC1', '32FC1'])
+@pytest.mark.parametrize('padding', [0, 6])
+@pytest.mark.parametrize('bigendian', [False, True])
+def test_depth_image_both_encodings(encoding, padding, bigendian):
+    import array
+
+    from sensor_msgs.msg import Image
+
+    from pose4d_ros.nodes.convert import depth_from_msg
+
+    rng = np.random.default_rng(0)
+    metres = rng.uniform(0.5, 4.0, size=(4, 5)).astype(np.float32)
+    metres[0, 0] = np.nan
+    if encoding == '16UC1':
+        raw = np.where(np.isnan(metres), 0, np.rint(metres * 1000)).astype(np.uint16)
+        expected = np.where(raw == 0, np.nan, raw * 0.001).astype(np.float32)
+    else:
+        raw = np.where(np.isnan(metres), 0.0, metres).astype(np.float32)  # 0 = no reading too
+        expected = np.where(raw == 0, np.nan, raw)
+    raw = raw.astype(raw.dtype.newbyteorder('>' if bigendian else '<'))
+    rows = raw.view(np.uint8).reshape(4, -1)
+    rows = np.hstack([rows, np.full((4, padding), 0xAB, np.uint8)])  # stride > row
+    msg = Image(height=4, width=5, encoding=encoding, is_bigendian=int(bigendian),
+                step=rows.shape[1])
+    msg.data = array.array('B', rows.tobytes())
+    got = depth_from_msg(msg)
+    assert got.dtype == np.float32
+    assert_allclose(got, expected, rtol=0, atol=1e-6, equal_nan=True)
+
+
+def test_bad_images_are_refused_with_the_reason():
+    import array
+
+    from sensor_msgs.msg import Image
+
+    from pose4d_ros.nodes.convert import color_from_msg, depth_from_msg
+
+    msg = Image(height=2, width=2, encoding='rgb8', step=6)
+    msg.data = array.array('B', bytes(12))
+    assert color_from_msg(msg).shape == (2, 2, 3)
+    with pytest.raises(ValueError, match='depth image encoding'):
+        depth_from_msg(msg)
+    msg.step = 4
+    with pytest.raises(ValueError, match='step 4 is smaller'):
+        color_from_msg(msg)
+    msg.step, msg.data = 6, array.array('B', bytes(5))
+    with pytest.raises(ValueError, match='expected 12'):
+        color_from_msg(msg)
+    msg.encoding = 'yuv422'
+    with pytest.raises(ValueError, match='unsupported image encoding'):
+        color_from_msg(msg)
+
+
+def test_color_and_camera_info_round_trip():
+    from std_msgs.msg import Header
+
+    from pose4d_ros.nodes.convert import (
+        array_to_image,
+        color_from_msg,
+        intrinsics_from_msg,
+        intrinsics_to_msg,
+    )
+
+    rng = np.random.default_rng(0)
+    rgb = rng.integers(0, 256, size=(3, 4, 3), dtype=np.uint8)
+    assert_array_equal(color_from_msg(array_to_image(rgb, 'rgb8', Header())), rgb)
+    assert_array_equal(color_from_msg(array_to_image(rgb[..., ::-1], 'bgr8', Header())), rgb)
+    intr = cad60_intrinsics()
+    assert intrinsics_from_msg(intrinsics_to_msg(intr, Header())) == intr

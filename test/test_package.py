@@ -1,0 +1,126 @@
+"""The installed package: `ros2 run` layout, ament index, config files, the pose4d command."""
+
+from __future__ import annotations
+
+import ast
+import importlib
+import os
+import subprocess
+from importlib.metadata import distribution
+from pathlib import Path
+
+import pytest
+import yaml
+from conftest import REPO
+from harness import PACKAGE, executable
+
+CONSOLE_SCRIPTS = sorted(ep.name for ep in distribution(PACKAGE).entry_points
+                         if ep.group == 'console_scripts')
+NODE_MODULES = {ep.name: ep.value.split(':')[0] for ep in distribution(PACKAGE).entry_points
+                if ep.group == 'console_scripts' and '.nodes.' in ep.value}
+
+
+def test_package_found_through_ament_index():
+    from ament_index_python.packages import get_package_prefix, get_package_share_directory
+
+    prefix = Path(get_package_prefix(PACKAGE))
+    share = Path(get_package_share_directory(PACKAGE))
+    assert (prefix / 'share' / 'ament_index' / 'resource_index' / 'packages' / PACKAGE).is_file()
+    assert (share / 'package.xml').is_file()
+    for cfg in sorted((REPO / 'config').glob('*.yaml')):
+        assert (share / 'config' / cfg.name).read_text() == cfg.read_text(), \
+            f'installed {cfg.name} is stale: run make setup'
+
+
+@pytest.mark.parametrize('name', CONSOLE_SCRIPTS)
+def test_executable_where_ros2_run_looks(name):
+    path = executable(name)
+    assert path.is_file(), f'{path} missing'
+    assert os.access(path, os.X_OK), f'{path} is not executable'
+
+
+def test_pose4d_msgs_is_an_interface_package():
+    from ament_index_python import get_resource
+
+    content, _ = get_resource('rosidl_interfaces', 'pose4d_msgs')
+    assert 'msg/Joint.msg' in content and 'msg/JointArray.msg' in content
+    assert get_resource('packages', 'pose4d_msgs')
+
+
+def test_pose4d_command_help_and_version():
+    out = subprocess.run([str(executable('pose4d')), '--version'], capture_output=True,
+                         text=True, check=True)
+    from pose4d_ros import __version__
+
+    assert out.stdout.strip() == f'pose4d {__version__}'
+    out = subprocess.run([str(executable('pose4d')), '--help'], capture_output=True, text=True,
+                         check=True)
+    assert 'usage: pose4d' in out.stdout
+
+
+def test_pose4d_unknown_verb_fails():
+    out = subprocess.run([str(executable('pose4d')), 'no-such-verb'], capture_output=True,
+                         text=True)
+    assert out.returncode != 0 and 'invalid choice' in out.stderr
+
+
+def _imports(path: Path) -> set[str]:
+    tree = ast.parse(path.read_text(), filename=str(path))
+    names: set[str] = set()
+    for node in ast.walk(tree):
+        if isinstance(node, ast.Import):
+            names.update(alias.name.split('.')[0] for alias in node.names)
+        elif isinstance(node, ast.ImportFrom) and node.level == 0 and node.module:
+            names.add(node.module.split('.')[0])
+    return names
+
+
+ROS_MODULES = {'rclpy', 'rosidl_runtime_py', 'rosbag2_py', 'ament_index_python'}
+
+
+def _is_ros(module: str) -> bool:
+    return module in ROS_MODULES or module.endswith('_msgs') or module.endswith('_interfaces')
+
+
+@pytest.mark.parametrize('folder', ['core', 'datasets'])
+def test_core_and_datasets_never_import_ros(folder):
+    files = sorted((REPO / PACKAGE / folder).rglob('*.py'))
+    assert files
+    offenders = {}
+    for f in files:
+        bad = {m for m in _imports(f) if _is_ros(m)}
+        if folder == 'core' or f.name != 'bag.py':
+            bad |= {m for m in _imports(f) if m == 'rosbags'}
+        if bad:
+            offenders[str(f.relative_to(REPO))] = sorted(bad)
+    assert not offenders, f'ROS imports where none may be: {offenders}'
+
+
+def test_boundary_check_catches_a_violation(tmp_path):
+    bad = tmp_path / 'x.py'
+    bad.write_text('import numpy\nfrom sensor_msgs.msg import Image\n'
+                   'from rclpy.node import Node\n')
+    assert {m for m in _imports(bad) if _is_ros(m)} == {'sensor_msgs', 'rclpy'}
+
+
+@pytest.mark.parametrize('exe', sorted(NODE_MODULES))
+def test_yaml_defaults_equal_code_defaults(exe):
+    module = importlib.import_module(NODE_MODULES[exe])
+    cfg = yaml.safe_load((REPO / 'config' / f'{exe}.yaml').read_text())
+    assert list(cfg) == [exe], f'config/{exe}.yaml must have the node name {exe} at the top'
+    flat: dict = {}
+
+    def walk(prefix: str, d: dict) -> None:
+        for k, v in d.items():
+            if isinstance(v, dict):
+                walk(f'{prefix}{k}.', v)
+            else:
+                flat[f'{prefix}{k}'] = v
+
+    walk('', cfg[exe]['ros__parameters'])
+    code = {p.name: p.default for p in module.PARAMS}
+    assert flat == code
+    for p in module.PARAMS:
+        assert p.description, f'{exe}: parameter {p.name} has no description'
+        assert p.validate(p.default) is None or p.name.endswith(('.bag', '.output')), \
+            f'{exe}: default of {p.name} breaks its own rule'
