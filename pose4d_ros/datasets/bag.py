@@ -151,6 +151,9 @@ class BagWriter:
             raise ValueError(f'topic {topic} was not added to {self.path}')
         if not isinstance(message, bytes | bytearray | memoryview):
             message = self._store.serialize_cdr(message, connection.msgtype)
+            # Fast DDS pads every payload to a multiple of 4 bytes on the wire, so a recorder
+            # receives (and a bag of recorded data holds) the padded form; write that form.
+            message = bytes(message) + bytes(-len(message) % 4)
         self._writer.write(connection, int(timestamp_ns), bytes(message))
         self.counts[topic] += 1
 
