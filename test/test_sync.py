@@ -1,0 +1,71 @@
+"""Stamp pairing of colour and depth: exact, nearest within slop, never the latest."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from pose4d_ros.core.sync import StampSync
+
+MS = 1_000_000
+
+
+def test_exact_pairs_in_any_arrival_order():
+    sync = StampSync(2)
+    assert sync.push(1, 100, 'd100') == []
+    assert sync.push(0, 100, 'c100') == [(100, ('c100', 'd100'))]
+    assert sync.push(0, 200, 'c200') == []  # depth of 200 not here yet: wait, do not take 100
+    assert sync.push(1, 200, 'd200') == [(200, ('c200', 'd200'))]
+    assert sync.dropped == [0, 0]
+
+
+def test_exact_mode_never_takes_a_different_stamp():
+    sync = StampSync(2)
+    sync.push(1, 100, 'd100')
+    assert sync.push(0, 133, 'c133') == []
+    # depth moved past 133 without a match: the colour frame is dropped, not paired
+    assert sync.push(1, 166, 'd166') == []
+    assert sync.dropped[0] == 1
+    assert sync.push(0, 166, 'c166') == [(166, ('c166', 'd166'))]
+    assert sync.dropped[1] == 1  # d100 was never used
+
+
+def test_nearest_within_slop():
+    sync = StampSync(2, slop_ns=10 * MS)
+    sync.push(1, 95 * MS, 'd95')
+    sync.push(0, 100 * MS, 'c100')  # 5 ms away; a nearer depth could still come
+    out = sync.push(1, 103 * MS, 'd103')
+    assert out == [(100 * MS, ('c100', 'd103'))]
+    assert sync.dropped == [0, 1]
+
+
+def test_three_streams_and_loss():
+    rng = np.random.default_rng(0)
+    sync = StampSync(3)
+    stamps = [k * 33 * MS for k in range(200)]
+    lost = set(rng.choice(200, 20, replace=False).tolist())
+    events = []
+    for k, s in enumerate(stamps):
+        for stream in rng.permutation(3):
+            if stream == 2 and k in lost:
+                continue
+            events.extend(sync.push(int(stream), s, (int(stream), k)))
+    got = [e[1][0][1] for e in events]
+    # every frame with all three parts comes out once, in order, correctly paired
+    assert got == [k for k in range(200) if k not in lost][: len(got)]
+    assert len(got) >= 200 - len(lost) - 1
+    assert all(items[0][1] == items[1][1] == items[2][1] for _, items in events)
+
+
+def test_restarted_stream_is_reset():
+    sync = StampSync(2)
+    sync.push(1, 500, 'old')
+    sync.push(1, 100, 'new')  # replay looped: stamps went back
+    assert sync.push(0, 100, 'c') == [(100, ('c', 'new'))]
+
+
+@pytest.mark.parametrize('kwargs', [{'n_streams': 1}, {'n_streams': 2, 'slop_ns': -1},
+                                    {'n_streams': 2, 'queue_size': 0}])
+def test_bad_arguments(kwargs):
+    with pytest.raises(ValueError):
+        StampSync(**kwargs)
