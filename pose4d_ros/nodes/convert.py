@@ -15,15 +15,16 @@ import importlib
 import sys
 
 import numpy as np
-from builtin_interfaces.msg import Time
+from builtin_interfaces.msg import Duration, Time
 from geometry_msgs.msg import Point
 from numpy.typing import NDArray
 from pose4d_msgs.msg import Joint, JointArray
-from sensor_msgs.msg import CameraInfo, Image
-from std_msgs.msg import Header
+from sensor_msgs.msg import CameraInfo, Image, PointCloud2, PointField
+from std_msgs.msg import ColorRGBA, Header
+from visualization_msgs.msg import Marker, MarkerArray
 
 from pose4d_ros.core.camera import Intrinsics, depth_to_metres
-from pose4d_ros.core.joints import JointSet
+from pose4d_ros.core.joints import DETECTED, INFERRED, MISSING, TRACKED, JointSet
 
 # encoding -> (dtype, channels)
 _ENCODINGS: dict[str, tuple[str, int]] = {
@@ -165,3 +166,69 @@ def message_type(name: str) -> type:
         return getattr(module, parts[2])
     except (ImportError, AttributeError):
         raise ValueError(f'message type {name} is not installed') from None
+
+
+def cloud_to_msg(xyz: NDArray[np.floating], rgb: NDArray[np.uint8] | None,
+                 header: Header) -> PointCloud2:
+    """An unorganised PointCloud2 (x, y, z float32 metres [+ rgb packed as float32])."""
+    xyz = np.asarray(xyz, dtype=np.float32).reshape(-1, 3)
+    fields = [PointField(name=n, offset=4 * i, datatype=PointField.FLOAT32, count=1)
+              for i, n in enumerate('xyz')]
+    if rgb is None:
+        data = xyz
+    else:
+        rgb = np.asarray(rgb, dtype=np.uint8).reshape(-1, 3)
+        packed = (rgb[:, 0].astype(np.uint32) << 16) | (rgb[:, 1].astype(np.uint32) << 8) \
+            | rgb[:, 2].astype(np.uint32)
+        fields.append(PointField(name='rgb', offset=12, datatype=PointField.FLOAT32, count=1))
+        data = np.concatenate([xyz, packed.view(np.float32)[:, None]], axis=1)
+    data = np.ascontiguousarray(data, dtype=np.float32)
+    msg = PointCloud2(header=header, height=1, width=len(data), fields=fields,
+                      is_bigendian=sys.byteorder == 'big', point_step=data.shape[1] * 4,
+                      row_step=data.shape[1] * 4 * len(data), is_dense=True)
+    msg.data = array.array('B', data.tobytes())
+    return msg
+
+
+# RViz colours of joint sources: detected green, tracked blue, inferred orange, missing grey.
+_SOURCE_RGBA = {DETECTED: (0.1, 0.85, 0.2, 1.0), TRACKED: (0.2, 0.5, 1.0, 1.0),
+                INFERRED: (1.0, 0.55, 0.0, 1.0), MISSING: (0.5, 0.5, 0.5, 0.4)}
+
+
+def skeleton_markers(joints: JointSet, bones: list[tuple[int, int]], header: Header,
+                     *, namespace: str = 'pose4d', radius_m: float = 0.04,
+                     lifetime_s: float = 0.5) -> MarkerArray:
+    """Spheres for the joints and lines for the bones, coloured by source, for RViz.
+
+    Joints without a 3-D position are left out; a bone is drawn when both ends have one, in
+    the colour of its less certain end (inferred over tracked over detected).
+    """
+    lifetime = Duration(sec=int(lifetime_s), nanosec=int((lifetime_s % 1) * 1e9))
+    spheres = Marker(header=header, ns=f'{namespace}/joints', id=0,
+                     type=Marker.SPHERE_LIST, action=Marker.ADD, lifetime=lifetime)
+    spheres.pose.orientation.w = 1.0
+    spheres.scale.x = spheres.scale.y = spheres.scale.z = radius_m
+    lines = Marker(header=header, ns=f'{namespace}/bones', id=1, type=Marker.LINE_LIST,
+                   action=Marker.ADD, lifetime=lifetime)
+    lines.pose.orientation.w = 1.0
+    lines.scale.x = radius_m / 3
+    valid = np.isfinite(joints.xyz).all(axis=1)
+
+    def point(i: int) -> Point:
+        x, y, z = (float(c) for c in joints.xyz[i])
+        return Point(x=x, y=y, z=z)
+
+    def color(src: int) -> ColorRGBA:
+        r, g, b, a = _SOURCE_RGBA[int(src)]
+        return ColorRGBA(r=r, g=g, b=b, a=a)
+
+    for i in np.flatnonzero(valid):
+        spheres.points.append(point(int(i)))
+        spheres.colors.append(color(joints.source[i]))
+    rank = {DETECTED: 0, TRACKED: 1, INFERRED: 2, MISSING: 3}
+    for a, b in bones:
+        if valid[a] and valid[b]:
+            worst = max(joints.source[a], joints.source[b], key=lambda s: rank[int(s)])
+            lines.points.extend([point(a), point(b)])
+            lines.colors.extend([color(worst), color(worst)])
+    return MarkerArray(markers=[spheres, lines])
