@@ -1,0 +1,193 @@
+"""`pose4d synth`: render synthetic RGB-D people in CAD-60's on-disk format.
+
+People are posed by real Kinect motion (UTKinect takes), each video a window of a take on a new
+random body in a new random room (see `pose4d_ros.datasets.synth_video`). Output: one `dataN/`
+per UTKinect subject N, each with `activityLabel.txt` and its videos (`<id>.txt`,
+`<id>/RGB_<k>.png`, `<id>/Depth_<k>.png`, plus `<id>/Mask_<k>.png`, the person mask), and a
+`synth.json` at the top recording the command's parameters and every video's source. The set
+is built in a temporary directory next to `--out` and renamed when complete, so a failed or
+interrupted run leaves nothing behind.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import re
+import shutil
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+from pose4d_ros import __version__
+from pose4d_ros.core.camera import cad60_intrinsics
+
+_TAKE = re.compile(r'^s(\d{2})_e(\d{2})$')
+_SUBJECT = re.compile(r'^s(\d{2})$')
+_RANGE = re.compile(r'^s(\d{2})-s(\d{2})$')
+
+
+def add_parser(subparsers: argparse._SubParsersAction) -> None:
+    p = subparsers.add_parser(
+        'synth', help='render synthetic RGB-D people in CAD-60 format',
+        description=__doc__.split('\n\n')[1].replace('\n', ' '),
+        formatter_class=argparse.ArgumentDefaultsHelpFormatter)
+    p.add_argument('--utkinect', required=True, type=Path,
+                   help='UTKinect directory (joints_sNN_eMM.txt, actionLabel.txt)')
+    p.add_argument('--out', required=True, type=Path, help='output directory (must not exist)')
+    p.add_argument('--seed', type=int, default=0, help='random seed (bodies, rooms, noise)')
+    p.add_argument('--takes', default='all',
+                   help="takes: 'all' or a comma list of s01_e01, s02 (both takes), s01-s06")
+    p.add_argument('--frames', type=int, default=60, help='frames per video (at most)')
+    p.add_argument('--stride', type=int, default=1,
+                   help='keep every N-th frame of the 30 fps motion (frame numbers keep 30 fps)')
+    p.add_argument('--start', type=float, default=0.0,
+                   help='seconds into each take where the first window starts')
+    p.add_argument('--videos-per-take', type=int, default=1,
+                   help='windows per take, spread evenly from --start to the end')
+    p.add_argument('--body-per', choices=('video', 'subject'), default='video',
+                   help='a new random body for every video, or one per UTKinect subject')
+    p.add_argument('--occluders', type=float, default=0.3,
+                   help='probability of furniture between camera and person')
+    p.add_argument('--width', type=int, default=320, help='image width (CAD-60: 320)')
+    p.add_argument('--height', type=int, default=240, help='image height (CAD-60: 240)')
+    p.add_argument('--no-noise', action='store_true',
+                   help='exact depth and clean colour (no Kinect model)')
+    p.add_argument('--force', action='store_true', help='replace --out if it exists')
+    p.add_argument('--quiet', action='store_true', help='no progress bar')
+    p.set_defaults(func=run)
+
+
+def parse_takes(spec: str, available: list[str]) -> list[str]:
+    """Expand a --takes value into take names, in order, without repeats.
+
+    `available` lists the takes present ('sNN_eMM'); every requested one must be there.
+    """
+    if spec.strip() == 'all':
+        if not available:
+            raise ValueError('no joints_sNN_eMM.txt files in the UTKinect directory')
+        return sorted(available)
+    out: list[str] = []
+    for item in (s.strip() for s in spec.split(',')):
+        if _TAKE.match(item):
+            names = [item]
+        elif m := _SUBJECT.match(item):
+            names = sorted(t for t in available if t.startswith(f's{m.group(1)}_'))
+        elif m := _RANGE.match(item):
+            lo, hi = int(m.group(1)), int(m.group(2))
+            if lo > hi:
+                raise ValueError(f'--takes: empty subject range {item!r}')
+            names = sorted(t for t in available if lo <= int(t[1:3]) <= hi)
+        else:
+            raise ValueError(f"--takes: {item!r} is not sNN_eMM, sNN or sNN-sMM")
+        if not names or any(n not in available for n in names):
+            missing = [n for n in names if n not in available] or [item]
+            raise ValueError(f'--takes: no UTKinect take for {", ".join(missing)}')
+        out += [n for n in names if n not in out]
+    return out
+
+
+def _check(args: argparse.Namespace) -> None:
+    if not args.utkinect.is_dir():
+        raise ValueError(f'--utkinect {args.utkinect}: not a directory')
+    for name in ('frames', 'stride', 'videos_per_take', 'width', 'height'):
+        if getattr(args, name) < 1:
+            raise ValueError(f'--{name.replace("_", "-")} must be >= 1, got '
+                             f'{getattr(args, name)}')
+    if args.videos_per_take > 100:
+        raise ValueError(f'--videos-per-take must be <= 100, got {args.videos_per_take}')
+    if not 0.0 <= args.occluders <= 1.0:
+        raise ValueError(f'--occluders must be in [0, 1], got {args.occluders}')
+    if args.start < 0:
+        raise ValueError(f'--start must be >= 0 seconds, got {args.start}')
+    if args.seed < 0:
+        raise ValueError(f'--seed must be >= 0, got {args.seed}')
+    if args.out.exists() and not args.force:
+        raise ValueError(f'--out {args.out}: already exists (use --force to replace it)')
+    if not args.out.parent.is_dir():
+        raise ValueError(f'--out {args.out}: parent directory does not exist')
+
+
+def run(args: argparse.Namespace) -> int:
+    # heavy imports here, so that `pose4d --help` stays fast
+    from tqdm import tqdm
+
+    from pose4d_ros.datasets import cad60, synth, synth_video
+    from pose4d_ros.datasets.utkinect import list_takes
+
+    _check(args)
+    available = [p.name[len('joints_'):-len('.txt')] for p in list_takes(args.utkinect)]
+    names = parse_takes(args.takes, available)
+    intrinsics = cad60_intrinsics(args.width, args.height)
+    motions = synth_video.load_takes(args.utkinect, names)
+    plans = [plan for m in motions for plan in synth_video.plan_videos(
+        m, seed=args.seed, videos=args.videos_per_take, frames=args.frames, stride=args.stride,
+        start_s=args.start)]
+    by_take = {m.name: m for m in motions}
+    total = sum(p.n_frames for p in plans)
+
+    out = args.out.resolve()
+    tmp = Path(tempfile.mkdtemp(prefix=f'.{out.name}.', suffix='.partial', dir=out.parent))
+    t0 = time.perf_counter()
+    n_bytes = 0
+    try:
+        labels: dict[int, dict[str, str]] = {}
+        bodies: dict[int, synth.Body] = {}
+        records = []
+        with tqdm(total=total, unit='frame', desc='pose4d synth', disable=args.quiet,
+                  file=sys.stderr) as bar:
+            for plan in plans:
+                body = None
+                if args.body_per == 'subject':
+                    if plan.subject not in bodies:
+                        bodies[plan.subject] = synth_video.subject_body(args.seed, plan.subject)
+                    body = bodies[plan.subject]
+                job = synth_video.prepare_video(plan, by_take[plan.take], intrinsics,
+                                                body=body, occluder_prob=args.occluders,
+                                                kinect_noise=not args.no_noise)
+                person_dir = tmp / f'data{plan.subject}'
+                person_dir.mkdir(exist_ok=True)
+                n_bytes += synth_video.write_video(job, person_dir, progress=bar.update)
+                labels.setdefault(plan.subject, {})[plan.video_id] = plan.activity
+                records.append({
+                    'video': f'data{plan.subject}/{plan.video_id}', 'take': plan.take,
+                    'activity': plan.activity, 'start_frame_30fps': plan.start,
+                    'stride': plan.stride, 'frames': plan.n_frames,
+                    'stature_m': round(job.body.stature_m, 3),
+                    'occluder': any(b.kind == 'occluder' for b in job.scene.boxes),
+                    'camera_height_m': round(job.scene.cam_height_m, 3),
+                })
+        for subject, videos in labels.items():
+            cad60.write_activity_labels(tmp / f'data{subject}' / 'activityLabel.txt', videos)
+        info = {
+            'generator': f'pose4d synth {__version__}',
+            'command': ' '.join(sys.argv),
+            'seed': args.seed, 'takes': names, 'frames': args.frames, 'stride': args.stride,
+            'start_s': args.start, 'videos_per_take': args.videos_per_take,
+            'body_per': args.body_per, 'occluders': args.occluders,
+            'size': [args.width, args.height], 'kinect_noise': not args.no_noise,
+            'videos': records,
+        }
+        (tmp / 'synth.json').write_text(json.dumps(info, indent=1) + '\n')
+        _replace_dir(tmp, out)
+    except BaseException:
+        shutil.rmtree(tmp, ignore_errors=True)
+        raise
+    elapsed = time.perf_counter() - t0
+    print(f'pose4d synth: {len(plans)} videos, {total} frames, {n_bytes / 1e6:.1f} MB '
+          f'({n_bytes / max(total, 1) / 1e3:.1f} kB/frame) in {elapsed:.1f} s '
+          f'({total / elapsed:.1f} frames/s incl. PNG writing) -> {out}')
+    return 0
+
+
+def _replace_dir(tmp: Path, out: Path) -> None:
+    """Move the finished set into place (replacing an old one only once the new one exists)."""
+    if out.exists():
+        trash = Path(tempfile.mkdtemp(prefix=f'.{out.name}.', suffix='.old', dir=out.parent))
+        trash.rmdir()
+        out.rename(trash)
+        tmp.rename(out)
+        shutil.rmtree(trash, ignore_errors=True)
+    else:
+        tmp.rename(out)

@@ -1,0 +1,923 @@
+"""Synthetic RGB-D people for CAD-60-style data: bodies, rooms, retargeting and rendering.
+
+Model. A body is a set of capsules (neck, shoulders, upper and lower arms, hands, hips, upper
+and lower legs, feet) and ellipsoids (head, hair, chest, abdomen, pelvis) hung on a 20-joint
+Kinect v1 skeleton (`utkinect.UTKINECT_JOINTS`), with per-body bone lengths, girths and
+clothes (`random_body`). A pose from real Kinect motion is retargeted to the body by keeping
+every bone's direction and setting its length to the body's (`retarget`). A room is a set of
+textured oriented boxes (floor, walls, ceiling, skirting, door, pictures, furniture, sometimes
+an occluder between camera and person) seen by a camera at 0.85-1.35 m, pitched down a little,
+lit by a directional light plus ambient (`random_scene`). `render` ray-casts the body into the
+room's depth buffer (numba, `synth_raycast`), shades it Lambertian + ambient, and turns the
+exact depth into a Kinect v1 measurement (`synth_kinect`: projector shadows, disparity
+quantisation, noise growing with z^2, holes at edges and beyond range).
+
+Frames. Poses and rendered joints are metres in the camera optical frame (x right, y down,
+z forward). Rooms are built in a right-handed room frame: X right, Y forward (away from the
+camera), Z up, floor at Z = 0, camera at (0, 0, h); `Scene.to_optical` maps room to optical.
+
+Ground truth for CAD-60 files (`cad60_ground_truth`): CAD-60's 15 joints from the rendered
+joints, with CAD-60's hand := the Kinect wrist and foot := the ankle (the detector's wrist and
+ankle, `skeleton.GROUND_TRUTH_ALIASES`), orientation matrices from bone directions.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field, replace
+
+import cv2
+import numpy as np
+from numpy.typing import NDArray
+
+from pose4d_ros.core.camera import Intrinsics
+from pose4d_ros.datasets import synth_textures as tex
+from pose4d_ros.datasets.synth_kinect import KinectModel, ideal_depth, kinect_depth
+from pose4d_ros.datasets.synth_raycast import raycast_body, raycast_boxes, shade
+from pose4d_ros.datasets.utkinect import UTKINECT_JOINTS
+
+# --------------------------------------------------------------------------------------------
+# The Kinect v1 skeleton
+# --------------------------------------------------------------------------------------------
+
+_J = {name: i for i, name in enumerate(UTKINECT_JOINTS)}
+HC, SPINE, SC, HEAD = _J['hip_center'], _J['spine'], _J['shoulder_center'], _J['head']
+LSH, LEL, LWR, LHA = _J['left_shoulder'], _J['left_elbow'], _J['left_wrist'], _J['left_hand']
+RSH, REL, RWR, RHA = (_J['right_shoulder'], _J['right_elbow'], _J['right_wrist'],
+                      _J['right_hand'])
+LHIP, LKN, LAN, LFT = _J['left_hip'], _J['left_knee'], _J['left_ankle'], _J['left_foot']
+RHIP, RKN, RAN, RFT = _J['right_hip'], _J['right_knee'], _J['right_ankle'], _J['right_foot']
+
+# Parent of each joint in the Kinect v1 tree (hip centre is the root).
+PARENTS: tuple[int, ...] = (-1, HC, SPINE, SC, SC, LSH, LEL, LWR, SC, RSH, REL, RWR,
+                            HC, LHIP, LKN, LAN, HC, RHIP, RKN, RAN)
+
+# Median bone lengths (metres) over the 16 UTKinect takes s01-s08 (the length of the bone
+# ending at each joint), and the stature they roughly correspond to.
+REF_BONES: NDArray[np.float64] = np.array([
+    0.0, 0.068, 0.338, 0.194,
+    0.198, 0.260, 0.237, 0.080,
+    0.198, 0.260, 0.237, 0.080,
+    0.105, 0.475, 0.372, 0.090,
+    0.105, 0.475, 0.372, 0.090,
+])
+REF_STATURE_M = 1.72
+
+# Bone directions of a person standing upright facing the camera (optical frame), used only
+# when a pose gives no direction (coincident or missing joints).
+_REST_DIR = np.array([
+    [0, 0, 0], [0, -1, 0], [0, -1, 0], [0, -1, 0],
+    [1, 0.2, 0], [0.2, 1, 0], [0, 1, 0], [0, 1, 0],
+    [-1, 0.2, 0], [-0.2, 1, 0], [0, 1, 0], [0, 1, 0],
+    [1, 0.7, 0], [0, 1, 0], [0, 1, 0], [0, 0.6, -1],
+    [-1, 0.7, 0], [0, 1, 0], [0, 1, 0], [0, 0.6, -1],
+], dtype=np.float64)
+_REST_DIR[1:] /= np.linalg.norm(_REST_DIR[1:], axis=1, keepdims=True)
+
+# CAD-60 joint order (skeleton.CAD60_JOINTS) from the Kinect v1 joints: hand := wrist and
+# foot := ankle, the joints the detector calls wrist and ankle.
+CAD60_FROM_KINECT: tuple[int, ...] = (HEAD, SC, SPINE, LSH, LEL, RSH, REL, LHIP, LKN, RHIP,
+                                      RKN, LWR, RWR, LAN, RAN)
+
+# Body material slots.
+SKIN, HAIR, SHIRT, TROUSERS, SHOES, FACE = range(6)
+
+
+# --------------------------------------------------------------------------------------------
+# Bodies
+# --------------------------------------------------------------------------------------------
+
+@dataclass(frozen=True, eq=False)
+class Body:
+    """A synthetic person's shape and clothes.
+
+    Attributes
+    ----------
+    stature_m : approximate standing height, metres.
+    bones : (20,) float64 length of the bone ending at each Kinect joint, metres (0 at the
+        root), `UTKINECT_JOINTS` order.
+    radii : capsule radii, metres: neck, upper_arm, forearm, hand, thigh, shank, foot.
+    head_axes, chest_axes, abdomen_axes, pelvis_axes : (3,) ellipsoid semi-axes, metres
+        (across, along the body, front-to-back).
+    materials : SKIN, HAIR, SHIRT, TROUSERS, SHOES, FACE tiles.
+    long_sleeves, shorts, long_hair, bald : clothing and hair style.
+    """
+
+    stature_m: float
+    bones: NDArray[np.float64]
+    radii: dict[str, float]
+    head_axes: NDArray[np.float64]
+    chest_axes: NDArray[np.float64]
+    abdomen_axes: NDArray[np.float64]
+    pelvis_axes: NDArray[np.float64]
+    materials: tex.Materials
+    long_sleeves: bool
+    shorts: bool
+    long_hair: bool
+    bald: bool
+
+
+def random_body(rng: np.random.Generator) -> Body:
+    """A random person: stature 1.52-1.95 m, proportions jittered per body part, a build from
+    slim to heavy, skin tone, hair and clothes (colours, patterns, sleeves, shorts)."""
+    stature = float(rng.uniform(1.52, 1.95))
+    s = stature / REF_STATURE_M
+    build = float(rng.uniform(0.85, 1.3))  # girth factor
+    f_trunk, f_head, f_shoulder, f_arm, f_leg, f_hip = rng.normal(
+        1.0, [0.035, 0.03, 0.06, 0.035, 0.035, 0.06])
+    bones = REF_BONES * s
+    bones[[SPINE, SC]] *= f_trunk
+    bones[HEAD] *= f_head
+    bones[[LSH, RSH]] *= f_shoulder * (0.95 + 0.1 * (build - 0.85))
+    upper, fore = rng.normal(1.0, 0.02, 2)
+    bones[[LEL, REL]] *= f_arm * upper
+    bones[[LWR, RWR]] *= f_arm * fore
+    thigh, shank = rng.normal(1.0, 0.02, 2)
+    bones[[LKN, RKN]] *= f_leg * thigh
+    bones[[LAN, RAN]] *= f_leg * shank
+    bones[[LHIP, RHIP]] *= f_hip * (0.95 + 0.15 * (build - 0.85))
+    g = s * build
+    radii = {
+        'neck': 0.052 * s * build ** 0.5, 'upper_arm': 0.045 * g, 'forearm': 0.036 * g,
+        'hand': 0.030 * s, 'thigh': 0.072 * g, 'shank': 0.050 * g, 'foot': 0.040 * s,
+    }
+    head = np.array([0.076, 0.108, 0.092]) * s ** 0.4 * f_head
+    shoulder_half = float(bones[LSH])
+    chest = np.array([0.80 * shoulder_half + 0.03 * build, 0.0, 0.10 * g])
+    abdomen = np.array([0.85 * chest[0], 0.14 * s, 0.10 * g * build ** 0.7])
+    hip_half = float(bones[LHIP])
+    pelvis = np.array([hip_half + 0.65 * radii['thigh'], 0.11 * s, 0.095 * g])
+
+    mb = tex.MaterialBuilder()
+    skin, _ = tex.skin_tile(rng)
+    mb.add('skin', skin, 0.2)
+    hair, hair_drop = tex.hair_tile(rng)
+    mb.add('hair', hair, 0.15, hair_drop)
+    shirt, shirt_scale, shirt_drop = tex.cloth_tile(rng, tex.SHIRT_COLOURS)
+    mb.add('shirt', shirt, shirt_scale, shirt_drop)
+    trousers, tr_scale, tr_drop = tex.cloth_tile(rng, tex.TROUSER_COLOURS,
+                                                 ('plain', 'plain', 'denim', 'denim'))
+    mb.add('trousers', trousers, tr_scale, tr_drop)
+    shoe = tex.tint(tex.grain(rng, 'gravel', 0.2),
+                    tex.jitter_colour(rng, tex.SHOE_COLOURS[rng.integers(len(tex.SHOE_COLOURS))]),
+                    0.05)
+    mb.add('shoes', shoe, 0.2)
+    # the head ellipsoid's surface is exactly one tile (see `synth_raycast`: s = angle * rx,
+    # t = (y + 1) * ry)
+    mb.add('face', tex.face_tile(rng, skin, hair), (2 * np.pi * head[0], 2 * head[1]))
+    return Body(
+        stature_m=stature, bones=bones, radii=radii, head_axes=head, chest_axes=chest,
+        abdomen_axes=abdomen, pelvis_axes=pelvis, materials=mb.build(),
+        long_sleeves=bool(rng.random() < 0.6), shorts=bool(rng.random() < 0.15),
+        long_hair=bool(rng.random() < 0.35), bald=bool(rng.random() < 0.06),
+    )
+
+
+def retarget(pose: NDArray[np.floating], body: Body, *,
+             up: NDArray[np.floating] | None = None) -> NDArray[np.float64]:
+    """Give a pose the body's bone lengths, keeping every bone's direction.
+
+    Parameters
+    ----------
+    pose : (20, 3) float, metres, optical frame, `UTKINECT_JOINTS` order.
+    body : the target body.
+    up : (3,) unit "up" vector in the same frame, optional. Without it the hip centre stays
+        where it is; with it, the result is also moved along `up` so that its lowest ankle or
+        foot joint is as high as the pose's (the feet stay on the floor).
+
+    Returns
+    -------
+    (20, 3) float64 metres, same frame.
+    """
+    pose = np.asarray(pose, dtype=np.float64)
+    if pose.shape != (20, 3):
+        raise ValueError(f'pose must be (20, 3) metres, got shape {pose.shape}')
+    if not np.all(np.isfinite(pose[HC])):
+        raise ValueError('pose has no hip centre (NaN)')
+    out = np.empty_like(pose)
+    out[HC] = pose[HC]
+    for i in range(1, 20):
+        p = PARENTS[i]
+        d = pose[i] - pose[p]
+        n = float(np.linalg.norm(d))
+        d = d / n if np.isfinite(n) and n > 1e-6 else _REST_DIR[i]
+        out[i] = out[p] + d * body.bones[i]
+    if up is not None:
+        up = np.asarray(up, dtype=np.float64)
+        feet = [LAN, LFT, RAN, RFT]
+        src = pose[feet] @ up
+        dst = out[feet] @ up
+        if np.all(np.isfinite(src)):
+            out += (src.min() - dst.min()) * up
+    return out
+
+
+def _unit(v: NDArray[np.float64], fallback: NDArray[np.float64]) -> NDArray[np.float64]:
+    n = float(np.linalg.norm(v))
+    return v / n if n > 1e-9 else fallback
+
+
+def body_frame(joints: NDArray[np.float64]) -> tuple[NDArray[np.float64], ...]:
+    """(left, up, forward) unit vectors of the trunk from Kinect joints (any right-handed
+    frame): up from hip centre to shoulder centre, left from the right to the left shoulder,
+    forward = left x up (towards the camera for a person facing it)."""
+    up = _unit(joints[SC] - joints[HC], np.array([0.0, -1.0, 0.0]))
+    left = joints[LSH] - joints[RSH]
+    fwd = _unit(np.cross(left, up), np.array([0.0, 0.0, -1.0]))
+    left = np.cross(up, fwd)
+    return left, up, fwd
+
+
+@dataclass(frozen=True)
+class Primitives:
+    """A body as ray-casting primitives (optical frame, metres); see `synth_raycast`."""
+
+    cap_a: NDArray[np.float64]
+    cap_b: NDArray[np.float64]
+    cap_r: NDArray[np.float64]
+    cap_e1: NDArray[np.float64]
+    ell_c: NDArray[np.float64]
+    ell_rot: NDArray[np.float64]
+    ell_r: NDArray[np.float64]
+    mat: NDArray[np.int64]  # material per primitive, capsules first
+
+
+def body_primitives(joints: NDArray[np.float64], body: Body) -> Primitives:
+    """The capsules and ellipsoids of `body` posed at `joints` ((20, 3) metres, optical)."""
+    j = joints
+    left, up, fwd = body_frame(j)
+    r = body.radii
+    caps: list[tuple[NDArray, NDArray, float, int]] = []
+    forearm_mat = SHIRT if body.long_sleeves else SKIN
+    shank_mat = SKIN if body.shorts else TROUSERS
+    caps.append((j[LSH], j[RSH], 1.1 * r['upper_arm'], SHIRT))
+    head_dir = _unit(j[HEAD] - j[SC], up)
+    caps.append((j[SC] - 0.02 * head_dir, j[SC] + 0.55 * (j[HEAD] - j[SC]), r['neck'], SKIN))
+    for sh, el, wr, ha in ((LSH, LEL, LWR, LHA), (RSH, REL, RWR, RHA)):
+        caps.append((j[sh], j[el], r['upper_arm'], SHIRT))
+        caps.append((j[el], j[wr], r['forearm'], forearm_mat))
+        caps.append((j[wr] + 0.2 * (j[ha] - j[wr]), j[wr] + 1.5 * (j[ha] - j[wr]), r['hand'],
+                     SKIN))
+    caps.append((j[LHIP], j[RHIP], r['thigh'], TROUSERS))
+    for hip, kn, an, ft in ((LHIP, LKN, LAN, LFT), (RHIP, RKN, RAN, RFT)):
+        caps.append((j[hip], j[kn], r['thigh'], TROUSERS))
+        caps.append((j[kn], j[an], r['shank'], shank_mat))
+        foot_dir = _unit(j[ft] - j[an], fwd)
+        caps.append((j[an] - 0.035 * foot_dir - 0.25 * r['foot'] * up,
+                     j[ft] + 0.03 * foot_dir, r['foot'], SHOES))
+    cap_a = np.array([c[0] for c in caps])
+    cap_b = np.array([c[1] for c in caps])
+    axes = cap_b - cap_a
+    axes /= np.maximum(np.linalg.norm(axes, axis=1, keepdims=True), 1e-9)
+    e1 = fwd[None, :] - (axes @ fwd)[:, None] * axes
+    bad = np.linalg.norm(e1, axis=1) < 1e-3
+    e1[bad] = up - (axes[bad] @ up)[:, None] * axes[bad]
+    e1 /= np.maximum(np.linalg.norm(e1, axis=1, keepdims=True), 1e-9)
+
+    ells: list[tuple[NDArray, NDArray, NDArray, int]] = []
+    h_up = head_dir
+    h_fwd = _unit(fwd - (fwd @ h_up) * h_up, fwd)
+    h_left = np.cross(h_up, h_fwd)
+    head_rot = np.stack([h_left, -h_up, h_fwd])
+    ha = body.head_axes
+    ells.append((j[HEAD] + 0.01 * h_fwd, head_rot, ha, FACE))
+    if not body.bald:
+        ells.append((j[HEAD] + 0.018 * h_up - 0.024 * h_fwd, head_rot,
+                     ha + np.array([0.008, 0.01, 0.004]), HAIR))
+        if body.long_hair:
+            ells.append((j[HEAD] - 0.10 * h_up - 0.05 * h_fwd, head_rot,
+                         np.array([0.9 * ha[0], 0.16, 0.055]), HAIR))
+    trunk = j[SC] - j[SPINE]
+    trunk_len = float(np.linalg.norm(trunk))
+    t_up = _unit(trunk, up)
+    t_fwd = _unit(fwd - (fwd @ t_up) * t_up, fwd)
+    t_rot = np.stack([np.cross(t_up, t_fwd), -t_up, t_fwd])
+    chest = body.chest_axes.copy()
+    chest[1] = 0.58 * trunk_len + 0.02
+    ells.append((j[SPINE] + 0.52 * trunk - 0.01 * t_fwd, t_rot, chest, SHIRT))
+    ells.append((j[SPINE] + 0.06 * t_up + 0.012 * t_fwd, t_rot, body.abdomen_axes, SHIRT))
+    hip_left = _unit(j[LHIP] - j[RHIP], left)
+    p_up = _unit(up - (up @ hip_left) * hip_left, up)
+    p_rot = np.stack([hip_left, -p_up, np.cross(hip_left, p_up)])
+    ells.append((j[HC] - 0.015 * p_up, p_rot, body.pelvis_axes, TROUSERS))
+    return Primitives(
+        cap_a=cap_a, cap_b=cap_b, cap_r=np.array([c[2] for c in caps]), cap_e1=e1,
+        ell_c=np.array([e[0] for e in ells]), ell_rot=np.array([e[1] for e in ells]),
+        ell_r=np.array([e[2] for e in ells]),
+        mat=np.array([c[3] for c in caps] + [e[3] for e in ells], dtype=np.int64),
+    )
+
+
+# --------------------------------------------------------------------------------------------
+# Scenes
+# --------------------------------------------------------------------------------------------
+
+@dataclass(frozen=True)
+class Box:
+    """An oriented box in the room frame (X right, Y forward, Z up; metres, radians)."""
+
+    center: tuple[float, float, float]
+    half: tuple[float, float, float]
+    material: int
+    yaw: float = 0.0
+    kind: str = 'furniture'  # 'floor', 'wall', 'furniture', 'occluder', 'decor'
+
+
+@dataclass(frozen=True, eq=False)
+class Scene:
+    """A furnished room, its camera and light, with the room pre-rendered for `intrinsics`.
+
+    Attributes
+    ----------
+    intrinsics : the camera the background buffers were rendered for.
+    cam_height_m : camera centre above the floor, metres.
+    room_to_cam : (3, 3) float64 rotation, p_optical = room_to_cam @ (p_room - cam_pos).
+    cam_pos : (3,) float64 room frame.
+    boxes : the room's boxes; boxes[floor_index] is the floor.
+    materials : the boxes' materials.
+    light_room : (3,) unit vector towards the light, room frame.
+    ambient, diffuse : shading weights; light_colour : (3,) RGB gain.
+    bg_depth : (H, W) float32 z metres (inf = nothing); bg_normal (H, W, 3) float32;
+    bg_albedo : (H, W, 3) float32; bg_ids : (H, W) int32 box index; bg_dropout : (H, W)
+        float32 infrared dropout probability of the material seen.
+    """
+
+    intrinsics: Intrinsics
+    cam_height_m: float
+    room_to_cam: NDArray[np.float64]
+    cam_pos: NDArray[np.float64]
+    boxes: tuple[Box, ...]
+    materials: tex.Materials
+    light_room: NDArray[np.float64]
+    ambient: float
+    diffuse: float
+    light_colour: NDArray[np.float64]
+    floor_index: int
+    bg_depth: NDArray[np.float32] = field(repr=False)
+    bg_normal: NDArray[np.float32] = field(repr=False)
+    bg_albedo: NDArray[np.float32] = field(repr=False)
+    bg_ids: NDArray[np.int32] = field(repr=False)
+    bg_dropout: NDArray[np.float32] = field(repr=False)
+
+    @property
+    def up_optical(self) -> NDArray[np.float64]:
+        """(3,) the room's up direction in the optical frame."""
+        return self.room_to_cam @ np.array([0.0, 0.0, 1.0])
+
+    @property
+    def light_optical(self) -> NDArray[np.float64]:
+        return self.room_to_cam @ self.light_room
+
+    def to_optical(self, points_room: NDArray[np.floating]) -> NDArray[np.float64]:
+        """(..., 3) room frame -> optical frame, metres."""
+        p = np.asarray(points_room, dtype=np.float64)
+        return (p - self.cam_pos) @ self.room_to_cam.T
+
+    def to_room(self, points_optical: NDArray[np.floating]) -> NDArray[np.float64]:
+        """(..., 3) optical frame -> room frame, metres."""
+        return np.asarray(points_optical, dtype=np.float64) @ self.room_to_cam + self.cam_pos
+
+    def footprints(self, kinds: tuple[str, ...] = ('furniture', 'occluder')
+                   ) -> NDArray[np.float64]:
+        """(K, 4) floor rectangles (xmin, xmax, ymin, ymax) of the boxes of `kinds`."""
+        out = []
+        for b in self.boxes:
+            if b.kind not in kinds:
+                continue
+            c, s = np.cos(b.yaw), np.sin(b.yaw)
+            ex = abs(c) * b.half[0] + abs(s) * b.half[1]
+            ey = abs(s) * b.half[0] + abs(c) * b.half[1]
+            out.append((b.center[0] - ex, b.center[0] + ex, b.center[1] - ey,
+                        b.center[1] + ey))
+        return np.array(out, dtype=np.float64).reshape(-1, 4)
+
+    def with_boxes(self, boxes: list[Box],
+                   materials: tuple[tuple[str, NDArray[np.float32], float], ...] = ()
+                   ) -> Scene:
+        """A copy with more boxes (and materials, numbered after the existing ones)."""
+        mats = self.materials
+        if materials:
+            mb = tex.MaterialBuilder()
+            for i, name in enumerate(mats.names):
+                mb.add(name, mats.tiles[i], tuple(mats.scale[i]), float(mats.ir_dropout[i]))
+            for name, tile, scale in materials:
+                mb.add(name, tile, scale)
+            mats = mb.build()
+        return _build_scene(self.intrinsics, self.cam_height_m, self.room_to_cam,
+                            self.boxes + tuple(boxes), mats, self.light_room, self.ambient,
+                            self.diffuse, self.light_colour, self.floor_index)
+
+    def with_light(self, *, gain: float = 1.0, light_room: NDArray[np.floating] | None = None
+                   ) -> Scene:
+        """A copy with the light scaled by `gain` (and turned to `light_room`); no re-render."""
+        lr = self.light_room if light_room is None else _unit(np.asarray(light_room, float),
+                                                              self.light_room)
+        return replace(self, light_room=lr, light_colour=self.light_colour * gain)
+
+    def for_intrinsics(self, intrinsics: Intrinsics) -> Scene:
+        """The same room rendered for another camera model."""
+        if intrinsics == self.intrinsics:
+            return self
+        return _build_scene(intrinsics, self.cam_height_m, self.room_to_cam, self.boxes,
+                            self.materials, self.light_room, self.ambient, self.diffuse,
+                            self.light_colour, self.floor_index)
+
+
+def _yaw_matrix(yaw: float) -> NDArray[np.float64]:
+    c, s = np.cos(yaw), np.sin(yaw)
+    return np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+
+
+def camera_rotation(pitch: float, yaw: float = 0.0, roll: float = 0.0) -> NDArray[np.float64]:
+    """room_to_cam for a camera looking along +Y, pitched down by `pitch`, turned left by
+    `yaw` and rolled by `roll` (radians); rows are the optical axes in the room frame."""
+    cp, sp = np.cos(pitch), np.sin(pitch)
+    x = np.array([1.0, 0.0, 0.0])
+    z = np.array([0.0, cp, -sp])
+    y = np.cross(z, x)
+    rot = np.stack([x, y, z])  # rows: optical x, y, z in room coordinates
+    cr, sr = np.cos(roll), np.sin(roll)
+    roll_m = np.array([[cr, -sr, 0.0], [sr, cr, 0.0], [0.0, 0.0, 1.0]])
+    return roll_m @ rot @ _yaw_matrix(yaw).T
+
+
+def _build_scene(intrinsics: Intrinsics, cam_height: float, room_to_cam: NDArray[np.float64],
+                 boxes: tuple[Box, ...], materials: tex.Materials, light_room, ambient: float,
+                 diffuse: float, light_colour, floor_index: int) -> Scene:
+    cam_pos = np.array([0.0, 0.0, cam_height])
+    n = len(boxes)
+    centers = np.empty((n, 3))
+    rots = np.empty((n, 3, 3))
+    halves = np.empty((n, 3))
+    mats = np.empty(n, dtype=np.int64)
+    for i, b in enumerate(boxes):
+        centers[i] = room_to_cam @ (np.asarray(b.center) - cam_pos)
+        # row k = local axis k (room: yaw about Z) expressed in the optical frame
+        rots[i] = (room_to_cam @ _yaw_matrix(b.yaw)).T
+        halves[i] = b.half
+        mats[i] = b.material
+    h, w = intrinsics.height, intrinsics.width
+    depth = np.empty((h, w), np.float32)
+    normal = np.empty((h, w, 3), np.float32)
+    albedo = np.empty((h, w, 3), np.float32)
+    ids = np.empty((h, w), np.int32)
+    raycast_boxes(intrinsics.fx, intrinsics.fy, intrinsics.cx, intrinsics.cy, h, w, centers,
+                  rots, halves, mats, materials.tiles, materials.scale, depth, normal, albedo,
+                  ids)
+    dropout = np.where(ids >= 0, materials.ir_dropout[mats[np.maximum(ids, 0)]], 0.0)
+    for a in (depth, normal, albedo, ids):
+        a.flags.writeable = False
+    return Scene(intrinsics=intrinsics, cam_height_m=cam_height, room_to_cam=room_to_cam,
+                 cam_pos=cam_pos, boxes=boxes, materials=materials,
+                 light_room=np.asarray(light_room, float), ambient=float(ambient),
+                 diffuse=float(diffuse), light_colour=np.asarray(light_colour, float),
+                 floor_index=floor_index, bg_depth=depth, bg_normal=normal, bg_albedo=albedo,
+                 bg_ids=ids, bg_dropout=dropout.astype(np.float32))
+
+
+# The region where `pose4d synth` puts people: room-frame X and Y ranges, metres.
+PERSON_ZONE = (-1.1, 1.1, 1.9, 3.6)
+
+
+def _overlaps(rect: tuple[float, float, float, float],
+              rects: list[tuple[float, float, float, float]], margin: float = 0.05) -> bool:
+    x0, x1, y0, y1 = rect
+    return any(x0 < b[1] + margin and b[0] - margin < x1 and y0 < b[3] + margin and
+               b[2] - margin < y1 for b in rects)
+
+
+def random_scene(rng: np.random.Generator, intrinsics: Intrinsics, *,
+                 occluder_prob: float = 0.3) -> Scene:
+    """A random furnished room seen by a Kinect-like camera.
+
+    The camera stands 0.85-1.35 m high, pitched down to aim at the middle of a person 3 m
+    away (about -2 to 11 degrees), looking at a back wall
+    3.7-5.5 m away (partly beyond the sensor's range, as in real rooms); side walls are 1.7-3 m
+    to either side. Furniture (tables, cabinets, shelves, chairs, sofas, counters) stands along
+    the walls outside `PERSON_ZONE`; with probability `occluder_prob` a low object stands
+    between the camera and that zone (1.2-1.8 m away), hiding a person's legs. Walls, floor and
+    furniture are textured from real photographs; the light's direction, colour and strength
+    vary.
+
+    Parameters
+    ----------
+    rng : the random source (the scene is a deterministic function of its state).
+    intrinsics : the camera the room is pre-rendered for.
+    occluder_prob : probability of an occluding object in front of the person zone.
+    """
+    mb = tex.MaterialBuilder()
+    cam_h = float(rng.uniform(0.85, 1.35))
+    # aimed roughly at the middle of a person 3 m away, so that whole bodies fit at 2.2-3.5 m
+    pitch = np.arctan2(cam_h - 0.9, 3.0) + np.deg2rad(rng.uniform(-2.0, 3.0))
+    yaw = np.deg2rad(rng.uniform(-6.0, 6.0))
+    roll = np.deg2rad(rng.normal(0.0, 0.8))
+    room_to_cam = camera_rotation(pitch, yaw, roll)
+
+    back = float(rng.uniform(3.7, 5.5))
+    xl = -float(rng.uniform(1.7, 3.0))
+    xr = float(rng.uniform(1.7, 3.0))
+    ceil = float(rng.uniform(2.5, 2.9))
+    t = 0.05  # half thickness of walls
+
+    tile, scale, name = tex.floor_tile(rng)
+    m_floor = mb.add(f'floor/{name}', tile, scale)
+    tile, scale, name = tex.wall_tile(rng)
+    m_wall = mb.add(f'wall/{name}', tile, scale)
+    m_accent = m_wall
+    if rng.random() < 0.35:
+        tile, scale, name = tex.wall_tile(rng)
+        m_accent = mb.add(f'wall/{name}', tile, scale)
+    m_ceiling = mb.add('ceiling', tex.tint(tex.grain(rng, 'moon'), (0.9, 0.9, 0.88), 0.02),
+                       1.0)
+    m_skirting = mb.add('skirting', *tex.furniture_tile(rng, 'laminate')[:2])
+
+    cy = back / 2 - 0.5
+    hy = back / 2 + 1.0
+    boxes: list[Box] = [
+        Box((0.0, cy, -t), (8.0, hy, t), m_floor, kind='floor'),
+        Box((0.0, back + t, ceil / 2), (8.0, t, ceil / 2 + 0.1), m_accent, kind='wall'),
+        Box((xl - t, cy, ceil / 2), (t, hy, ceil / 2 + 0.1), m_wall, kind='wall'),
+        Box((xr + t, cy, ceil / 2), (t, hy, ceil / 2 + 0.1), m_wall, kind='wall'),
+        Box((0.0, cy, ceil + t), (8.0, hy, t), m_ceiling, kind='wall'),
+        Box((0.0, back - 0.008, 0.045), ((xr - xl) / 2 + 0.1, 0.008, 0.045), m_skirting,
+            kind='decor'),
+        Box((xl + 0.008, cy, 0.045), (0.008, hy, 0.045), m_skirting, kind='decor'),
+        Box((xr - 0.008, cy, 0.045), (0.008, hy, 0.045), m_skirting, kind='decor'),
+    ]
+    taken: list[tuple[float, float, float, float]] = []  # furniture footprints
+
+    # a door and some pictures on the walls
+    if rng.random() < 0.5:
+        tile, scale, _ = tex.furniture_tile(rng, str(rng.choice(['wood', 'laminate'])))
+        m_door = mb.add('door', tile, scale)
+        x = float(rng.uniform(xl + 0.6, xr - 0.6))
+        boxes.append(Box((x, back - 0.02, 1.02), (0.45, 0.02, 1.02), m_door, kind='decor'))
+        taken.append((x - 0.5, x + 0.5, back - 0.9, back))  # keep the door free
+    for _ in range(int(rng.integers(0, 4))):
+        w = float(rng.uniform(0.3, 0.9))
+        hgt = w * float(rng.uniform(0.6, 1.0))
+        tile, _ = tex.picture_tile(rng, w / hgt)
+        m_pic = mb.add('picture', tile, (w, hgt))  # the picture's face is exactly one tile
+        z = float(rng.uniform(1.3, 1.8))
+        if rng.random() < 0.6:
+            x = float(rng.uniform(xl + w, xr - w))
+            boxes.append(Box((x, back - 0.012, z), (w / 2, 0.012, hgt / 2), m_pic,
+                             kind='decor'))
+        else:
+            side = xl if rng.random() < 0.5 else xr
+            y = float(rng.uniform(2.0, back - 0.6))
+            sign = 1.0 if side == xl else -1.0
+            boxes.append(Box((side + sign * 0.012, y, z), (w / 2, 0.012, hgt / 2), m_pic,
+                             yaw=float(sign * np.pi / 2), kind='decor'))
+
+    # furniture along the walls
+    for _ in range(int(rng.integers(2, 6))):
+        kind = str(rng.choice(['table', 'cabinet', 'shelf', 'chair', 'sofa', 'counter']))
+        for _attempt in range(12):
+            new = _furniture(rng, mb, kind, back, xl, xr)
+            if new is None:
+                break
+            rect, parts = new
+            if not _overlaps(rect, taken) and not _overlaps(rect, [_zone_rect()], 0.0):
+                taken.append(rect)
+                boxes.extend(parts)
+                break
+
+    if rng.random() < occluder_prob:
+        kind = str(rng.choice(['table', 'chair', 'cabinet', 'boxes']))
+        x = float(rng.uniform(-0.45, 0.45))
+        y = float(rng.uniform(1.2, 1.8))
+        top = min(0.85, cam_h - 0.3) * float(rng.uniform(0.75, 1.0))
+        boxes.extend(_occluder(rng, mb, kind, x, y, top))
+
+    el = np.deg2rad(rng.uniform(25.0, 70.0))
+    az = np.deg2rad(rng.uniform(-80.0, 80.0) + (180.0 if rng.random() < 0.15 else 0.0))
+    light_room = np.array([np.sin(az) * np.cos(el), -np.cos(az) * np.cos(el), np.sin(el)])
+    warm = float(rng.uniform(-1.0, 1.0))
+    colour = np.array([1.0 + 0.08 * warm, 1.0, 1.0 - 0.12 * warm])
+    colour *= float(rng.uniform(0.85, 1.1))
+    return _build_scene(intrinsics, cam_h, room_to_cam, tuple(boxes), mb.build(), light_room,
+                        float(rng.uniform(0.3, 0.55)), float(rng.uniform(0.45, 0.75)), colour,
+                        floor_index=0)
+
+
+def _zone_rect() -> tuple[float, float, float, float]:
+    return PERSON_ZONE
+
+
+def _table(center, half_top, height, mat, yaw=0.0, kind='furniture') -> list[Box]:
+    """A table top on four legs (also chairs' seats)."""
+    x, y = center
+    hx, hy = half_top
+    top = 0.02
+    parts = [Box((x, y, height - top), (hx, hy, top), mat, yaw, kind)]
+    leg = 0.025
+    c, s = np.cos(yaw), np.sin(yaw)
+    for sx in (-1, 1):
+        for sy in (-1, 1):
+            lx, ly = sx * (hx - leg), sy * (hy - leg)
+            parts.append(Box((x + c * lx - s * ly, y + s * lx + c * ly, (height - 2 * top) / 2),
+                             (leg, leg, (height - 2 * top) / 2), mat, yaw, kind))
+    return parts
+
+
+def _furniture(rng: np.random.Generator, mb: tex.MaterialBuilder, kind: str, back: float,
+               xl: float, xr: float):
+    """One piece of furniture against a wall: (footprint, boxes), or None if it cannot fit."""
+    dims = {  # (width, depth, height) ranges
+        'table': ((0.8, 1.6), (0.6, 0.9), (0.72, 0.78)),
+        'cabinet': ((0.5, 1.2), (0.4, 0.6), (0.8, 1.9)),
+        'shelf': ((0.6, 1.2), (0.3, 0.4), (1.2, 2.0)),
+        'chair': ((0.42, 0.5), (0.42, 0.5), (0.44, 0.48)),
+        'sofa': ((1.4, 2.1), (0.8, 0.95), (0.4, 0.45)),
+        'counter': ((1.2, 2.4), (0.6, 0.65), (0.88, 0.92)),
+    }[kind]
+    w, d, h = (float(rng.uniform(*r)) for r in dims)
+    wall = rng.choice(['back', 'left', 'right'])
+    if wall == 'back':
+        if xr - xl < w + 0.2:
+            return None
+        x = float(rng.uniform(xl + w / 2, xr - w / 2))
+        y = back - d / 2 - 0.01
+        yaw = 0.0
+    else:
+        lo, hi = 1.2, back - w / 2 - 0.05
+        if hi <= lo:
+            return None
+        y = float(rng.uniform(lo, hi))
+        x = xl + d / 2 + 0.01 if wall == 'left' else xr - d / 2 - 0.01
+        yaw = float(np.pi / 2 if wall == 'left' else -np.pi / 2)
+    ex, ey = (w / 2, d / 2) if yaw == 0.0 else (d / 2, w / 2)
+    rect = (x - ex, x + ex, y - ey, y + ey)
+    material = {'table': 'wood', 'cabinet': str(rng.choice(['wood', 'laminate'])),
+                'shelf': 'wood', 'chair': str(rng.choice(['wood', 'metal'])), 'sofa': 'fabric',
+                'counter': 'laminate'}[kind]
+    tile, scale, name = tex.furniture_tile(rng, material)
+    m = mb.add(f'{kind}/{name}', tile, scale)
+    c, s = np.cos(yaw), np.sin(yaw)
+
+    def at(lx: float, ly: float) -> tuple[float, float]:
+        """Local (across, out of the wall) offsets -> room X, Y; local +y faces the room."""
+        return x + c * lx + s * ly, y + s * lx - c * ly
+
+    if kind == 'table':
+        return rect, _table((x, y), (w / 2, d / 2), h, m, yaw)
+    if kind == 'chair':
+        parts = _table((x, y), (w / 2, d / 2), h, m, yaw)
+        bx, by = at(0.0, -(d / 2 - 0.02))
+        parts.append(Box((bx, by, h + 0.22), (w / 2, 0.02, 0.22), m, yaw))
+        return rect, parts
+    if kind == 'sofa':
+        parts = [Box((x, y, h / 2), (w / 2, d / 2, h / 2), m, yaw)]
+        bx, by = at(0.0, -(d / 2 - 0.1))
+        parts.append(Box((bx, by, h + 0.22), (w / 2, 0.1, 0.22), m, yaw))
+        for sx in (-1, 1):
+            ax, ay = at(sx * (w / 2 - 0.09), 0.0)
+            parts.append(Box((ax, ay, h + 0.1), (0.09, d / 2, 0.1), m, yaw))
+        return rect, parts
+    if kind == 'counter':
+        tile2, scale2, _ = tex.furniture_tile(rng, 'wood')
+        m2 = mb.add('counter/top', tile2, scale2)
+        return rect, [Box((x, y, (h - 0.04) / 2), (w / 2, d / 2, (h - 0.04) / 2), m, yaw),
+                      Box((x, y, h - 0.02), (w / 2 + 0.01, d / 2 + 0.02, 0.02), m2, yaw)]
+    if kind == 'shelf':
+        parts = [Box(at(0.0, -(d / 2 - 0.01)) + (h / 2,), (w / 2, 0.01, h / 2), m, yaw)]
+        for sx in (-1, 1):
+            parts.append(Box(at(sx * (w / 2 - 0.01), 0.0) + (h / 2,), (0.01, d / 2, h / 2), m,
+                             yaw))
+        n = int(rng.integers(3, 6))
+        for k in range(n + 1):
+            parts.append(Box((x, y, k * (h - 0.02) / n + 0.01), (w / 2, d / 2, 0.01), m, yaw))
+        return rect, parts
+    return rect, [Box((x, y, h / 2), (w / 2, d / 2, h / 2), m, yaw)]
+
+
+def _occluder(rng: np.random.Generator, mb: tex.MaterialBuilder, kind: str, x: float,
+              y: float, top: float) -> list[Box]:
+    """A low object between the camera and the person zone (kind 'occluder'), at most `top`
+    metres high (below the camera, or it would hide everything behind it)."""
+    yaw = float(rng.uniform(-0.35, 0.35))
+    if kind == 'table':
+        tile, scale, _ = tex.furniture_tile(rng, 'wood')
+        m = mb.add('occluder/table', tile, scale)
+        return _table((x, y), (float(rng.uniform(0.4, 0.7)), float(rng.uniform(0.3, 0.45))),
+                      float(rng.uniform(0.8, 1.0)) * top, m, yaw, 'occluder')
+    if kind == 'chair':
+        tile, scale, _ = tex.furniture_tile(rng, str(rng.choice(['wood', 'metal'])))
+        m = mb.add('occluder/chair', tile, scale)
+        seat = min(0.46, 0.6 * top)
+        back = top - seat
+        parts = _table((x, y), (0.23, 0.23), seat, m, yaw, 'occluder')
+        c, s = np.cos(yaw), np.sin(yaw)
+        parts.append(Box((x - s * 0.21, y + c * 0.21, seat + back / 2), (0.23, 0.02, back / 2),
+                         m, yaw, 'occluder'))
+        return parts
+    if kind == 'cabinet':
+        tile, scale, _ = tex.furniture_tile(rng, str(rng.choice(['wood', 'laminate'])))
+        m = mb.add('occluder/cabinet', tile, scale)
+        h = float(rng.uniform(0.6, 1.0)) * top
+        return [Box((x, y, h / 2), (float(rng.uniform(0.3, 0.55)), 0.22, h / 2), m, yaw,
+                    'occluder')]
+    # a stack of cardboard boxes
+    colour = tex.jitter_colour(rng, (0.62, 0.48, 0.32), 0.06)
+    m = mb.add('occluder/boxes', tex.tint(tex.grain(rng, 'gravel', 0.3), colour, 0.06), 0.5)
+    parts = []
+    z = 0.0
+    for _ in range(int(rng.integers(1, 3))):
+        hx, hy, hz = (float(v) for v in rng.uniform([0.18, 0.15, 0.12], [0.32, 0.25, 0.25]))
+        hz = min(hz, (top - z) / 2)
+        if hz < 0.05:
+            break
+        parts.append(Box((x + float(rng.normal(0, 0.03)), y, z + hz), (hx, hy, hz), m,
+                         yaw + float(rng.normal(0, 0.1)), 'occluder'))
+        z += 2 * hz
+    return parts
+
+
+# --------------------------------------------------------------------------------------------
+# Rendering
+# --------------------------------------------------------------------------------------------
+
+@dataclass(frozen=True, eq=False)
+class Rendered:
+    """One rendered RGB-D frame.
+
+    Attributes
+    ----------
+    rgb : (H, W, 3) uint8, RGB order.
+    depth_mm : (H, W) uint16 millimetres, 0 = no reading, registered to `rgb`.
+    mask : (H, W) bool, True where the person is the visible surface.
+    joints : (20, 3) float64 metres, optical frame: the retargeted joints actually rendered,
+        `UTKINECT_JOINTS` order.
+    """
+
+    rgb: NDArray[np.uint8]
+    depth_mm: NDArray[np.uint16]
+    mask: NDArray[np.bool_]
+    joints: NDArray[np.float64]
+
+
+def _empty_background(intrinsics: Intrinsics) -> tuple[NDArray, ...]:
+    h, w = intrinsics.height, intrinsics.width
+    return (np.full((h, w), np.inf, np.float32), np.zeros((h, w, 3), np.float32),
+            np.zeros((h, w, 3), np.float32), np.full((h, w), -1, np.int32),
+            np.zeros((h, w), np.float32))
+
+
+_VIGNETTE: dict[Intrinsics, NDArray[np.float32]] = {}
+
+
+def _vignette(intrinsics: Intrinsics) -> NDArray[np.float32]:
+    if intrinsics not in _VIGNETTE:
+        u, v = np.meshgrid(np.arange(intrinsics.width), np.arange(intrinsics.height))
+        r2 = ((u - intrinsics.cx) / intrinsics.fx) ** 2 + \
+            ((v - intrinsics.cy) / intrinsics.fy) ** 2
+        _VIGNETTE[intrinsics] = (1.0 / (1.0 + 0.5 * r2)).astype(np.float32)[:, :, None]
+    return _VIGNETTE[intrinsics]
+
+
+def render(pose: NDArray[np.floating], body: Body, scene: Scene | None,
+           intrinsics: Intrinsics, *, rng: np.random.Generator | None = None,
+           kinect_noise: bool = True, sensor: KinectModel | None = None) -> Rendered:
+    """Render a person in a pose, in a room, as a Kinect v1 would see it.
+
+    Parameters
+    ----------
+    pose : (20, 3) float metres, optical frame, `UTKINECT_JOINTS` order (e.g. real Kinect
+        motion placed in the room). It is retargeted to `body` first (`retarget`; with a scene
+        the feet keep their height above the floor).
+    body : from `random_body`.
+    scene : from `random_scene`, or None for the body alone (depth 0 elsewhere, black RGB).
+    intrinsics : the camera (the scene is re-rendered if it was made for another one).
+    rng : noise source; None = a fixed seed (the output is then a function of the inputs).
+    kinect_noise : apply the Kinect depth model and camera noise; False gives exact depth
+        (0 only where nothing is hit) and noise-free colour.
+    sensor : Kinect model parameters (default `KinectModel()`).
+
+    Returns
+    -------
+    Rendered (rgb, depth_mm, mask, joints).
+    """
+    rng = rng if rng is not None else np.random.default_rng(0)
+    if scene is not None:
+        scene = scene.for_intrinsics(intrinsics)
+        bg = (scene.bg_depth, scene.bg_normal, scene.bg_albedo, scene.bg_ids, scene.bg_dropout)
+        up = scene.up_optical
+    else:
+        bg = _empty_background(intrinsics)
+        up = None
+    joints = retarget(pose, body, up=up)
+    prims = body_primitives(joints, body)
+    h, w = intrinsics.height, intrinsics.width
+    zbuf = bg[0].copy()
+    ids = np.full((h, w), -1, np.int32)
+    normal = np.zeros((h, w, 3), np.float32)
+    st = np.zeros((h, w, 2), np.float32)
+    raycast_body(intrinsics.fx, intrinsics.fy, intrinsics.cx, intrinsics.cy, zbuf,
+                 prims.cap_a, prims.cap_b, prims.cap_r, prims.cap_e1, prims.ell_c,
+                 prims.ell_rot, prims.ell_r, ids, normal, st)
+    mask = ids >= 0
+
+    if scene is not None:
+        light = scene.light_optical
+        ambient, diffuse, colour = scene.ambient, scene.diffuse, scene.light_colour
+        floor_id = scene.floor_index
+        blobs = _contact_shadows(joints, body, scene)
+    else:
+        light = np.array([0.3, -0.5, -0.8]) / np.linalg.norm([0.3, -0.5, -0.8])
+        ambient, diffuse, colour, floor_id = 0.45, 0.6, np.ones(3), -2
+        blobs = np.zeros((0, 5))  # no floor
+    img = np.empty((h, w, 3), np.float32)
+    shade(bg[2], bg[1], bg[3], zbuf, ids, normal, st, prims.mat, body.materials.tiles,
+          body.materials.scale, light, ambient, diffuse, colour, floor_id, blobs,
+          intrinsics.fx, intrinsics.fy, intrinsics.cx, intrinsics.cy, img)
+    all_normal = np.where(mask[:, :, None], normal, bg[1])
+    if kinect_noise:
+        img *= _vignette(intrinsics)
+        img = cv2.GaussianBlur(img, (0, 0), 0.65)
+        img += rng.normal(0.0, 0.012, img.shape).astype(np.float32)
+        dropout = np.where(mask, body.materials.ir_dropout[prims.mat[np.maximum(ids, 0)]],
+                           bg[4]).astype(np.float32)
+        depth = kinect_depth(zbuf, all_normal, intrinsics, rng, dropout=dropout, model=sensor)
+    else:
+        depth = ideal_depth(zbuf)
+    rgb = np.clip(img * 255.0 + 0.5, 0, 255).astype(np.uint8)
+    return Rendered(rgb=rgb, depth_mm=depth, mask=mask, joints=joints)
+
+
+def _contact_shadows(joints: NDArray[np.float64], body: Body, scene: Scene
+                     ) -> NDArray[np.float64]:
+    """Soft dark blobs on the floor under the feet and the body: (B, 5) centre (optical,
+    metres), radius, strength (the ambient occlusion a person casts, without shadow rays)."""
+    up = scene.up_optical
+    h = scene.cam_height_m
+
+    def on_floor(p: NDArray[np.float64]) -> NDArray[np.float64]:
+        return p - (p @ up + h) * up
+
+    blobs = []
+    for an, ft in ((LAN, LFT), (RAN, RFT)):
+        p = 0.5 * (joints[an] + joints[ft])
+        lift = float(p @ up + h)
+        if lift < 0.4:
+            blobs.append((*on_floor(p), 0.09 + 0.3 * lift, 0.5 - lift))
+    lift = float(joints[HC] @ up + h)
+    blobs.append((*on_floor(joints[HC]), max(0.25, 0.45 * lift), 0.3))
+    return np.array(blobs, dtype=np.float64)
+
+
+# --------------------------------------------------------------------------------------------
+# Ground truth in CAD-60's terms
+# --------------------------------------------------------------------------------------------
+
+def cad60_ground_truth(joints: NDArray[np.floating]
+                       ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """CAD-60 joints and orientations of a Kinect v1 pose.
+
+    Parameters
+    ----------
+    joints : (20, 3) float metres, optical frame, `UTKINECT_JOINTS` order.
+
+    Returns
+    -------
+    joints_mm : (15, 3) float64 millimetres, OpenNI world frame (x right, y up, z away),
+        `skeleton.CAD60_JOINTS` order (anatomical sides); hand := wrist, foot := ankle.
+    orientations : (11, 3, 3) float64 rotation matrices of joints 1-11, world frame: columns
+        are the joint's x, y, z axes. A person facing the camera with arms stretched sideways
+        (T-pose) gives the identity everywhere: x = towards the person's left, y = up, z away
+        from the camera; the arm bones lie along x, the trunk and leg bones along y.
+    """
+    j = np.asarray(joints, dtype=np.float64)
+    world = j * np.array([1.0, -1.0, 1.0])  # metres, y up
+    joints_mm = world[list(CAD60_FROM_KINECT)] * 1000.0
+
+    def frame(x_axis: NDArray | None, y_axis: NDArray | None) -> NDArray[np.float64]:
+        if x_axis is not None:
+            x = x_axis
+            y = _unit(t_y - (t_y @ x) * x, np.cross(t_z, x))
+        else:
+            y = y_axis
+            x = _unit(t_x - (t_x @ y) * y, np.cross(y, t_z))
+        return np.column_stack([x, y, np.cross(x, y)])
+
+    t_y = _unit(world[SC] - world[HC], np.array([0.0, 1.0, 0.0]))
+    t_x = world[LSH] - world[RSH]
+    t_x = _unit(t_x - (t_x @ t_y) * t_y, np.array([1.0, 0.0, 0.0]))
+    t_z = np.cross(t_x, t_y)
+
+    def d(a: int, b: int, fallback: NDArray) -> NDArray[np.float64]:
+        return _unit(world[b] - world[a], fallback)
+
+    rots = [
+        frame(None, d(SC, HEAD, t_y)),            # head
+        frame(None, d(SC, HEAD, t_y)),            # neck
+        np.column_stack([t_x, t_y, t_z]),         # torso
+        frame(d(LSH, LEL, t_x), None),            # left shoulder
+        frame(d(LEL, LWR, t_x), None),            # left elbow
+        frame(d(REL, RSH, t_x), None),            # right shoulder
+        frame(d(RWR, REL, t_x), None),            # right elbow
+        frame(None, d(LKN, LHIP, t_y)),           # left hip
+        frame(None, d(LAN, LKN, t_y)),            # left knee
+        frame(None, d(RKN, RHIP, t_y)),           # right hip
+        frame(None, d(RAN, RKN, t_y)),            # right knee
+    ]
+    return joints_mm, np.array(rots)

@@ -1,0 +1,341 @@
+"""From real Kinect motion (UTKinect takes) to synthetic CAD-60 videos on disk.
+
+A take is resampled to 30 fps (`utkinect.resample`) and moved into a floor frame: the floor is
+the plane through the lower foot joint of each frame (robust least squares), which removes the
+recording camera's height and tilt; frames in which a foot touches it are snapped onto it. A
+video is a window of a take (every `stride`-th frame), posed by that motion on a fresh random
+body (`synth.random_body`) in a fresh random room (`synth.random_scene`): the walk keeps its
+shape and its heading towards the camera but is turned by up to +-25 degrees and moved so that
+the person stands 2.2-3.3 m from the camera, clear of the furniture and behind any occluder.
+Windows in which the person sits get a chair under the hips. The light's strength drifts
+slowly during a video (auto-exposure).
+
+Output (`write_video`): one CAD-60 video per window, `<id>.txt`, `<id>/RGB_<k>.png`,
+`<id>/Depth_<k>.png`, `<id>/Mask_<k>.png`, k = 1 + the frame's index at 30 fps in the window
+(frame numbers keep the 30 fps clock: with stride 3 they are 1, 4, 7, ...).
+Video ids (10 digits): subject (2), take (2), window (2), seed modulo 10000 (4).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Iterator
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+from numpy.typing import NDArray
+
+from pose4d_ros.core.camera import Intrinsics
+from pose4d_ros.datasets import cad60, synth
+from pose4d_ros.datasets import synth_textures as tex
+from pose4d_ros.datasets.synth import HC, LAN, LFT, RAN, RFT, Body, Rendered, Scene
+from pose4d_ros.datasets.utkinect import read_actions, read_take, resample, to_optical
+
+FPS = 30.0
+SIT_ACTIONS = ('sitDown', 'standUp')
+
+
+@dataclass(frozen=True)
+class TakeMotion:
+    """A UTKinect take at 30 fps in its floor frame.
+
+    Attributes
+    ----------
+    name : 'sNN_eMM'; subject, take : NN, MM.
+    joints : (T, 20, 3) float64 metres, floor frame (X right, Y forward, Z up, floor Z = 0 at
+        the lower foot joint), `UTKINECT_JOINTS` order.
+    actions : {action: (first, last)} frame indices into `joints`.
+    """
+
+    name: str
+    subject: int
+    take: int
+    joints: NDArray[np.float64]
+    actions: dict[str, tuple[int, int]]
+
+
+def fit_floor(joints: NDArray[np.float64]) -> tuple[NDArray[np.float64], float]:
+    """The floor under a Kinect take, from the lower foot joint of each frame.
+
+    Parameters
+    ----------
+    joints : (T, 20, 3) metres, optical frame.
+
+    Returns
+    -------
+    up : (3,) unit vector, optical frame; height : camera height above the fitted plane, so
+        that a point p is `p @ up + height` above the floor.
+    """
+    feet = joints[:, [LAN, LFT, RAN, RFT], :]
+    low = feet[np.arange(len(joints)), np.argmax(feet[:, :, 1], axis=1)]  # y down: largest
+    keep = np.all(np.isfinite(low), axis=1)
+    if keep.sum() < 10:
+        raise ValueError(f'only {int(keep.sum())} frames with feet: cannot fit the floor')
+    for _ in range(4):  # trimmed least squares: y = a x + c z + d
+        a = np.column_stack([low[keep, 0], low[keep, 2], np.ones(keep.sum())])
+        # a weak prior a = c = 0 (a level camera) keeps the fit stable for takes in which the
+        # person hardly moves in x or z
+        a = np.vstack([a, [[0.1, 0.0, 0.0], [0.0, 0.1, 0.0]]])
+        coef, *_ = np.linalg.lstsq(a, np.r_[low[keep, 1], 0.0, 0.0], rcond=None)
+        res = low[:, 1] - (coef[0] * low[:, 0] + coef[1] * low[:, 2] + coef[2])
+        mad = float(np.median(np.abs(res[keep]))) + 1e-3
+        keep = np.all(np.isfinite(low), axis=1) & (np.abs(res) < 3.0 * mad)
+    normal = np.array([-coef[0], 1.0, -coef[1]])
+    scale = float(np.linalg.norm(normal))
+    up = -normal / scale  # the plane's normal points down (+y); up is its opposite
+    height = float(coef[2] / scale)  # distance from the camera to the plane
+    return up, height
+
+
+def to_floor_frame(joints: NDArray[np.float64], up: NDArray[np.float64],
+                   height: float) -> NDArray[np.float64]:
+    """Optical-frame joints -> floor frame (X right, Y forward along the ground, Z up)."""
+    fwd = np.array([0.0, 0.0, 1.0]) - up[2] * up
+    fwd /= np.linalg.norm(fwd)
+    right = np.cross(fwd, up)
+    rot = np.stack([right, fwd, up])
+    out = joints @ rot.T
+    out[..., 2] += height
+    return out
+
+
+def load_take(path: str | Path, actions: dict[str, dict[str, tuple[int, int]]] | None = None
+              ) -> TakeMotion:
+    """Read a UTKinect take, resample it to 30 fps and move it into its floor frame."""
+    take = read_take(path)
+    _, joints = resample(take, fps=FPS)
+    optical = to_optical(joints)
+    up, height = fit_floor(optical)
+    spans = {}
+    for action, (first, last) in (actions or {}).get(take.name, {}).items():
+        a, b = first - take.frames[0], last - take.frames[0]
+        if b >= 0 and a < len(joints):
+            spans[action] = (max(int(a), 0), min(int(b), len(joints) - 1))
+    return TakeMotion(take.name, take.subject, int(take.name[-2:]),
+                      to_floor_frame(optical, up, height), spans)
+
+
+def load_takes(directory: str | Path, names: list[str]) -> list[TakeMotion]:
+    """Load the named takes ('sNN_eMM') of a UTKinect directory (with its actionLabel.txt)."""
+    directory = Path(directory)
+    labels_path = directory / 'actionLabel.txt'
+    actions = read_actions(labels_path) if labels_path.is_file() else {}
+    out = []
+    for name in names:
+        path = directory / f'joints_{name}.txt'
+        if not path.is_file():
+            raise ValueError(f'{path}: UTKinect take not found')
+        out.append(load_take(path, actions))
+    return out
+
+
+@dataclass(frozen=True)
+class VideoPlan:
+    """One synthetic video: a window of a take and the seed of its body and room.
+
+    Attributes
+    ----------
+    take : 'sNN_eMM'; subject, take_no : NN, MM; window : index of the window in the take.
+    start : first frame index (30 fps) in the take; n_frames : frames written; stride : step.
+    seed : the run's seed; video_id : 10 digits; activity : the UTKinect action covering most
+        of the window, or 'random' (CAD-60's name for unscripted activity).
+    """
+
+    take: str
+    subject: int
+    take_no: int
+    window: int
+    start: int
+    n_frames: int
+    stride: int
+    seed: int
+    video_id: str
+    activity: str
+
+    @property
+    def indices(self) -> NDArray[np.int64]:
+        return self.start + self.stride * np.arange(self.n_frames)
+
+    @property
+    def frame_numbers(self) -> NDArray[np.int64]:
+        """CAD-60 frame numbers k (1 + index at 30 fps within the window)."""
+        return 1 + self.stride * np.arange(self.n_frames)
+
+
+def plan_videos(motion: TakeMotion, *, seed: int, videos: int = 1, frames: int = 60,
+                stride: int = 1, start_s: float = 0.0) -> list[VideoPlan]:
+    """Split a take into `videos` windows of `frames` frames (every `stride`-th at 30 fps),
+    spread evenly from `start_s` seconds to the end (windows shrink if the take is short)."""
+    if videos < 1 or frames < 1 or stride < 1:
+        raise ValueError(f'videos, frames and stride must be >= 1, got {videos}, {frames}, '
+                         f'{stride}')
+    if start_s < 0:
+        raise ValueError(f'start must be >= 0 seconds, got {start_s}')
+    total = len(motion.joints)
+    first = int(round(start_s * FPS))
+    if first >= total:
+        raise ValueError(f'{motion.name}: start {start_s} s is beyond the take '
+                         f'({total / FPS:.1f} s)')
+    n = min(frames, (total - 1 - first) // stride + 1)
+    span = (n - 1) * stride + 1
+    free = total - first - span
+    plans = []
+    for w in range(videos):
+        start = first + (int(round(w * free / (videos - 1))) if videos > 1 else 0)
+        window = (start, start + span - 1)
+        overlap = {a: min(b, window[1]) - max(a0, window[0]) + 1
+                   for a, (a0, b) in motion.actions.items()}
+        best = max(overlap, key=overlap.get, default=None)
+        activity = best if best is not None and overlap[best] > 0 else 'random'
+        vid = f'{motion.subject:02d}{motion.take:02d}{w % 100:02d}{seed % 10000:04d}'
+        plans.append(VideoPlan(motion.name, motion.subject, motion.take, w, start, n, stride,
+                               seed, vid, activity))
+    return plans
+
+
+def video_rng(plan: VideoPlan, what: int) -> np.random.Generator:
+    """The random stream of one part (`what`) of one video: independent of other videos."""
+    return np.random.default_rng([plan.seed, plan.subject, plan.take_no, plan.window, what])
+
+
+def subject_body(seed: int, subject: int) -> Body:
+    """One body for all videos of a subject (`pose4d synth --body-per subject`)."""
+    return synth.random_body(np.random.default_rng([seed, subject, 0, 0, 0]))
+
+
+@dataclass(frozen=True, eq=False)
+class VideoJob:
+    """Everything needed to render a planned video."""
+
+    plan: VideoPlan
+    body: Body
+    scene: Scene
+    poses: NDArray[np.float64]  # (F, 20, 3) metres, scene camera's optical frame
+    gains: NDArray[np.float64]  # (F,) light gain per frame
+    intrinsics: Intrinsics
+    kinect_noise: bool
+
+
+def prepare_video(plan: VideoPlan, motion: TakeMotion, intrinsics: Intrinsics, *,
+                  body: Body | None = None, occluder_prob: float = 0.3,
+                  kinect_noise: bool = True) -> VideoJob:
+    """Draw the body (unless given) and the room, place the motion, add a chair if needed."""
+    body = body if body is not None else synth.random_body(video_rng(plan, 1))
+    rng = video_rng(plan, 2)
+    scene = synth.random_scene(rng, intrinsics, occluder_prob=occluder_prob)
+    room = motion.joints[plan.indices].copy()
+    # The lower foot joint sits a shoe's radius above the floor. Kinect's foot joints jitter
+    # by centimetres about the fitted floor, so frames in contact (lower foot within 15 cm)
+    # are snapped onto it; the rest keep their height.
+    low = room[:, [LAN, LFT, RAN, RFT], 2].min(axis=1)
+    room[..., 2] += np.where(low < 0.15, body.radii['foot'] - low, body.radii['foot'])[:, None]
+    room = place_in_room(room, scene, rng)
+    window_actions = [a for a, (a0, b) in motion.actions.items()
+                      if a0 <= plan.indices[-1] and b >= plan.indices[0]]
+    if any(a in SIT_ACTIONS for a in window_actions):
+        scene = _add_seat(scene, room, rng)
+    t = plan.frame_numbers / FPS
+    gains = 1.0 + 0.05 * np.sin(2 * np.pi * t / rng.uniform(4.0, 10.0) + rng.uniform(0, 6.3))
+    return VideoJob(plan, body, scene, scene.to_optical(room), gains, intrinsics, kinect_noise)
+
+
+def place_in_room(joints: NDArray[np.float64], scene: Scene, rng: np.random.Generator, *,
+                  tries: int = 80) -> NDArray[np.float64]:
+    """Turn and move a window of floor-frame motion into the room's person zone.
+
+    The motion is turned about the vertical through its mean hip position by up to 25 degrees
+    and moved to a random spot 2.2-3.3 m ahead; the spot that keeps the hips inside
+    `synth.PERSON_ZONE`, 0.35 m clear of furniture and 0.45 m behind any occluder in the most
+    frames wins (the first that does so in all frames).
+
+    Parameters
+    ----------
+    joints : (F, 20, 3) metres, floor frame.
+
+    Returns
+    -------
+    (F, 20, 3) metres, room frame.
+    """
+    hips = joints[:, HC, :2]
+    centre = hips.mean(axis=0)
+    furniture = scene.footprints(('furniture',))
+    occluders = scene.footprints(('occluder',))
+    x0, x1, y0, y1 = synth.PERSON_ZONE
+    best = None
+    for _ in range(tries):
+        yaw = np.deg2rad(rng.uniform(-25.0, 25.0))
+        target = np.array([rng.uniform(-0.5, 0.5), rng.uniform(2.2, 3.3)])
+        c, s = np.cos(yaw), np.sin(yaw)
+        rot = np.array([[c, -s], [s, c]])
+        p = (hips - centre) @ rot.T + target
+        bad = ~((p[:, 0] > x0) & (p[:, 0] < x1) & (p[:, 1] > y0) & (p[:, 1] < y1))
+        for fx0, fx1, fy0, fy1 in furniture:
+            bad |= ((p[:, 0] > fx0 - 0.35) & (p[:, 0] < fx1 + 0.35) & (p[:, 1] > fy0 - 0.35)
+                    & (p[:, 1] < fy1 + 0.35))
+        for _, _, _, oy1 in occluders:
+            bad |= p[:, 1] < oy1 + 0.45
+        cost = int(bad.sum())
+        if best is None or cost < best[0]:
+            best = (cost, rot, target)
+        if cost == 0:
+            break
+    _, rot, target = best
+    out = joints.copy()
+    out[..., :2] = (joints[..., :2] - centre) @ rot.T + target
+    return out
+
+
+def _add_seat(scene: Scene, room: NDArray[np.float64], rng: np.random.Generator) -> Scene:
+    """A chair under the hips at the lowest hip position of the window (the person sits)."""
+    k = int(np.argmin(room[:, HC, 2]))
+    j = room[k]
+    left, up, fwd = synth.body_frame(j)
+    yaw = float(np.arctan2(-fwd[0], fwd[1]))  # local +y = the chair's front = person's front
+    seat_top = max(float(j[HC, 2]) - 0.1, 0.3)
+    pos = j[HC, :2] - 0.06 * fwd[:2] / max(float(np.linalg.norm(fwd[:2])), 1e-6)
+    tile, scale, _ = tex.furniture_tile(rng, str(rng.choice(['wood', 'metal', 'fabric'])))
+    mat = len(scene.materials)
+    parts = synth._table((float(pos[0]), float(pos[1])), (0.22, 0.22), seat_top, mat, yaw,
+                         'furniture')
+    c, s = np.cos(yaw), np.sin(yaw)
+    bx, by = pos[0] + s * 0.2, pos[1] - c * 0.2  # behind the seat: -local y
+    parts.append(synth.Box((float(bx), float(by), seat_top + 0.22), (0.22, 0.02, 0.22), mat,
+                           yaw, 'furniture'))
+    return scene.with_boxes(parts, (('seat', tile, scale),))
+
+
+def render_video(job: VideoJob) -> Iterator[tuple[int, Rendered]]:
+    """Yield (frame number k, rendered frame) for every frame of a prepared video."""
+    rng = video_rng(job.plan, 3)
+    for k, pose, gain in zip(job.plan.frame_numbers, job.poses, job.gains, strict=True):
+        scene = job.scene.with_light(gain=float(gain))
+        yield int(k), synth.render(pose, job.body, scene, job.intrinsics, rng=rng,
+                                   kinect_noise=job.kinect_noise)
+
+
+def write_video(job: VideoJob, person_dir: str | Path, *,
+                progress: Callable[[int], object] | None = None) -> int:
+    """Render a video into `person_dir` as `<id>.txt` and `<id>/{RGB,Depth,Mask}_<k>.png`.
+
+    `progress(1)` is called after each frame. Returns the bytes written. The skeleton file is
+    written last, so a video without one is incomplete.
+    """
+    person_dir = Path(person_dir)
+    frame_dir = person_dir / job.plan.video_id
+    frame_dir.mkdir(parents=True, exist_ok=False)
+    joints_mm, rots = [], []
+    for k, frame in render_video(job):
+        cad60.write_frame(frame_dir, k, frame.rgb, frame.depth_mm, frame.mask)
+        jm, rot = synth.cad60_ground_truth(frame.joints)
+        joints_mm.append(jm)
+        rots.append(rot)
+        if progress is not None:
+            progress(1)
+    n = len(joints_mm)
+    skeleton = cad60.Skeleton(
+        frames=job.plan.frame_numbers.astype(np.int64), joints_mm=np.array(joints_mm),
+        joint_conf=np.ones((n, 15)), orientations=np.array(rots),
+        orientation_conf=np.ones((n, 11)))
+    cad60.write_skeleton(person_dir / f'{job.plan.video_id}.txt', skeleton)
+    return sum(p.stat().st_size for p in frame_dir.iterdir()) + \
+        (person_dir / f'{job.plan.video_id}.txt').stat().st_size

@@ -1,0 +1,322 @@
+"""Synthetic RGB-D renderer: ground truth on the person, determinism, Kinect depth, CAD-60 output.
+
+Poses come from a small synthetic Kinect motion made here (a person facing the camera swinging
+the arms), so the tests do not need ../shared/data; one end-to-end test of `pose4d synth` on the
+real UTKinect takes runs when that data is present.
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+from numpy.testing import assert_allclose, assert_array_equal
+
+from pose4d_ros.cli.main import main as pose4d_main
+from pose4d_ros.core.camera import cad60_intrinsics, project
+from pose4d_ros.core.skeleton import CAD60_JOINTS
+from pose4d_ros.datasets import cad60, synth, synth_video
+from pose4d_ros.datasets.synth_kinect import KinectModel, kinect_depth
+from pose4d_ros.datasets.synth_raycast import projector_shadow
+from pose4d_ros.datasets.utkinect import UTKINECT_JOINTS
+
+UTKINECT = Path(__file__).resolve().parents[2] / 'shared' / 'data' / 'utkinect'
+K = cad60_intrinsics()
+J = {n: i for i, n in enumerate(UTKINECT_JOINTS)}
+
+
+def standing_pose(z: float = 2.8, cam_height: float = 1.0, arm: float = 0.0) -> np.ndarray:
+    """A person facing the camera (optical frame), feet on a floor `cam_height` below the
+    camera; `arm` (radians) lifts both arms sideways."""
+    d = synth._REST_DIR.copy()
+    for side, sign in (('left', 1.0), ('right', -1.0)):
+        for joint in (f'{side}_elbow', f'{side}_wrist', f'{side}_hand'):
+            d[J[joint]] = [sign * np.sin(arm), np.cos(arm), -0.1]
+    d[1:] /= np.linalg.norm(d[1:], axis=1, keepdims=True)
+    pose = np.zeros((20, 3))
+    for i in range(1, 20):
+        pose[i] = pose[synth.PARENTS[i]] + d[i] * synth.REF_BONES[i]
+    pose += [0.0, cam_height - 0.04 - pose[[14, 15, 18, 19], 1].max(), z]
+    return pose
+
+
+def test_retarget_keeps_directions_and_sets_lengths() -> None:
+    rng = np.random.default_rng(0)
+    body = synth.random_body(rng)
+    pose = standing_pose(arm=0.7) + rng.normal(0, 0.02, (20, 3))
+    out = synth.retarget(pose, body)
+    assert_allclose(out[0], pose[0])
+    for i in range(1, 20):
+        p = synth.PARENTS[i]
+        bone_in, bone_out = pose[i] - pose[p], out[i] - out[p]
+        assert_allclose(np.linalg.norm(bone_out), body.bones[i], rtol=1e-9)
+        assert_allclose(bone_out / np.linalg.norm(bone_out),
+                        bone_in / np.linalg.norm(bone_in), atol=1e-9)
+    up = np.array([0.0, -1.0, 0.0])
+    grounded = synth.retarget(pose, body, up=up)
+    feet = [14, 15, 18, 19]
+    assert_allclose((grounded[feet] @ up).min(), (pose[feet] @ up).min(), atol=1e-9)
+    with pytest.raises(ValueError, match=r'\(20, 3\)'):
+        synth.retarget(pose[:15], body)
+
+
+@pytest.mark.parametrize('arm', [0.0, 1.2, 2.6])
+def test_ground_truth_joints_lie_on_the_person(arm: float) -> None:
+    """Head, wrists, hands, ankles and feet project onto the mask and onto valid depth."""
+    rng = np.random.default_rng(1)
+    body = synth.random_body(rng)
+    r = synth.render(standing_pose(arm=arm), body, None, K, rng=rng)
+    names = ['head', 'left_wrist', 'right_wrist', 'left_hand', 'right_hand', 'left_ankle',
+             'right_ankle', 'left_foot', 'right_foot', 'shoulder_center', 'hip_center']
+    uv = np.rint(project(r.joints[[J[n] for n in names]], K)).astype(int)
+    for name, (u, v) in zip(names, uv, strict=True):
+        assert 0 <= u < K.width and 0 <= v < K.height, name
+        assert r.mask[v, u], f'{name} at ({u}, {v}) is not on the person'
+        win = r.depth_mm[v - 2:v + 3, u - 2:u + 3].astype(float) / 1000
+        z = r.joints[J[name], 2]
+        near = win[(win > 0) & (np.abs(win - z) < 0.2)]
+        assert near.size > 0, f'no depth reading within 0.2 m of {name}'
+    # nothing but the person: depth 0 and black elsewhere
+    assert np.all(r.depth_mm[~r.mask] == 0)
+    assert 1500 < r.mask.sum() < 15000
+
+
+def test_ground_truth_in_a_room_without_occluders() -> None:
+    rng = np.random.default_rng(2)
+    body = synth.random_body(rng)
+    for _ in range(3):
+        scene = synth.random_scene(rng, K, occluder_prob=0.0)
+        room = scene.to_room(standing_pose())
+        room[:, :2] += np.array([0.0, 2.8]) - room[0, :2]
+        room[:, 2] -= room[[14, 15, 18, 19], 2].min() - body.radii['foot']
+        r = synth.render(scene.to_optical(room), body, scene, K, rng=rng)
+        for name in ('head', 'left_wrist', 'right_wrist', 'left_ankle', 'right_ankle'):
+            u, v = np.rint(project(r.joints[[J[name]]], K)[0]).astype(int)
+            if 0 <= u < K.width and 0 <= v < K.height:
+                assert r.mask[v, u], name
+        # the feet stand on the floor: the lowest foot joint is a shoe's radius up
+        up = scene.up_optical
+        heights = r.joints[[14, 15, 18, 19]] @ up + scene.cam_height_m
+        assert_allclose(heights.min(), body.radii['foot'], atol=1e-6)
+        assert r.rgb.dtype == np.uint8 and r.rgb.shape == (240, 320, 3)
+        assert (r.depth_mm > 0).mean() > 0.3  # the room is mostly within range
+
+
+def test_occluder_hides_the_legs_sometimes() -> None:
+    """With an occluder in every room, some ankles are hidden (mask False at the joint)."""
+    rng = np.random.default_rng(3)
+    body = synth.random_body(rng)
+    hidden = 0
+    for _ in range(6):
+        scene = synth.random_scene(rng, K, occluder_prob=1.0)
+        assert any(b.kind == 'occluder' for b in scene.boxes)
+        room = scene.to_room(standing_pose())
+        room[:, :2] += np.array([0.0, 2.6]) - room[0, :2]
+        room[:, 2] -= room[[14, 15, 18, 19], 2].min() - body.radii['foot']
+        r = synth.render(scene.to_optical(room), body, scene, K, rng=rng)
+        u, v = np.rint(project(r.joints[[J['left_ankle']]], K)[0]).astype(int)
+        if 0 <= u < K.width and 0 <= v < K.height and not r.mask[v, u]:
+            hidden += 1
+        assert r.mask[np.rint(project(r.joints[[J['head']]], K)[0, ::-1]).astype(int)[0],
+                      np.rint(project(r.joints[[J['head']]], K)[0]).astype(int)[0]]
+    assert hidden >= 1
+
+
+def test_render_is_deterministic_with_a_seed() -> None:
+    def once(seed: int) -> synth.Rendered:
+        rng = np.random.default_rng(seed)
+        body = synth.random_body(rng)
+        scene = synth.random_scene(rng, K)
+        room = scene.to_room(standing_pose())
+        room[:, :2] += np.array([0.0, 3.0]) - room[0, :2]
+        return synth.render(scene.to_optical(room), body, scene, K, rng=rng)
+
+    a, b, c = once(7), once(7), once(8)
+    assert_array_equal(a.rgb, b.rgb)
+    assert_array_equal(a.depth_mm, b.depth_mm)
+    assert_array_equal(a.mask, b.mask)
+    assert_array_equal(a.joints, b.joints)
+    assert not np.array_equal(a.rgb, c.rgb)
+    assert not np.array_equal(a.depth_mm, c.depth_mm)
+
+
+def test_kinect_depth_has_holes_quantisation_and_range() -> None:
+    rng = np.random.default_rng(4)
+    body = synth.random_body(rng)
+    scene = synth.random_scene(rng, K, occluder_prob=0.0)
+    room = scene.to_room(standing_pose())
+    room[:, :2] += np.array([0.0, 2.8]) - room[0, :2]
+    pose = scene.to_optical(room)
+    noisy = synth.render(pose, body, scene, K, rng=rng)
+    exact = synth.render(pose, body, scene, K, kinect_noise=False)
+    assert noisy.depth_mm.dtype == np.uint16
+    assert_array_equal(noisy.mask, exact.mask)
+    # holes on the person's outline and in the room; exact depth has none within range
+    assert (noisy.depth_mm[noisy.mask] == 0).sum() > 10
+    in_range = (exact.depth_mm > 500) & (exact.depth_mm < 4400)
+    assert np.all(noisy.depth_mm[exact.depth_mm > 4800] == 0)  # beyond range (+- noise)
+    assert (noisy.depth_mm[in_range] == 0).mean() > 0.005
+    # readings are disparity levels: 1 / (z quant) is close to an integer
+    z = noisy.depth_mm[noisy.depth_mm > 0] / 1000.0
+    quant = KinectModel().quant
+    level = 1.0 / (z * quant)
+    mm_rounding = 0.0005 / (z**2 * quant) + 1e-9  # d level / dz times half a millimetre
+    assert np.all(np.abs(level - np.rint(level)) <= mm_rounding)
+    # and the error grows with distance, within a few quantisation steps
+    both = (noisy.depth_mm > 0) & in_range
+    err = np.abs(noisy.depth_mm[both].astype(float) - exact.depth_mm[both]) / 1000
+    zb = exact.depth_mm[both] / 1000
+    assert np.median(err[zb > 3.5]) > np.median(err[zb < 2.0])
+    assert np.percentile(err / zb**2, 95) < 0.02
+
+
+def test_projector_shadow_band_left_of_a_near_object() -> None:
+    """A box at 2 m in front of a wall at 4 m leaves f b (1/2 - 1/4) ~ 5.3 px with no
+    reading on its left, none on its right."""
+    depth = np.full((240, 320), 4.0, np.float32)
+    depth[:, 150:200] = 2.0
+    fb = K.fx * 0.075
+    shadow = projector_shadow(depth, fb)
+    width = fb * (1 / 2.0 - 1 / 4.0)
+    row = shadow[20]
+    assert not row[150:].any()
+    band = np.flatnonzero(row)
+    assert band.max() == 149 and abs(len(band) - width) <= 1.0
+    facing = np.dstack([np.zeros_like(depth)] * 2 + [-np.ones_like(depth)])
+    z = kinect_depth(depth, facing, K, np.random.default_rng(0),
+                     model=KinectModel(speckle=0.0, edge_drop=0.0, edge_ring_drop=0.0))
+    assert np.all(z[:, 145:150] == 0) and np.all(z[:, 150:] > 0) and np.all(z[:, :144] > 0)
+
+
+def test_cad60_ground_truth_tpose_is_identity_and_sides_are_anatomical() -> None:
+    pose = standing_pose(arm=np.pi / 2)
+    pose[:, 2] = 2.8  # flat, facing the camera
+    joints_mm, rots = synth.cad60_ground_truth(pose)
+    assert joints_mm.shape == (15, 3) and rots.shape == (11, 3, 3)
+    assert_allclose(rots, np.broadcast_to(np.eye(3), rots.shape), atol=0.05)
+    assert_allclose(np.einsum('nji,njk->nik', rots, rots), np.broadcast_to(np.eye(3),
+                    rots.shape), atol=1e-9)
+    # hand := wrist, foot := ankle; anatomical left at larger u (facing person)
+    assert_allclose(joints_mm[CAD60_JOINTS.index('left_hand')],
+                    pose[J['left_wrist']] * [1000, -1000, 1000])
+    assert_allclose(joints_mm[CAD60_JOINTS.index('right_foot')],
+                    pose[J['right_ankle']] * [1000, -1000, 1000])
+    uv = cad60.project_perspective(joints_mm)
+    assert uv[CAD60_JOINTS.index('left_shoulder'), 0] > uv[CAD60_JOINTS.index('right_shoulder'),
+                                                           0]
+
+
+def synthetic_take(frames: int = 90) -> np.ndarray:
+    """(F, 20, 3) optical-frame motion: arms swinging, walking slowly sideways and away."""
+    t = np.arange(frames) / 30.0
+    out = np.array([standing_pose(z=2.5 + 0.4 * np.sin(1.5 * ti), cam_height=0.9,
+                                  arm=0.3 + 0.8 * np.sin(2 * ti)) for ti in t])
+    out[:, :, 0] += 0.3 * np.sin(2 * t)[:, None]
+    return out
+
+
+def test_fit_floor_recovers_a_tilted_floor() -> None:
+    joints = synthetic_take()
+    tilt = np.deg2rad(8.0)  # camera pitched down: rotate the scene up about x
+    rot = np.array([[1, 0, 0], [0, np.cos(tilt), -np.sin(tilt)], [0, np.sin(tilt),
+                                                                   np.cos(tilt)]])
+    tilted = joints @ rot.T
+    up, height = synth_video.fit_floor(tilted)
+    assert_allclose(up, rot @ [0.0, -1.0, 0.0], atol=2e-3)  # the weak level-camera prior
+    feet = tilted[:, [14, 15, 18, 19]]
+    assert_allclose((feet @ up + height).min(axis=1), 0.0, atol=5e-3)
+
+
+def write_utkinect(directory: Path, frames: int = 90) -> None:
+    """A tiny UTKinect directory: s01_e01 and s02_e01 from `synthetic_take`."""
+    directory.mkdir(parents=True, exist_ok=True)
+    sdk = synthetic_take(frames) * [-1.0, -1.0, 1.0]  # optical -> Kinect SDK space
+    for name in ('s01_e01', 's02_e01'):
+        lines = [' '.join([str(2 * i + 10)] + [f'{v:.5f}' for v in sdk[i].ravel()])
+                 for i in range(frames)]
+        (directory / f'joints_{name}.txt').write_text('\n'.join(lines) + '\n')
+    (directory / 'actionLabel.txt').write_text(
+        's01_e01\nwaveHands: 10 100\nclapHands: NaN NaN\ns02_e01\nsitDown: 150 180\n')
+
+
+def test_pose4d_synth_writes_cad60_that_reads_back(tmp_path: Path) -> None:
+    ut = tmp_path / 'ut'
+    write_utkinect(ut)
+    out = tmp_path / 'set'
+    argv = ['synth', '--utkinect', str(ut), '--out', str(out), '--seed', '3', '--takes',
+            's01-s02', '--frames', '4', '--stride', '3', '--videos-per-take', '2', '--quiet']
+    assert pose4d_main(argv) == 0
+    assert sorted(p.name for p in tmp_path.iterdir()) == ['set', 'ut']  # no temp dir left
+    videos = cad60.list_videos(out)
+    assert [v.person for v in videos] == ['data1', 'data1', 'data2', 'data2']
+    # s01_e01 is waved in frames 10-100 (window 0), s02_e01 sits in frames 150-180 (window 1)
+    assert [v.activity for v in videos] == ['waveHands', 'random', 'random', 'sitDown']
+    assert len({v.video_id for v in videos}) == 4
+    assert all(len(v.video_id) == 10 and v.video_id.endswith('0003') for v in videos)
+    for video in videos:
+        skel = cad60.read_skeleton(video.skeleton_path)
+        assert_array_equal(skel.frames, [1, 4, 7, 10])
+        frames = list(cad60.iter_frames(video, with_mask=True))
+        for f, uv in zip(frames, skel.pixels(), strict=True):
+            assert f.depth_mm.dtype == np.uint16 and f.depth_mm.shape == (240, 320)
+            assert f.rgb.shape == (240, 320, 3) and f.mask.any()
+            assert (f.depth_mm == 0).any()
+            u, v = np.rint(uv[CAD60_JOINTS.index('head')]).astype(int)
+            assert f.mask[v, u]
+            assert uv[CAD60_JOINTS.index('left_shoulder'), 0] > \
+                uv[CAD60_JOINTS.index('right_shoulder'), 0]
+    info = json.loads((out / 'synth.json').read_text())
+    assert info['seed'] == 3 and len(info['videos']) == 4
+    # the same command again gives the same set
+    again = tmp_path / 'again'
+    argv[4] = str(again)
+    assert pose4d_main(argv) == 0
+    for video in videos:
+        a = video.frame_dir / 'Depth_7.png'
+        b = again / video.person / video.video_id / 'Depth_7.png'
+        assert a.read_bytes() == b.read_bytes()
+        assert (video.frame_dir / 'RGB_7.png').read_bytes() == \
+            (b.parent / 'RGB_7.png').read_bytes()
+
+
+@pytest.mark.parametrize(('extra', 'message'), [
+    (['--takes', 's09'], 'no UTKinect take for s09'),
+    (['--takes', 's01_x'], 'is not sNN_eMM'),
+    (['--frames', '0'], '--frames must be >= 1'),
+    (['--occluders', '1.5'], '--occluders must be in'),
+    (['--start', '100'], 'beyond the take'),
+])
+def test_pose4d_synth_bad_input_exits_2_and_leaves_nothing(tmp_path: Path, capsys, extra,
+                                                           message: str) -> None:
+    ut = tmp_path / 'ut'
+    write_utkinect(ut, frames=40)
+    out = tmp_path / 'set'
+    code = pose4d_main(['synth', '--utkinect', str(ut), '--out', str(out), '--quiet', *extra])
+    assert code == 2
+    assert message in capsys.readouterr().err
+    assert sorted(p.name for p in tmp_path.iterdir()) == ['ut']
+
+
+def test_pose4d_synth_refuses_existing_out(tmp_path: Path, capsys) -> None:
+    ut = tmp_path / 'ut'
+    write_utkinect(ut, frames=40)
+    (tmp_path / 'set').mkdir()
+    code = pose4d_main(['synth', '--utkinect', str(ut), '--out', str(tmp_path / 'set')])
+    assert code == 2 and 'already exists' in capsys.readouterr().err
+
+
+@pytest.mark.shared_data
+@pytest.mark.skipif(not UTKINECT.is_dir(), reason=f'{UTKINECT} not present')
+def test_real_utkinect_take_renders_on_the_floor(tmp_path: Path) -> None:
+    motion = synth_video.load_takes(UTKINECT, ['s02_e01'])[0]
+    plan = synth_video.plan_videos(motion, seed=1, videos=3, frames=3, stride=10)[1]
+    job = synth_video.prepare_video(plan, motion, K)
+    for _, frame in synth_video.render_video(job):
+        uv = np.rint(project(frame.joints[[J['head']]], K)[0]).astype(int)
+        assert frame.mask[uv[1], uv[0]]
+        heights = frame.joints[[14, 15, 18, 19]] @ job.scene.up_optical + \
+            job.scene.cam_height_m
+        assert_allclose(heights.min(), job.body.radii['foot'], atol=1e-6)
+        assert 1.8 < frame.joints[J['hip_center'], 2] < 4.0
