@@ -320,3 +320,27 @@ def test_real_utkinect_take_renders_on_the_floor(tmp_path: Path) -> None:
             job.scene.cam_height_m
         assert_allclose(heights.min(), job.body.radii['foot'], atol=1e-6)
         assert 1.8 < frame.joints[J['hip_center'], 2] < 4.0
+
+
+def test_a_sitting_window_gets_a_chair_under_the_hips() -> None:
+    rng = np.random.default_rng(5)
+    body = synth.random_body(rng)
+    scene = synth.random_scene(rng, K, occluder_prob=0.0)
+    stand = scene.to_room(standing_pose())
+    stand[:, :2] += np.array([0.0, 2.8]) - stand[0, :2]
+    sit = stand.copy()
+    sit[[0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 16], 2] -= 0.35  # the trunk goes down...
+    sit[[13, 17], 1] -= 0.4  # ...and the knees come forward (towards the camera, -Y)
+    sit[[13, 17], 2] = stand[[13, 17], 2] - 0.1
+    room = np.stack([stand, sit])
+    same = synth_video._add_seat(scene, room[:1], body, stand[0, 2], rng)
+    assert same is scene  # nobody sits: no chair
+    seated = synth_video._add_seat(scene, room, body, stand[0, 2], rng)
+    new = seated.boxes[len(scene.boxes):]
+    assert len(new) == 6  # seat, four legs, backrest
+    seat, back = new[0], new[-1]
+    assert abs(seat.center[0] - sit[0, 0]) < 0.05
+    assert back.center[1] > seat.center[1] + 0.15  # the backrest is behind, away from the knees
+    hip = synth.retarget(sit, body, up=np.array([0.0, 0.0, 1.0]))[0, 2]
+    assert_allclose(seat.center[2] + seat.half[2], np.clip(hip - 0.015 - 0.9 *
+                    body.pelvis_axes[1], 0.3, 0.6), atol=1e-9)

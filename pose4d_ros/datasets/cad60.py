@@ -542,7 +542,7 @@ def _encode_png(path: Path, img: NDArray, compression: int) -> None:
     _write_atomic(path, buf.tobytes())
 
 
-def write_rgb(path: str | Path, rgb: NDArray[np.uint8], *, compression: int = 3) -> None:
+def write_rgb(path: str | Path, rgb: NDArray[np.uint8], *, compression: int = 1) -> None:
     """Write an (H, W, 3) uint8 RGB image as an 8-bit PNG."""
     rgb = np.asarray(rgb)
     if rgb.dtype != np.uint8 or rgb.ndim != 3 or rgb.shape[2] != 3:
@@ -552,7 +552,7 @@ def write_rgb(path: str | Path, rgb: NDArray[np.uint8], *, compression: int = 3)
 
 
 def write_depth(path: str | Path, depth_mm: NDArray[np.uint16], *,
-                compression: int = 3) -> None:
+                compression: int = 1) -> None:
     """Write an (H, W) uint16 millimetre depth image as a single-channel 16-bit PNG."""
     depth_mm = np.asarray(depth_mm)
     if depth_mm.dtype != np.uint16 or depth_mm.ndim != 2:
@@ -561,7 +561,7 @@ def write_depth(path: str | Path, depth_mm: NDArray[np.uint16], *,
     _encode_png(Path(path), depth_mm, compression)
 
 
-def write_mask(path: str | Path, mask: NDArray[np.bool_], *, compression: int = 3) -> None:
+def write_mask(path: str | Path, mask: NDArray[np.bool_], *, compression: int = 1) -> None:
     """Write an (H, W) bool person mask as an 8-bit PNG (255 = person)."""
     mask = np.asarray(mask)
     if mask.ndim != 2:

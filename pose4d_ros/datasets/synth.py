@@ -475,7 +475,7 @@ def _build_scene(intrinsics: Intrinsics, cam_height: float, room_to_cam: NDArray
 
 
 # The region where `pose4d synth` puts people: room-frame X and Y ranges, metres.
-PERSON_ZONE = (-1.1, 1.1, 1.9, 3.6)
+PERSON_ZONE = (-1.1, 1.1, 2.1, 3.6)
 
 
 def _overlaps(rect: tuple[float, float, float, float],
@@ -494,7 +494,7 @@ def random_scene(rng: np.random.Generator, intrinsics: Intrinsics, *,
     3.7-5.5 m away (partly beyond the sensor's range, as in real rooms); side walls are 1.7-3 m
     to either side. Furniture (tables, cabinets, shelves, chairs, sofas, counters) stands along
     the walls outside `PERSON_ZONE`; with probability `occluder_prob` a low object stands
-    between the camera and that zone (1.2-1.8 m away), hiding a person's legs. Walls, floor and
+    between the camera and that zone (1.2-1.65 m away), hiding a person's legs. Walls, floor and
     furniture are textured from real photographs; the light's direction, colour and strength
     vary.
 
@@ -585,7 +585,7 @@ def random_scene(rng: np.random.Generator, intrinsics: Intrinsics, *,
     if rng.random() < occluder_prob:
         kind = str(rng.choice(['table', 'chair', 'cabinet', 'boxes']))
         x = float(rng.uniform(-0.45, 0.45))
-        y = float(rng.uniform(1.2, 1.8))
+        y = float(rng.uniform(1.2, 1.65))
         top = min(0.85, cam_h - 0.3) * float(rng.uniform(0.75, 1.0))
         boxes.extend(_occluder(rng, mb, kind, x, y, top))
 

@@ -127,7 +127,9 @@ def grain(rng: np.random.Generator, source: str = 'gravel', frac: float = 0.5,
         patch = patch[:, :patch.shape[0]]
     tile = cv2.resize(patch, (TILE, TILE), interpolation=cv2.INTER_AREA)
     tile = tile - cv2.GaussianBlur(tile, (0, 0), TILE / 8)  # keep the fine structure only
-    return (tile / (tile.std() + 1e-6)).astype(np.float32)
+    tile = tile / (tile.std() + 1e-6)
+    # clip the heavy tails (craters of the moon, stones of the gravel) to a fabric-like grain
+    return np.clip(tile, -2.0, 2.0).astype(np.float32)
 
 
 def tint(grey: NDArray[np.float32], colour: NDArray[np.floating] | tuple[float, ...],

@@ -33,6 +33,7 @@ from pose4d_ros.datasets.utkinect import read_actions, read_take, resample, to_o
 
 FPS = 30.0
 SIT_ACTIONS = ('sitDown', 'standUp')
+SEAT_HIP_FRACTION = 0.88  # sitting: hip centre below this fraction of its standing height
 
 
 @dataclass(frozen=True)
@@ -233,7 +234,8 @@ def prepare_video(plan: VideoPlan, motion: TakeMotion, intrinsics: Intrinsics, *
     window_actions = [a for a, (a0, b) in motion.actions.items()
                       if a0 <= plan.indices[-1] and b >= plan.indices[0]]
     if any(a in SIT_ACTIONS for a in window_actions):
-        scene = _add_seat(scene, room, rng)
+        standing = float(np.median(motion.joints[:, HC, 2]))
+        scene = _add_seat(scene, room, body, standing, rng)
     t = plan.frame_numbers / FPS
     gains = 1.0 + 0.05 * np.sin(2 * np.pi * t / rng.uniform(4.0, 10.0) + rng.uniform(0, 6.3))
     return VideoJob(plan, body, scene, scene.to_optical(room), gains, intrinsics, kinect_noise)
@@ -285,22 +287,31 @@ def place_in_room(joints: NDArray[np.float64], scene: Scene, rng: np.random.Gene
     return out
 
 
-def _add_seat(scene: Scene, room: NDArray[np.float64], rng: np.random.Generator) -> Scene:
-    """A chair under the hips at the lowest hip position of the window (the person sits)."""
+def _add_seat(scene: Scene, room: NDArray[np.float64], body: Body, standing_hip: float,
+              rng: np.random.Generator) -> Scene:
+    """A chair under the hips at the lowest hip position of the window, if the person sits
+    there (hip centre below `SEAT_HIP_FRACTION` of its standing height); the chair faces where
+    the knees point and its seat meets the retargeted body's pelvis."""
     k = int(np.argmin(room[:, HC, 2]))
-    j = room[k]
-    left, up, fwd = synth.body_frame(j)
-    yaw = float(np.arctan2(-fwd[0], fwd[1]))  # local +y = the chair's front = person's front
-    seat_top = max(float(j[HC, 2]) - 0.1, 0.3)
-    pos = j[HC, :2] - 0.06 * fwd[:2] / max(float(np.linalg.norm(fwd[:2])), 1e-6)
+    if room[k, HC, 2] > SEAT_HIP_FRACTION * standing_hip:
+        return scene
+    j = synth.retarget(room[k], body, up=np.array([0.0, 0.0, 1.0]))
+    knees = 0.5 * (j[synth.LKN, :2] + j[synth.RKN, :2])
+    fwd = knees - j[HC, :2]
+    if np.linalg.norm(fwd) < 0.05:  # knees above the hips: fall back on the trunk's front
+        fwd = synth.body_frame(j)[2][:2]
+    fwd = fwd / max(float(np.linalg.norm(fwd)), 1e-6)
+    yaw = float(np.arctan2(-fwd[0], fwd[1]))  # the chair's local +y = its front = fwd
+    # the pelvis ellipsoid hangs 1.5 cm below the hip centre (synth.body_primitives)
+    seat_top = float(np.clip(j[HC, 2] - 0.015 - 0.9 * body.pelvis_axes[1], 0.3, 0.6))
+    pos = j[HC, :2] - 0.05 * fwd
     tile, scale, _ = tex.furniture_tile(rng, str(rng.choice(['wood', 'metal', 'fabric'])))
     mat = len(scene.materials)
     parts = synth._table((float(pos[0]), float(pos[1])), (0.22, 0.22), seat_top, mat, yaw,
                          'furniture')
-    c, s = np.cos(yaw), np.sin(yaw)
-    bx, by = pos[0] + s * 0.2, pos[1] - c * 0.2  # behind the seat: -local y
-    parts.append(synth.Box((float(bx), float(by), seat_top + 0.22), (0.22, 0.02, 0.22), mat,
-                           yaw, 'furniture'))
+    back = pos - 0.2 * fwd  # the backrest stands behind the seat
+    parts.append(synth.Box((float(back[0]), float(back[1]), seat_top + 0.22),
+                           (0.22, 0.02, 0.22), mat, yaw, 'furniture'))
     return scene.with_boxes(parts, (('seat', tile, scale),))
 
 
