@@ -475,7 +475,7 @@ def _build_scene(intrinsics: Intrinsics, cam_height: float, room_to_cam: NDArray
 
 
 # The region where `pose4d synth` puts people: room-frame X and Y ranges, metres.
-PERSON_ZONE = (-1.1, 1.1, 2.1, 3.6)
+PERSON_ZONE = (-1.1, 1.1, 2.2, 3.7)
 
 
 def _overlaps(rect: tuple[float, float, float, float],
@@ -489,8 +489,8 @@ def random_scene(rng: np.random.Generator, intrinsics: Intrinsics, *,
                  occluder_prob: float = 0.3) -> Scene:
     """A random furnished room seen by a Kinect-like camera.
 
-    The camera stands 0.85-1.35 m high, pitched down to aim at the middle of a person 3 m
-    away (about -2 to 11 degrees), looking at a back wall
+    The camera stands 0.85-1.35 m high, aimed at a point 1.0-1.1 m high 3 m away (pitch about
+    -6 to +8 degrees), looking at a back wall
     3.7-5.5 m away (partly beyond the sensor's range, as in real rooms); side walls are 1.7-3 m
     to either side. Furniture (tables, cabinets, shelves, chairs, sofas, counters) stands along
     the walls outside `PERSON_ZONE`; with probability `occluder_prob` a low object stands
@@ -506,8 +506,10 @@ def random_scene(rng: np.random.Generator, intrinsics: Intrinsics, *,
     """
     mb = tex.MaterialBuilder()
     cam_h = float(rng.uniform(0.85, 1.35))
-    # aimed roughly at the middle of a person 3 m away, so that whole bodies fit at 2.2-3.5 m
-    pitch = np.arctan2(cam_h - 0.9, 3.0) + np.deg2rad(rng.uniform(-2.0, 3.0))
+    # aimed at 1.0-1.1 m high, 3 m away: a whole person fits from about 2.5 m on, and closer
+    # people lose their feet rather than their heads
+    aim = float(rng.uniform(1.0, 1.1))
+    pitch = np.arctan2(cam_h - aim, 3.0) + np.deg2rad(rng.uniform(-1.5, 1.5))
     yaw = np.deg2rad(rng.uniform(-6.0, 6.0))
     roll = np.deg2rad(rng.normal(0.0, 0.8))
     room_to_cam = camera_rotation(pitch, yaw, roll)

@@ -2,11 +2,11 @@
 
 A take is resampled to 30 fps (`utkinect.resample`) and moved into a floor frame: the floor is
 the plane through the lower foot joint of each frame (robust least squares), which removes the
-recording camera's height and tilt; frames in which a foot touches it are snapped onto it. A
+recording camera's height and tilt; the lower foot is then put on it in every frame. A
 video is a window of a take (every `stride`-th frame), posed by that motion on a fresh random
 body (`synth.random_body`) in a fresh random room (`synth.random_scene`): the walk keeps its
 shape and its heading towards the camera but is turned by up to +-25 degrees and moved so that
-the person stands 2.2-3.3 m from the camera, clear of the furniture and behind any occluder.
+the person stands 2.4-3.4 m from the camera, clear of the furniture and behind any occluder.
 Windows in which the person sits get a chair under the hips. The light's strength drifts
 slowly during a video (auto-exposure).
 
@@ -225,11 +225,11 @@ def prepare_video(plan: VideoPlan, motion: TakeMotion, intrinsics: Intrinsics, *
     rng = video_rng(plan, 2)
     scene = synth.random_scene(rng, intrinsics, occluder_prob=occluder_prob)
     room = motion.joints[plan.indices].copy()
-    # The lower foot joint sits a shoe's radius above the floor. Kinect's foot joints jitter
-    # by centimetres about the fitted floor, so frames in contact (lower foot within 15 cm)
-    # are snapped onto it; the rest keep their height.
+    # The lower foot joint sits a shoe's radius above the floor in every frame: Kinect's foot
+    # joints scatter by centimetres (decimetres when mis-tracked) about the fitted floor, and
+    # nobody jumps in UTKinect.
     low = room[:, [LAN, LFT, RAN, RFT], 2].min(axis=1)
-    room[..., 2] += np.where(low < 0.15, body.radii['foot'] - low, body.radii['foot'])[:, None]
+    room[..., 2] += (body.radii['foot'] - low)[:, None]
     room = place_in_room(room, scene, rng)
     window_actions = [a for a, (a0, b) in motion.actions.items()
                       if a0 <= plan.indices[-1] and b >= plan.indices[0]]
@@ -246,7 +246,7 @@ def place_in_room(joints: NDArray[np.float64], scene: Scene, rng: np.random.Gene
     """Turn and move a window of floor-frame motion into the room's person zone.
 
     The motion is turned about the vertical through its mean hip position by up to 25 degrees
-    and moved to a random spot 2.2-3.3 m ahead; the spot that keeps the hips inside
+    and moved to a random spot 2.4-3.4 m ahead; the spot that keeps the hips inside
     `synth.PERSON_ZONE`, 0.35 m clear of furniture and 0.45 m behind any occluder in the most
     frames wins (the first that does so in all frames).
 
@@ -266,7 +266,7 @@ def place_in_room(joints: NDArray[np.float64], scene: Scene, rng: np.random.Gene
     best = None
     for _ in range(tries):
         yaw = np.deg2rad(rng.uniform(-25.0, 25.0))
-        target = np.array([rng.uniform(-0.5, 0.5), rng.uniform(2.2, 3.3)])
+        target = np.array([rng.uniform(-0.5, 0.5), rng.uniform(2.4, 3.4)])
         c, s = np.cos(yaw), np.sin(yaw)
         rot = np.array([[c, -s], [s, c]])
         p = (hips - centre) @ rot.T + target
