@@ -1,0 +1,803 @@
+"""Denavit-Hartenberg limb chains and the inverse kinematics of elbows and knees.
+
+After Martinez Berti, Sanchez Salmeron and Ricolfe Viala, "4-Dimensional deformation part model
+for pose estimation using Kalman filter constraints", eqs. (17)-(24). The reduced part model
+detects shoulders, wrists, hips and ankles; elbows and knees are completed here, in 3-D, in the
+camera optical frame (x right, y down, z forward, metres).
+
+Chains (eq. 17 and the products after it)
+-----------------------------------------
+Each limb (2 arms, 2 legs) is a DH chain: three revolute joints at the root (shoulder / hip),
+one at the middle (elbow / knee), then a fixed link to the end (wrist / ankle)::
+
+    i   theta_i   d_i     a_i   alpha_i
+    1   q1        0       0     -pi/2
+    2   q2        0       0     +pi/2
+    3   q3        upper   0     -pi/2
+    4   q4        0       0     +pi/2
+    5   0         lower   0      0
+
+with the standard transform ``T_i = Rz(theta_i) Tz(d_i) Tx(a_i) Rx(alpha_i)`` (eq. 17). The
+upper bone points along ``z_2`` (azimuth q1, polar angle q2 in the base frame), q3 turns the
+limb about it and q4 is the bend (0 = straight): the angle between the two bones' directions.
+
+Inverse kinematics (eqs. 18-24)
+-------------------------------
+Given the root R and end E in 3-D and the bone lengths ``l1`` (upper) and ``l2`` (lower), the
+middle joint lies on a circle about the axis R->E: with ``D = |E - R|`` and ``n = (E - R) / D``,
+the law of cosines puts its centre at ``C = R + c n``, ``c = (D^2 + l1^2 - l2^2) / (2 D)``, radius
+``sqrt(l1^2 - c^2)``. The paper fixes the position on the circle (the swivel angle) through the
+end effector's orientation, which a part detector does not measure. Here the swivel is chosen
+by the depth image: N candidate points on the circle, and points along the two bones they
+imply, are projected into the depth image and compared with the measured robust depth (the
+joint centre sits `surface_offset_m` behind the visible surface; a candidate in front of the
+measured surface contradicts the free space the camera saw, one behind it would be hidden;
+both are penalised). When depth is missing or does not discriminate, a joint-limit prior
+decides: a preferred direction for the middle joint in the body frame (from shoulders and hips;
+elbows bend down and back-out, knees forward). Targets out of reach (``D > l1 + l2``) put the
+middle joint on the segment R->E at ``l1 / (l1 + l2)`` and are flagged UNREACHABLE.
+
+Bone lengths come from parameters or are learned per track by `LimbLengths` (robust medians of
+observed bone lengths when the 14-part model sees elbows/knees; otherwise the longest observed
+reach split in the default ratio; otherwise the defaults).
+"""
+
+from __future__ import annotations
+
+import math
+from collections import deque
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+from enum import IntEnum
+
+import numpy as np
+from numpy.typing import NDArray
+
+from pose4d_ros.core.camera import Intrinsics, project
+from pose4d_ros.core.skeleton import LIMBS, PARTS_10
+
+# Default bone lengths (upper, lower), metres: medians of the Kinect v1 skeletons of UTKinect
+# subjects s01-s06 (shoulder-elbow, elbow-wrist, hip-knee, knee-ankle), rounded to 5 mm.
+DEFAULT_LIMB_LENGTHS_M: dict[str, tuple[float, float]] = {
+    'left_arm': (0.26, 0.23), 'right_arm': (0.26, 0.23),
+    'left_leg': (0.47, 0.37), 'right_leg': (0.47, 0.37),
+}
+
+
+class IkFlag(IntEnum):
+    """How a middle joint (elbow/knee) was obtained."""
+
+    DEPTH = 0          # on the circle, swivel chosen by the depth image
+    PRIOR = 1          # on the circle, swivel from the joint-limit prior
+    UNREACHABLE = 2    # |end - root| out of reach: on the straight line, low confidence
+    MISSING = 3        # root, end or a length unknown: NaN
+    BEHIND_CAMERA = 4  # root or end with z <= 0: NaN
+
+
+# ---------------------------------------------------------------------------------------------
+# Denavit-Hartenberg chains (eq. 17)
+
+
+def dh_transform(theta: float, d: float, a: float, alpha: float) -> NDArray[np.float64]:
+    """The standard DH transform ``Rz(theta) Tz(d) Tx(a) Rx(alpha)`` (eq. 17), (4, 4)."""
+    ct, st, ca, sa = math.cos(theta), math.sin(theta), math.cos(alpha), math.sin(alpha)
+    return np.array([
+        [ct, -st * ca, st * sa, a * ct],
+        [st, ct * ca, -ct * sa, a * st],
+        [0.0, sa, ca, d],
+        [0.0, 0.0, 0.0, 1.0],
+    ])
+
+
+@dataclass(frozen=True)
+class DhLink:
+    """One row of a DH table: joint angle offset (radians), d, a (metres), alpha (radians)."""
+
+    d: float
+    a: float
+    alpha: float
+    revolute: bool = True
+
+
+def limb_chain(upper: float, lower: float) -> tuple[DhLink, ...]:
+    """The DH table of an arm or leg: 3 root joints, 1 middle joint, a fixed end link."""
+    if not (upper > 0 and lower > 0):
+        raise ValueError(f'bone lengths must be positive metres, got {upper}, {lower}')
+    h = math.pi / 2
+    return (DhLink(0.0, 0.0, -h), DhLink(0.0, 0.0, h), DhLink(upper, 0.0, -h),
+            DhLink(0.0, 0.0, h), DhLink(lower, 0.0, 0.0, revolute=False))
+
+
+def forward_kinematics(angles: Sequence[float] | NDArray[np.floating], upper: float,
+                       lower: float, base: NDArray[np.floating] | None = None
+                       ) -> NDArray[np.float64]:
+    """Positions of root, middle and end joints of a limb (the product of eq. 17's transforms).
+
+    Parameters
+    ----------
+    angles : (4,) radians, (q1, q2, q3) at the root, q4 at the middle joint (0 = straight).
+    upper, lower : bone lengths, metres.
+    base : (4, 4) pose of the root frame in the camera frame (rotation + the root's position);
+        identity if None.
+
+    Returns
+    -------
+    (3, 3) float64 metres: rows root, middle, end.
+    """
+    q = np.asarray(angles, dtype=np.float64).reshape(-1)
+    if q.shape != (4,):
+        raise ValueError(f'angles must have 4 values, got {q.shape}')
+    t = np.eye(4) if base is None else np.asarray(base, dtype=np.float64)
+    if t.shape != (4, 4):
+        raise ValueError(f'base must be a (4, 4) transform, got {t.shape}')
+    origins = [t[:3, 3].copy()]
+    for i, link in enumerate(limb_chain(upper, lower)):
+        theta = q[i] if link.revolute else 0.0
+        t = t @ dh_transform(theta, link.d, link.a, link.alpha)
+        origins.append(t[:3, 3].copy())
+    # Frame 3's origin is the middle joint, frame 5's the end (frames 1, 2 sit at the root).
+    return np.stack([origins[0], origins[3], origins[5]])
+
+
+def limb_angles(root: NDArray[np.floating], middle: NDArray[np.floating],
+                end: NDArray[np.floating], base_rotation: NDArray[np.floating] | None = None
+                ) -> NDArray[np.float64]:
+    """The DH joint angles (q1..q4) of a limb whose three joints are given (inverse of FK).
+
+    Parameters
+    ----------
+    root, middle, end : (3,) metres, camera frame.
+    base_rotation : (3, 3) rotation of the root frame in the camera frame; identity if None.
+
+    Returns
+    -------
+    (4,) radians; q2 and q4 in [0, pi].
+    """
+    rot = np.eye(3) if base_rotation is None else np.asarray(base_rotation, dtype=np.float64)
+    up = rot.T @ (np.asarray(middle, float) - np.asarray(root, float))
+    lo = rot.T @ (np.asarray(end, float) - np.asarray(middle, float))
+    z2 = up / np.linalg.norm(up)
+    # z2 = (cos q1 sin q2, sin q1 sin q2, cos q2) in the base frame.
+    q2 = math.acos(float(np.clip(z2[2], -1.0, 1.0)))
+    q1 = math.atan2(float(z2[1]), float(z2[0])) if math.sin(q2) > 1e-12 else 0.0
+    f2 = np.eye(4)
+    for theta, link in zip((q1, q2), limb_chain(1.0, 1.0)[:2], strict=True):
+        f2 = f2 @ dh_transform(theta, link.d, link.a, link.alpha)
+    # The lower bone in frame 2: (cos q3 sin q4, sin q3 sin q4, cos q4).
+    d2 = f2[:3, :3].T @ (lo / np.linalg.norm(lo))
+    q4 = math.acos(float(np.clip(d2[2], -1.0, 1.0)))
+    q3 = math.atan2(float(d2[1]), float(d2[0])) if math.sin(q4) > 1e-12 else 0.0
+    return np.array([q1, q2, q3, q4])
+
+
+# ---------------------------------------------------------------------------------------------
+# Body frame and the circle of the middle joint
+
+
+def _unit(v: NDArray[np.float64]) -> NDArray[np.float64] | None:
+    n = float(np.linalg.norm(v))
+    return v / n if np.isfinite(n) and n > 1e-9 else None
+
+
+def body_frame(left_shoulder: NDArray[np.floating], right_shoulder: NDArray[np.floating],
+               left_hip: NDArray[np.floating], right_hip: NDArray[np.floating]
+               ) -> NDArray[np.float64]:
+    """The person's frame from shoulders and hips, as a rotation in the camera frame.
+
+    Parameters
+    ----------
+    left_shoulder, right_shoulder, left_hip, right_hip : (3,) metres, camera optical frame;
+        NaN = unknown.
+
+    Returns
+    -------
+    (3, 3) float64 with columns (left, up, forward): towards the person's left, from hips to
+    shoulders, and the way the chest faces (left x up). Missing joints fall back on a person
+    upright and facing the camera (left = +x, up = -y, forward = -z).
+    """
+    ls, rs, lh, rh = (np.asarray(p, dtype=np.float64) for p in
+                      (left_shoulder, right_shoulder, left_hip, right_hip))
+    left = _unit(ls - rs)
+    if left is None:
+        left = _unit(lh - rh)
+    if left is None:
+        left = np.array([1.0, 0.0, 0.0])
+    up = _unit(0.5 * (ls + rs) - 0.5 * (lh + rh))
+    if up is None:
+        up = np.array([0.0, -1.0, 0.0])
+    up = _unit(up - (up @ left) * left)
+    if up is None:  # shoulders stacked vertically: keep a camera-upright guess
+        up = _unit(np.array([0.0, -1.0, 0.0]) - (-left[1]) * left)
+        if up is None:
+            up = np.array([0.0, 0.0, -1.0])
+    forward = np.cross(left, up)
+    return np.stack([left, up, forward], axis=1)
+
+
+@dataclass(frozen=True)
+class Circle:
+    """Where a middle joint can be: centre (3,), axis n (3,), radius, metres.
+
+    `reach` is D / (upper + lower); > 1 means out of reach.
+    """
+
+    centre: NDArray[np.float64]
+    axis: NDArray[np.float64]
+    radius: float
+    reach: float
+
+
+def middle_joint_circle(root: NDArray[np.floating], end: NDArray[np.floating], upper: float,
+                        lower: float) -> Circle:
+    """The circle of middle-joint positions (law of cosines; eqs. 18-21).
+
+    Out of reach (D > upper + lower) the circle degenerates to the point at ``upper / (upper +
+    lower)`` of the segment; too close (D < |upper - lower|) the centre is clamped so that the
+    middle joint stays `upper` from the root.
+    """
+    r0, e0 = np.asarray(root, dtype=np.float64), np.asarray(end, dtype=np.float64)
+    v = e0 - r0
+    dist = float(np.linalg.norm(v))
+    if not (upper > 0 and lower > 0):
+        raise ValueError(f'bone lengths must be positive metres, got {upper}, {lower}')
+    reach = dist / (upper + lower)
+    if dist < 1e-9:
+        return Circle(r0.copy(), np.array([0.0, 0.0, 1.0]), float(upper), reach)
+    n = v / dist
+    if dist >= upper + lower:
+        return Circle(r0 + v * (upper / (upper + lower)), n, 0.0, reach)
+    c = (dist * dist + upper * upper - lower * lower) / (2.0 * dist)
+    c = float(np.clip(c, -upper, upper))
+    return Circle(r0 + c * n, n, math.sqrt(max(upper * upper - c * c, 0.0)), reach)
+
+
+def circle_points(circle: Circle, reference: NDArray[np.floating], angles: NDArray[np.floating]
+                  ) -> NDArray[np.float64]:
+    """Points of the circle at swivel `angles` (radians) from the direction `reference`.
+
+    Returns (N, 3) metres; angle 0 is the point closest to ``centre + reference``.
+    """
+    u, w = _plane_basis(circle.axis, np.asarray(reference, dtype=np.float64))
+    a = np.asarray(angles, dtype=np.float64)[:, None]
+    return circle.centre + circle.radius * (np.cos(a) * u + np.sin(a) * w)
+
+
+def _plane_basis(axis: NDArray[np.float64], reference: NDArray[np.float64]
+                 ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """An orthonormal (u, w) of the plane normal to `axis`, u as close to `reference` as can be."""
+    for ref in (reference, np.array([0.0, 0.0, -1.0]), np.array([0.0, 1.0, 0.0])):
+        u = _unit(ref - (ref @ axis) * axis)
+        if u is not None:
+            return u, np.cross(axis, u)
+    raise ValueError(f'cannot build a plane normal to {axis}')  # unreachable for a unit axis
+
+
+# ---------------------------------------------------------------------------------------------
+# Depth support
+
+
+def sample_depth(depth_m: NDArray[np.floating], uv: NDArray[np.floating], *, radius: int = 2,
+                 mask: NDArray[np.bool_] | None = None) -> NDArray[np.float64]:
+    """`core.camera.robust_depth` for many pixels at once (same result, vectorised).
+
+    Parameters
+    ----------
+    depth_m : (H, W) float metres, NaN = no reading.
+    uv : (N, 2) float pixel (u, v); NaN rows give NaN.
+    radius : half-size of the square window, pixels.
+    mask : (H, W) bool, optional; True = person.
+
+    Returns
+    -------
+    (N,) float64 metres, the median of the window's valid pixels; NaN if none or off-image.
+    """
+    if radius < 0:
+        raise ValueError(f'radius must be >= 0, got {radius}')
+    depth_m = np.asarray(depth_m)
+    h, w = depth_m.shape
+    uv = np.asarray(uv, dtype=np.float64).reshape(-1, 2)
+    out = np.full(len(uv), np.nan)
+    ok = np.isfinite(uv).all(axis=1)
+    c = np.zeros(len(uv), np.int64)
+    r = np.zeros(len(uv), np.int64)
+    c[ok] = np.rint(uv[ok, 0]).astype(np.int64)
+    r[ok] = np.rint(uv[ok, 1]).astype(np.int64)
+    ok &= (c >= 0) & (c < w) & (r >= 0) & (r < h)
+    if not ok.any():
+        return out
+    off = np.arange(-radius, radius + 1)
+    rows = (r[ok, None, None] + off[None, :, None]).reshape(ok.sum(), -1, 1)
+    cols = (c[ok, None, None] + off[None, None, :]).reshape(ok.sum(), 1, -1)
+    rows, cols = np.broadcast_arrays(rows, cols)
+    rows, cols = rows.reshape(ok.sum(), -1), cols.reshape(ok.sum(), -1)
+    inside = (rows >= 0) & (rows < h) & (cols >= 0) & (cols < w)
+    rc, cc = np.clip(rows, 0, h - 1), np.clip(cols, 0, w - 1)
+    vals = depth_m[rc, cc]
+    valid = inside & np.isfinite(vals) & (vals > 0)
+    if mask is not None:
+        valid &= np.asarray(mask, dtype=bool)[rc, cc]
+    # Median of the valid values: sort with the invalid ones last, then pick the middle.
+    vals = np.sort(np.where(valid, vals, np.inf), axis=1)
+    k = valid.sum(axis=1)
+    rows_k = np.arange(len(k))
+    lo = vals[rows_k, np.maximum((k - 1) // 2, 0)]
+    hi = vals[rows_k, np.maximum(k // 2, 0)]
+    # float32 images: average as numpy's median does (in the image's dtype).
+    med = (lo + hi) / vals.dtype.type(2) if np.issubdtype(vals.dtype, np.floating) else \
+        (lo + hi) / 2.0
+    out[ok] = np.where(k > 0, med, np.nan)
+    return out
+
+
+@dataclass(frozen=True)
+class IkConfig:
+    """Parameters of the middle-joint inference.
+
+    Attributes
+    ----------
+    n_candidates : swivel angles sampled on the circle (coarse search).
+    refine_steps : extra samples each side of the best coarse angle (fine search).
+    bone_samples : points sampled inside each bone (besides the middle joint) for depth support.
+    depth_radius_px : window half-size of the robust depth, pixels.
+    surface_offset_m : (arm, leg) how far the joint centre and the bone axes lie behind the
+        visible surface, metres (about the limb's radius).
+    depth_scale_m : scale of the robust (Welsch) cost of a depth disagreement r,
+        ``1 - exp(-r^2 / (2 scale^2))``: smooth near 0, saturating at 1 for outliers; metres.
+    free_space_weight : cost of a sample in front of the measured surface (the camera saw past
+        it), 0..1 per sample.
+    occluded_weight : cost of a sample behind the measured surface (hidden or wrong), per sample.
+    unknown_cost : cost of a sample without depth (hole, off-image), per sample.
+    min_valid_fraction : below this fraction of samples with depth, the prior decides.
+    ambiguity_margin : the depth decides only if its cost over the circle varies by more.
+    prior_weight : weight of the prior's cost next to the depth's (breaks ties).
+    length_scales : factors applied to both bone lengths to make the depth search's circles.
+    scale_weight : cost per unit of |log(scale)| (prefers the given lengths).
+    prior_shrink : (arm, leg) fraction of the radius at which the prior puts the joint (1 = on
+        the circle; less = the expected position under the swivel's uncertainty).
+    arm_prior, leg_prior : preferred direction of the elbow / knee from the circle's centre, as
+        (outward, up, forward) coefficients in the body frame (outward = away from the body's
+        midline on that limb's side).
+    prior_angle_std_rad : swivel uncertainty assumed for the prior, for the confidence.
+    confidence_scale_m : positional uncertainty at which the confidence is 1/e, metres.
+    reach_tolerance : a target beyond reach by less than this fraction counts as straight.
+    unreachable_confidence : confidence of an UNREACHABLE middle joint.
+    """
+
+    n_candidates: int = 36
+    refine_steps: int = 4
+    bone_samples: int = 3
+    depth_radius_px: int = 2
+    surface_offset_m: tuple[float, float] = (0.04, 0.06)
+    depth_scale_m: float = 0.03
+    free_space_weight: float = 1.0
+    occluded_weight: float = 0.6
+    unknown_cost: float = 0.5
+    min_valid_fraction: float = 0.3
+    ambiguity_margin: float = 0.05
+    prior_weight: float = 0.05
+    length_scales: tuple[float, ...] = (0.85, 0.9, 0.95, 1.0, 1.05, 1.1)
+    scale_weight: float = 0.1
+    prior_shrink: tuple[float, float] = (1.0, 1.0)
+    arm_prior: tuple[float, float, float] = (0.3, -0.8, -0.5)
+    leg_prior: tuple[float, float, float] = (0.1, 0.0, 1.0)
+    prior_angle_std_rad: float = 0.6
+    confidence_scale_m: float = 0.1
+    reach_tolerance: float = 0.05
+    unreachable_confidence: float = 0.2
+
+    def __post_init__(self) -> None:
+        if self.n_candidates < 4:
+            raise ValueError(f'n_candidates must be >= 4, got {self.n_candidates}')
+        if self.refine_steps < 0 or self.bone_samples < 0 or self.depth_radius_px < 0:
+            raise ValueError(f'refine_steps ({self.refine_steps}), bone_samples '
+                             f'({self.bone_samples}) and depth_radius_px '
+                             f'({self.depth_radius_px}) must be >= 0')
+        for name in ('depth_scale_m', 'confidence_scale_m'):
+            if not getattr(self, name) > 0:
+                raise ValueError(f'{name} must be positive, got {getattr(self, name)}')
+        if not self.length_scales or min(self.length_scales) <= 0:
+            raise ValueError(f'length_scales must be positive factors, got {self.length_scales}')
+        if len(self.prior_shrink) != 2 or not all(0 <= x <= 1 for x in self.prior_shrink):
+            raise ValueError(f'prior_shrink must be 2 factors in [0, 1], got {self.prior_shrink}')
+        if len(self.surface_offset_m) != 2:
+            raise ValueError(f'surface_offset_m must be (arm, leg), got {self.surface_offset_m}')
+        for name in ('arm_prior', 'leg_prior'):
+            v = getattr(self, name)
+            if len(v) != 3 or not np.any(np.asarray(v, float) != 0):
+                raise ValueError(f'{name} must be 3 coefficients, not all zero, got {v}')
+
+
+@dataclass(frozen=True)
+class LimbSolution:
+    """One inferred middle joint.
+
+    Attributes
+    ----------
+    position : (3,) float64 metres, camera optical frame; NaN when MISSING/BEHIND_CAMERA.
+    pixel : (2,) float64 pixel (u, v); NaN when unknown or without intrinsics.
+    confidence : 0..1.
+    flag : `IkFlag`.
+    """
+
+    position: NDArray[np.float64]
+    pixel: NDArray[np.float64]
+    confidence: float
+    flag: IkFlag
+
+
+def _nan_solution(flag: IkFlag) -> LimbSolution:
+    return LimbSolution(np.full(3, np.nan), np.full(2, np.nan), 0.0, flag)
+
+
+def prior_direction(limb: str, frame: NDArray[np.floating], config: IkConfig = IkConfig()
+                    ) -> NDArray[np.float64]:
+    """The joint-limit prior's preferred direction of a limb's middle joint, camera frame (3,).
+
+    `frame` is `body_frame`'s (3, 3) (left, up, forward) rotation.
+    """
+    if limb not in LIMBS:
+        raise ValueError(f'unknown limb {limb!r}; expected one of {tuple(LIMBS)}')
+    coeffs = config.arm_prior if limb.endswith('arm') else config.leg_prior
+    side = 1.0 if limb.startswith('left') else -1.0
+    out, up, fwd = coeffs
+    f = np.asarray(frame, dtype=np.float64)
+    return side * out * f[:, 0] + up * f[:, 1] + fwd * f[:, 2]
+
+
+# Smallest sine of the angle between a viewing ray and a bone used for the bone's surface depth.
+_MIN_SIN = 0.3
+
+
+def _depth_cost(depth_m: NDArray, root: NDArray, end: NDArray, cands: NDArray,
+                intrinsics: Intrinsics, mask: NDArray | None, config: IkConfig,
+                offset: float) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """Mean per-sample cost of each candidate middle joint, and its fraction of samples with depth.
+
+    Samples: the middle joint and `bone_samples` interior points of each bone it implies. A bone
+    is a cylinder of radius `offset` about its axis: the ray through a sample's pixel enters it
+    ``offset / sin(theta)`` before the axis, theta being the angle between the ray and the bone
+    (capped at 1 / `_MIN_SIN`), so a limb pointing at the camera shows its surface well in front
+    of its axis. At the middle joint the nearer of the two bones' surfaces counts.
+    """
+    fr = (np.arange(config.bone_samples) + 1.0) / (config.bone_samples + 1.0)
+    up = cands - root
+    lo = end - cands
+    up_dir = up / np.maximum(np.linalg.norm(up, axis=1, keepdims=True), 1e-9)
+    lo_dir = lo / np.maximum(np.linalg.norm(lo, axis=1, keepdims=True), 1e-9)
+    pts = [cands[:, None, :]]
+    dirs = [None]
+    if len(fr):
+        pts.append(root + fr[None, :, None] * up[:, None, :])
+        pts.append(cands[:, None, :] + fr[None, :, None] * lo[:, None, :])
+        dirs += [np.repeat(up_dir[:, None, :], len(fr), axis=1),
+                 np.repeat(lo_dir[:, None, :], len(fr), axis=1)]
+    samples = np.concatenate(pts, axis=1)  # (N, S, 3)
+    n, s = samples.shape[:2]
+    flat = samples.reshape(-1, 3)
+    ray = samples / np.maximum(np.linalg.norm(samples, axis=2, keepdims=True), 1e-9)
+
+    def entry(d: NDArray[np.float64], r: NDArray[np.float64]) -> NDArray[np.float64]:
+        sin = np.linalg.norm(np.cross(r, d), axis=-1)
+        return offset / np.maximum(sin, _MIN_SIN) * r[..., 2]
+
+    depth_in_front = np.empty((n, s))
+    depth_in_front[:, 0] = np.maximum(entry(up_dir, ray[:, 0]), entry(lo_dir, ray[:, 0]))
+    if len(fr):
+        depth_in_front[:, 1:] = entry(np.concatenate(dirs[1:], axis=1), ray[:, 1:])
+    uv = project(flat, intrinsics)
+    measured = sample_depth(depth_m, uv, radius=config.depth_radius_px, mask=mask)
+    expected = flat[:, 2] - depth_in_front.reshape(-1)
+    resid = measured - expected  # > 0: the camera saw farther than the limb's surface
+    excess = 1.0 - np.exp(-0.5 * (resid / config.depth_scale_m) ** 2)
+    cost = np.where(resid > 0, config.free_space_weight, config.occluded_weight) * excess
+    known = np.isfinite(measured)
+    unknown = np.full(len(flat), config.unknown_cost)
+    if mask is not None:
+        # Off the person's mask, inside the image: the camera saw background there.
+        h, w = mask.shape
+        ok = np.isfinite(uv).all(axis=1)
+        c = np.where(ok, np.rint(np.nan_to_num(uv[:, 0])), -1).astype(np.int64)
+        r = np.where(ok, np.rint(np.nan_to_num(uv[:, 1])), -1).astype(np.int64)
+        inside = ok & (c >= 0) & (c < w) & (r >= 0) & (r < h)
+        off = np.zeros(len(flat), bool)
+        off[inside] = ~np.asarray(mask, bool)[r[inside], c[inside]]
+        unknown = np.where(off, config.free_space_weight, unknown)
+        known |= off
+    cost = np.where(np.isfinite(measured), cost, unknown)
+    return cost.reshape(n, s).mean(axis=1), known.reshape(n, s).mean(axis=1)
+
+
+def _swivel_angles(n: int) -> NDArray[np.float64]:
+    """n swivel angles in (-pi, pi], 0 (the prior's direction) included."""
+    angles = np.arange(n) * (2.0 * math.pi / n)
+    return np.where(angles > math.pi, angles - 2.0 * math.pi, angles)
+
+
+def solve_limb(depth_m: NDArray[np.floating] | None, root: NDArray[np.floating],
+               end: NDArray[np.floating], upper: float, lower: float,
+               intrinsics: Intrinsics | None, *, prior: NDArray[np.floating],
+               kind: str = 'arm', mask: NDArray[np.bool_] | None = None,
+               config: IkConfig = IkConfig()) -> LimbSolution:
+    """Infer one elbow or knee.
+
+    Parameters
+    ----------
+    depth_m : (H, W) float metres (NaN = no reading) registered to `intrinsics`, or None
+        (prior only).
+    root, end : (3,) metres, camera optical frame (shoulder/hip and wrist/ankle); NaN = unknown.
+    upper, lower : bone lengths, metres.
+    intrinsics : the depth image's camera (also used for the output pixel); may be None when
+        `depth_m` is None.
+    prior : (3,) preferred direction of the middle joint (`prior_direction`), camera frame.
+    kind : 'arm' or 'leg': which of the config's (arm, leg) parameters apply.
+    mask : (H, W) bool person mask, optional.
+    config : parameters.
+
+    Notes
+    -----
+    With depth, candidates are taken on the circles of the bone lengths scaled by each of
+    `config.length_scales` (the lengths are uncertain and a Kinect skeleton is not rigid) and
+    the one the depth image supports best wins (ties broken by the prior and by the scale's
+    distance from 1). Without depth, or when the depth does not discriminate, the prior puts
+    the joint at ``centre + shrink * radius * u``, u being the prior direction in the circle's
+    plane and shrink `config.prior_shrink`: ``shrink < 1`` is the expected position under the
+    prior's swivel uncertainty rather than a point on the circle.
+    """
+    r0 = np.asarray(root, dtype=np.float64).reshape(3)
+    e0 = np.asarray(end, dtype=np.float64).reshape(3)
+    if depth_m is not None and intrinsics is None:
+        raise ValueError('intrinsics are needed to use a depth image')
+    if not (np.isfinite(r0).all() and np.isfinite(e0).all()
+            and math.isfinite(upper) and math.isfinite(lower) and upper > 0 and lower > 0):
+        return _nan_solution(IkFlag.MISSING)
+    if r0[2] <= 0 or e0[2] <= 0:
+        return _nan_solution(IkFlag.BEHIND_CAMERA)
+    if kind not in ('arm', 'leg'):
+        raise ValueError(f"kind must be 'arm' or 'leg', got {kind!r}")
+    k = 0 if kind == 'arm' else 1
+    ref = np.asarray(prior, dtype=np.float64).reshape(3)
+
+    def finish(p: NDArray[np.float64], confidence: float, flag: IkFlag) -> LimbSolution:
+        if p[2] <= 0:
+            return LimbSolution(p, np.full(2, np.nan), 0.0, IkFlag.BEHIND_CAMERA)
+        uv = np.full(2, np.nan) if intrinsics is None else project(p[None], intrinsics)[0]
+        return LimbSolution(p, uv, float(confidence), flag)
+
+    dist = float(np.linalg.norm(e0 - r0))
+    if depth_m is not None and dist > 1e-6:
+        found = _depth_search(depth_m, r0, e0, upper, lower, intrinsics, ref, mask, config,
+                              config.surface_offset_m[k])
+        if found is not None:
+            return finish(found[0], found[1], IkFlag.DEPTH)
+    circle = middle_joint_circle(r0, e0, upper, lower)
+    too_close = dist < abs(upper - lower) * (1.0 - config.reach_tolerance)
+    if circle.reach > 1.0 + config.reach_tolerance or too_close or dist < 1e-6:
+        p = circle.centre if circle.radius == 0.0 else circle_points(circle, ref, np.zeros(1))[0]
+        return finish(p, config.unreachable_confidence, IkFlag.UNREACHABLE)
+    u, _ = _plane_basis(circle.axis, ref)
+    p = circle.centre + config.prior_shrink[k] * circle.radius * u
+    spread = circle.radius * config.prior_angle_std_rad
+    return finish(p, math.exp(-spread / config.confidence_scale_m), IkFlag.PRIOR)
+
+
+def _depth_search(depth_m: NDArray, r0: NDArray[np.float64], e0: NDArray[np.float64],
+                  upper: float, lower: float, intrinsics: Intrinsics, ref: NDArray[np.float64],
+                  mask: NDArray | None, config: IkConfig, offset: float
+                  ) -> tuple[NDArray[np.float64], float] | None:
+    """The depth-supported middle joint and its confidence, or None if depth does not decide."""
+    angles = _swivel_angles(config.n_candidates)
+    step = 2.0 * math.pi / config.n_candidates
+    pts, penalty, keys = [], [], []
+    for scale in config.length_scales:
+        circle = middle_joint_circle(r0, e0, upper * scale, lower * scale)
+        too_close = np.linalg.norm(e0 - r0) < abs(upper - lower) * scale
+        if too_close:
+            continue
+        scale_cost = config.scale_weight * abs(math.log(scale))
+        if circle.radius < 1e-6:
+            pts.append(circle.centre[None])
+            penalty.append(np.array([scale_cost]))
+            keys.append((scale, np.array([math.nan])))
+            continue
+        pts.append(circle_points(circle, ref, angles))
+        penalty.append(scale_cost + config.prior_weight * 0.5 * (1.0 - np.cos(angles)))
+        keys.append((scale, angles))
+    if not pts:
+        return None
+    cands = np.concatenate(pts)
+    cost, known = _depth_cost(depth_m, r0, e0, cands, intrinsics, mask, config, offset)
+    if known.mean() < config.min_valid_fraction or \
+            float(cost.max() - cost.min()) <= config.ambiguity_margin:
+        return None
+    total = cost + np.concatenate(penalty)
+    best = int(np.argmin(total))
+    p = cands[best]
+    # Which circle and angle the best candidate came from, to refine its swivel.
+    first = 0
+    for scale, angs in keys:
+        if best < first + len(angs):
+            angle = float(angs[best - first])
+            if config.refine_steps > 0 and math.isfinite(angle):
+                circle = middle_joint_circle(r0, e0, upper * scale, lower * scale)
+                fine = angle + np.arange(-config.refine_steps, config.refine_steps + 1) * \
+                    (step / (config.refine_steps + 1))
+                fpts = circle_points(circle, ref, fine)
+                fcost, _ = _depth_cost(depth_m, r0, e0, fpts, intrinsics, mask, config, offset)
+                ftotal = fcost + config.scale_weight * abs(math.log(scale)) + \
+                    config.prior_weight * 0.5 * (1.0 - np.cos(fine))
+                p = fpts[int(np.argmin(ftotal))]
+            break
+        first += len(angs)
+    # Uncertainty: how far the candidates about as good as the best lie from it.
+    near = total <= total.min() + config.ambiguity_margin
+    spread = float(np.mean(np.linalg.norm(cands[near] - p, axis=1)))
+    return p, math.exp(-spread / config.confidence_scale_m)
+
+
+# ---------------------------------------------------------------------------------------------
+# Bone lengths
+
+
+class LimbLengths:
+    """Bone lengths per limb, learned from a track's observations (falls back on parameters).
+
+    - When the middle joint is observed (a 14-part detector), each bone's length is the median
+      of the last `window` observations.
+    - Otherwise, once `min_samples` root-end distances are seen, the total length is their
+      `reach_percentile` (a limb is sometimes nearly straight) split in the defaults' ratio.
+    - Otherwise the defaults.
+
+    This object is a learner and changes as it observes (unlike the pure functions here).
+    """
+
+    def __init__(self, defaults: Mapping[str, tuple[float, float]] | None = None, *,
+                 window: int = 300, min_samples: int = 15,
+                 reach_percentile: float = 95.0) -> None:
+        self.defaults = dict(DEFAULT_LIMB_LENGTHS_M if defaults is None else defaults)
+        for limb, (a, b) in self.defaults.items():
+            if limb not in LIMBS or not (a > 0 and b > 0):
+                raise ValueError(f'bad default lengths {limb!r}: ({a}, {b})')
+        if window < 1 or min_samples < 1 or not 0 < reach_percentile <= 100:
+            raise ValueError(f'window ({window}) and min_samples ({min_samples}) must be >= 1, '
+                             f'reach_percentile ({reach_percentile}) in (0, 100]')
+        self.min_samples = min_samples
+        self.reach_percentile = reach_percentile
+        self._bones: dict[str, deque[tuple[float, float]]] = {
+            k: deque(maxlen=window) for k in LIMBS}
+        self._reach: dict[str, deque[float]] = {k: deque(maxlen=window) for k in LIMBS}
+
+    def observe(self, limb: str, root: NDArray[np.floating], middle: NDArray[np.floating] | None,
+                end: NDArray[np.floating]) -> None:
+        """Record one frame of a limb (metres); NaN or None joints are skipped."""
+        if limb not in LIMBS:
+            raise ValueError(f'unknown limb {limb!r}; expected one of {tuple(LIMBS)}')
+        r0, e0 = np.asarray(root, float), np.asarray(end, float)
+        if middle is not None and np.isfinite(middle).all() and np.isfinite(r0).all() \
+                and np.isfinite(e0).all():
+            m0 = np.asarray(middle, float)
+            self._bones[limb].append((float(np.linalg.norm(m0 - r0)),
+                                      float(np.linalg.norm(e0 - m0))))
+        if np.isfinite(r0).all() and np.isfinite(e0).all():
+            self._reach[limb].append(float(np.linalg.norm(e0 - r0)))
+
+    def observe_many(self, limb: str, roots: NDArray[np.floating],
+                     middles: NDArray[np.floating] | None, ends: NDArray[np.floating]) -> None:
+        """Record many frames of a limb at once: (F, 3) arrays, metres; NaN rows are skipped."""
+        if limb not in LIMBS:
+            raise ValueError(f'unknown limb {limb!r}; expected one of {tuple(LIMBS)}')
+        r0 = np.asarray(roots, float).reshape(-1, 3)
+        e0 = np.asarray(ends, float).reshape(-1, 3)
+        ok = np.isfinite(r0).all(axis=1) & np.isfinite(e0).all(axis=1)
+        if middles is not None:
+            m0 = np.asarray(middles, float).reshape(-1, 3)
+            both = ok & np.isfinite(m0).all(axis=1)
+            up = np.linalg.norm(m0[both] - r0[both], axis=1)
+            lo = np.linalg.norm(e0[both] - m0[both], axis=1)
+            self._bones[limb].extend(zip(up.tolist(), lo.tolist(), strict=True))
+        self._reach[limb].extend(np.linalg.norm(e0[ok] - r0[ok], axis=1).tolist())
+
+    def observe_skeleton(self, names: Sequence[str], points: NDArray[np.floating]) -> None:
+        """Record every limb of one frame: `points` (J, 3) metres named by `names`."""
+        pts = np.asarray(points, dtype=np.float64)
+        index = {n: i for i, n in enumerate(names)}
+        for limb, (a, m, b) in LIMBS.items():
+            if a in index and b in index:
+                middle = pts[index[m]] if m in index else None
+                self.observe(limb, pts[index[a]], middle, pts[index[b]])
+
+    def lengths(self, limb: str) -> tuple[float, float]:
+        """(upper, lower) metres for `limb`."""
+        if limb not in LIMBS:
+            raise ValueError(f'unknown limb {limb!r}; expected one of {tuple(LIMBS)}')
+        bones = self._bones[limb]
+        if len(bones) >= self.min_samples:
+            arr = np.asarray(bones)
+            return float(np.median(arr[:, 0])), float(np.median(arr[:, 1]))
+        a, b = self.defaults[limb]
+        reach = self._reach[limb]
+        if len(reach) >= self.min_samples:
+            total = float(np.percentile(np.asarray(reach), self.reach_percentile))
+            return total * a / (a + b), total * b / (a + b)
+        return a, b
+
+    def as_dict(self) -> dict[str, tuple[float, float]]:
+        return {limb: self.lengths(limb) for limb in LIMBS}
+
+
+# ---------------------------------------------------------------------------------------------
+# All four limbs
+
+
+@dataclass(frozen=True)
+class IkResult:
+    """Elbows and knees of one frame, in `LIMBS` order (left arm, right arm, left leg, right leg).
+
+    Attributes
+    ----------
+    names : the middle joints' names ('left_elbow', ...).
+    positions : (4, 3) float64 metres, camera optical frame; NaN when not inferred.
+    pixels : (4, 2) float64 pixel (u, v); NaN when unknown.
+    confidence : (4,) float32, 0..1.
+    flags : (4,) uint8 `IkFlag` values.
+    """
+
+    names: tuple[str, ...]
+    positions: NDArray[np.float64]
+    pixels: NDArray[np.float64]
+    confidence: NDArray[np.float32]
+    flags: NDArray[np.uint8]
+
+
+def infer_middle_joints(depth_m: NDArray[np.floating] | None, points: NDArray[np.floating],
+                        intrinsics: Intrinsics | None,
+                        lengths: LimbLengths | Mapping[str, tuple[float, float]], *,
+                        names: Sequence[str] = PARTS_10.names,
+                        mask: NDArray[np.bool_] | None = None,
+                        config: IkConfig = IkConfig()) -> IkResult:
+    """Infer both elbows and both knees of one frame (what the `ik` node calls).
+
+    Parameters
+    ----------
+    depth_m : (H, W) float metres, NaN = no reading, or None for the prior alone.
+    points : (J, 3) float metres, camera optical frame, NaN = unknown; named by `names` (must
+        include shoulders, wrists, hips and ankles).
+    intrinsics : the camera of `depth_m` and of the output pixels (None: no pixels, no depth).
+    lengths : a `LimbLengths` or {limb: (upper, lower)} metres.
+    names : joint names of `points` (default: the 10 parts).
+    mask : (H, W) bool person mask, optional.
+    config : parameters.
+    """
+    pts = np.asarray(points, dtype=np.float64)
+    if pts.ndim != 2 or pts.shape != (len(names), 3):
+        raise ValueError(f'points must have shape ({len(names)}, 3), got {pts.shape}')
+    if depth_m is not None:
+        depth_m = np.asarray(depth_m)
+        if depth_m.ndim != 2:
+            raise ValueError(f'depth image must be 2-D, got shape {depth_m.shape}')
+        if mask is not None and np.shape(mask) != depth_m.shape:
+            raise ValueError(f'mask {np.shape(mask)} and depth {depth_m.shape} differ in shape')
+    index = {n: i for i, n in enumerate(names)}
+    for limb, (a, _, b) in LIMBS.items():
+        for joint in (a, b):
+            if joint not in index:
+                raise ValueError(f'joint {joint!r} (needed for {limb}) not in names {names}')
+
+    def get(name: str) -> NDArray[np.float64]:
+        return pts[index[name]] if name in index else np.full(3, np.nan)
+
+    frame = body_frame(get('left_shoulder'), get('right_shoulder'), get('left_hip'),
+                       get('right_hip'))
+    sols = []
+    for limb, (a, _, b) in LIMBS.items():
+        upper, lower = (lengths.lengths(limb) if isinstance(lengths, LimbLengths)
+                        else lengths[limb])
+        sols.append(solve_limb(depth_m, get(a), get(b), upper, lower, intrinsics,
+                               prior=prior_direction(limb, frame, config),
+                               kind='arm' if limb.endswith('arm') else 'leg', mask=mask,
+                               config=config))
+    return IkResult(
+        names=tuple(m for _, m, _ in LIMBS.values()),
+        positions=np.stack([s.position for s in sols]),
+        pixels=np.stack([s.pixel for s in sols]),
+        confidence=np.array([s.confidence for s in sols], np.float32),
+        flags=np.array([s.flag for s in sols], np.uint8))

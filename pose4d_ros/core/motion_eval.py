@@ -1,0 +1,730 @@
+"""Offline evaluation of the tracker (SLQE, eqs. 6-16) and the IK (eqs. 17-24) on real motion.
+
+Real Kinect v1 skeleton motion (UTKinect-Action3D) stands in for a detector's output:
+
+- Tracking: the 10 parts of the reduced model (head, neck = shoulder centre, shoulders, wrists,
+  hips, ankles) are projected into a 320x240 image with the CAD-60 intrinsics and corrupted the
+  way a part detector fails (seeded): Gaussian noise, outliers (a part jumps 20-60 px away) and
+  dropouts (NaN). The corrupted input as-is, a plain constant-velocity Kalman filter, the same
+  filter with the innovation gate, and SLQE are scored by their mean pixel error against the
+  clean projection.
+- IK: elbows and knees are hidden and inferred from the 3-D shoulders/hips and wrists/ankles with
+  limb lengths (learned from the take or fixed), with the joint-limit prior alone and with the
+  support of a depth image; scored by the 3-D error in millimetres.
+
+UTKinect frame numbers are sparse (steps of 2-8 frames of a 30 fps stream) with some long gaps
+between action clips; a take is split into segments at gaps over `max_gap_s` (no motion is
+invented across a gap) and each segment is resampled to 30 fps and tracked from scratch.
+
+This module reads files and returns numbers; the `pose4d track-eval` verb prints and saves them.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable, Iterable, Iterator, Sequence
+from dataclasses import asdict, dataclass, replace
+from pathlib import Path
+
+import numpy as np
+from numpy.typing import NDArray
+
+from pose4d_ros.core.camera import Intrinsics, cad60_intrinsics, project
+from pose4d_ros.core.kinematics import (
+    IkConfig,
+    IkFlag,
+    LimbLengths,
+    body_frame,
+    infer_middle_joints,
+    middle_joint_circle,
+)
+from pose4d_ros.core.skeleton import LIMBS, PARTS_10, PartTree, group_of
+from pose4d_ros.core.slqe import (
+    ConstantVelocityTracker,
+    CvConfig,
+    SlqeConfig,
+    SlqeTracker,
+    Source,
+)
+from pose4d_ros.datasets.utkinect import (
+    UTKINECT_JOINTS,
+    Take,
+    list_takes,
+    read_take,
+    resample,
+    to_optical,
+)
+
+# UTKinect joint used for each part name that it spells differently.
+UTKINECT_NAMES: dict[str, str] = {'neck': 'shoulder_center'}
+
+TRAIN_SUBJECTS: tuple[int, ...] = (1, 2, 3, 4, 5, 6)
+TEST_SUBJECTS: tuple[int, ...] = (7, 8)
+
+
+@dataclass(frozen=True)
+class Segment:
+    """A stretch of one take without long gaps, resampled to a regular rate.
+
+    Attributes
+    ----------
+    name : 'sNN_eMM/k', k = segment index in the take.
+    subject : NN.
+    times : (T,) float64 seconds.
+    joints : (T, 20, 3) float64 metres, optical frame, `UTKINECT_JOINTS` order.
+    """
+
+    name: str
+    subject: int
+    times: NDArray[np.float64]
+    joints: NDArray[np.float64]
+
+
+@dataclass(frozen=True)
+class Corruption:
+    """Detector-like corruption of clean part pixels.
+
+    Attributes
+    ----------
+    noise_px : Gaussian noise per axis, pixels (standard deviation).
+    outlier_rate : fraction of detections that jump away.
+    outlier_px : (min, max) distance of a jump, pixels (uniform, random direction).
+    dropout_rate : fraction of detections lost (NaN).
+    """
+
+    noise_px: float = 3.0
+    outlier_rate: float = 0.10
+    outlier_px: tuple[float, float] = (20.0, 60.0)
+    dropout_rate: float = 0.05
+
+
+def split_take(take: Take, *, max_gap_s: float = 0.5, fps: float = 30.0,
+               min_frames: int = 15, native: bool = False) -> list[Segment]:
+    """Split a take at gaps over `max_gap_s` and resample each piece to `fps` (optical frame).
+
+    With `native`, the pieces keep the recorded (irregular) frame times instead.
+    """
+    gaps = np.flatnonzero(np.diff(take.frames) / 30.0 > max_gap_s)
+    bounds = np.concatenate([[0], gaps + 1, [len(take.frames)]])
+    out = []
+    for k, (a, b) in enumerate(zip(bounds[:-1], bounds[1:], strict=True)):
+        piece = Take(take.name, take.frames[a:b], take.joints[a:b])
+        if native:
+            times = (piece.frames - piece.frames[0]) / 30.0
+            joints = piece.joints
+        else:
+            times, joints = resample(piece, fps=fps)
+        if len(times) < min_frames:
+            continue
+        out.append(Segment(f'{take.name}/{k}', take.subject, times, to_optical(joints)))
+    return out
+
+
+def load_segments(directory: str | Path, subjects: Iterable[int] | None = None, *,
+                  max_gap_s: float = 0.5, native: bool = False) -> list[Segment]:
+    """All segments of the UTKinect takes in `directory` (optionally only some subjects)."""
+    paths = list_takes(directory)
+    if not paths:
+        raise ValueError(f'{directory}: no joints_sNN_eMM.txt files')
+    keep = None if subjects is None else set(subjects)
+    out: list[Segment] = []
+    for path in paths:
+        take = read_take(path)
+        if keep is not None and take.subject not in keep:
+            continue
+        out.extend(split_take(take, max_gap_s=max_gap_s, native=native))
+    return out
+
+
+def part_indices(tree: PartTree = PARTS_10) -> NDArray[np.int64]:
+    """Index into `UTKINECT_JOINTS` of each part of `tree`."""
+    return np.array([UTKINECT_JOINTS.index(UTKINECT_NAMES.get(n, n)) for n in tree.names])
+
+
+def part_pixels(segment: Segment, intrinsics: Intrinsics, tree: PartTree = PARTS_10
+                ) -> NDArray[np.float64]:
+    """(T, P, 2) clean pixel positions of the tree's parts."""
+    pts = segment.joints[:, part_indices(tree)]
+    return project(pts.reshape(-1, 3), intrinsics).reshape(len(pts), len(tree), 2)
+
+
+def corrupt(uv: NDArray[np.floating], rng: np.random.Generator,
+            corruption: Corruption = Corruption()) -> tuple[NDArray[np.float64], NDArray[np.int8]]:
+    """Corrupt clean pixels like a detector: noise, outliers and dropouts.
+
+    Parameters
+    ----------
+    uv : (T, P, 2) float clean pixels (not modified).
+    rng : the random generator (seeded by the caller).
+    corruption : rates and sizes.
+
+    Returns
+    -------
+    noisy : (T, P, 2) float64 pixels, NaN for dropouts.
+    kind : (T, P) int8, 0 = noisy detection, 1 = outlier, 2 = dropout.
+    """
+    uv = np.asarray(uv, dtype=np.float64)
+    shape = uv.shape[:2]
+    noisy = uv + rng.normal(0.0, corruption.noise_px, uv.shape)
+    u = rng.random(shape)
+    kind = np.zeros(shape, np.int8)
+    kind[u < corruption.outlier_rate] = 1
+    kind[u >= 1.0 - corruption.dropout_rate] = 2
+    angle = rng.uniform(0.0, 2.0 * math.pi, shape)
+    dist = rng.uniform(*corruption.outlier_px, shape)
+    jump = np.stack([np.cos(angle), np.sin(angle)], axis=-1) * dist[..., None]
+    noisy = np.where((kind == 1)[..., None], noisy + jump, noisy)
+    noisy[kind == 2] = np.nan
+    return noisy, kind
+
+
+def segment_rng(seed: int, segment: Segment) -> np.random.Generator:
+    """A generator that depends on the seed and the segment only (order-independent)."""
+    take, _, k = segment.name.partition('/')
+    return np.random.default_rng([seed, int(take[1:3]), int(take[5:7]), int(k or 0)])
+
+
+TrackerFactory = Callable[[], SlqeTracker]
+
+
+def run_tracker(factory: TrackerFactory, uv: NDArray[np.floating], times: NDArray[np.floating],
+                confidence: NDArray[np.floating] | None = None
+                ) -> tuple[NDArray[np.float64], NDArray[np.uint8]]:
+    """Track a sequence of detections.
+
+    Parameters
+    ----------
+    factory : makes a fresh tracker.
+    uv : (T, P, 2) detections, pixels, NaN = missing.
+    times : (T,) seconds.
+    confidence : (T, P) or None.
+
+    Returns
+    -------
+    positions (T, P, 2) float64 pixels (NaN = missing) and source (T, P) uint8.
+    """
+    tracker = factory()
+    n = len(times)
+    pos = np.full(np.shape(uv), np.nan)
+    src = np.full(np.shape(uv)[:2], Source.MISSING, np.uint8)
+    for k in range(n):
+        out = tracker.step(uv[k], None if confidence is None else confidence[k], times[k])
+        pos[k] = out.positions
+        src[k] = out.source
+    return pos, src
+
+
+def _group_names(tree: PartTree) -> dict[str, list[int]]:
+    groups: dict[str, list[int]] = {}
+    for i, name in enumerate(tree.names):
+        groups.setdefault(group_of(name) or name, []).append(i)
+    return groups
+
+
+@dataclass
+class ErrorAccumulator:
+    """Sums of pixel errors per part over many sequences (NaN estimates counted as missing)."""
+
+    n_parts: int
+
+    def __post_init__(self) -> None:
+        self.sum = np.zeros(self.n_parts)
+        self.count = np.zeros(self.n_parts, np.int64)
+        self.total = np.zeros(self.n_parts, np.int64)
+
+    def add(self, est: NDArray, truth: NDArray, counted: NDArray[np.bool_]) -> None:
+        err = np.linalg.norm(np.asarray(est) - np.asarray(truth), axis=-1)
+        ok = counted & np.isfinite(err)
+        self.sum += np.where(ok, err, 0.0).sum(axis=0)
+        self.count += ok.sum(axis=0)
+        self.total += counted.sum(axis=0)
+
+    def table(self, tree: PartTree) -> dict[str, float]:
+        """{group: mean error, ..., 'average': mean over all part-frames, 'coverage': ...}."""
+        out = {}
+        for group, idx in _group_names(tree).items():
+            out[group] = float(self.sum[idx].sum() / max(self.count[idx].sum(), 1))
+        out['average'] = float(self.sum.sum() / max(self.count.sum(), 1))
+        out['coverage'] = float(self.count.sum() / max(self.total.sum(), 1))
+        return out
+
+
+def default_methods(slqe: SlqeConfig | None = None, cv: CvConfig | None = None,
+                    cv_gated: CvConfig | None = None, tree: PartTree = PARTS_10
+                    ) -> dict[str, TrackerFactory]:
+    """The compared trackers: plain CV filter, CV filter with the gate, SLQE."""
+    slqe = slqe or SlqeConfig()
+    cv = cv or CvConfig()
+    cv_gated = cv_gated or CvConfig(gate_chi2=slqe.gate_chi2)
+    return {
+        'cv': lambda: ConstantVelocityTracker(cv, tree),
+        'cv_gated': lambda: ConstantVelocityTracker(cv_gated, tree),
+        'slqe': lambda: SlqeTracker(slqe, tree),
+    }
+
+
+def evaluate_tracking(segments: Sequence[Segment], methods: dict[str, TrackerFactory], *,
+                      seed: int = 0, corruption: Corruption = Corruption(),
+                      intrinsics: Intrinsics | None = None, tree: PartTree = PARTS_10
+                      ) -> dict[str, dict[str, dict[str, float]]]:
+    """Mean pixel error of the corrupted input and of each tracker on `segments`.
+
+    Returns
+    -------
+    {'detected_frames': {method: table}, 'all_frames': {method: table}} where a table is
+    {group: px, 'average': px, 'coverage': fraction}. 'detected_frames' scores only the frames
+    where the input has a detection of the part (the input's own support, so every method is
+    compared on the same part-frames); 'all_frames' scores every frame (the input is then held
+    at its last detection, 'input_held').
+    """
+    intrinsics = intrinsics or cad60_intrinsics()
+    n_parts = len(tree)
+    names = ['input', 'input_held', *methods]
+    det = {m: ErrorAccumulator(n_parts) for m in names}
+    every = {m: ErrorAccumulator(n_parts) for m in names}
+    for seg in segments:
+        truth = part_pixels(seg, intrinsics, tree)
+        noisy, kind = corrupt(truth, segment_rng(seed, seg), corruption)
+        has_truth = np.isfinite(truth).all(axis=-1)
+        detected = has_truth & (kind != 2)
+        estimates = {'input': noisy, 'input_held': _hold(noisy)}
+        for m, factory in methods.items():
+            estimates[m] = run_tracker(factory, noisy, seg.times)[0]
+        for m, est in estimates.items():
+            det[m].add(est, truth, detected)
+            every[m].add(est, truth, has_truth)
+    return {'detected_frames': {m: a.table(tree) for m, a in det.items()},
+            'all_frames': {m: a.table(tree) for m, a in every.items()}}
+
+
+def _hold(uv: NDArray[np.float64]) -> NDArray[np.float64]:
+    """Fill NaN detections with the part's last detection (zero-order hold)."""
+    out = uv.copy()
+    for k in range(1, len(out)):
+        gap = ~np.isfinite(out[k]).all(axis=-1)
+        out[k][gap] = out[k - 1][gap]
+    return out
+
+
+def reduction(table: dict[str, float], reference: dict[str, float]) -> float:
+    """Relative reduction of the average error against a reference table (0.25 = 25 % lower)."""
+    return 1.0 - table['average'] / reference['average']
+
+
+def tune_tracking(segments: Sequence[Segment], *, seed: int = 0,
+                  corruption: Corruption = Corruption(), tree: PartTree = PARTS_10,
+                  rounds: int = 2, progress: Callable[[str], None] | None = None
+                  ) -> tuple[SlqeConfig, CvConfig, CvConfig, list[dict]]:
+    """Coordinate search of Q, R, the gate and the coupling on `segments` (training subjects).
+
+    The objective is the mean pixel error on the detected frames. Each tracker is tuned on its
+    own parameters (the plain CV filter has no gate).
+
+    Returns
+    -------
+    (slqe, cv, cv_gated, log): the best configurations and every evaluated point.
+    """
+    log: list[dict] = []
+
+    def score(name: str, factory: TrackerFactory, params: dict) -> float:
+        res = evaluate_tracking(segments, {name: factory}, seed=seed, corruption=corruption,
+                                tree=tree)
+        value = res['detected_frames'][name]['average']
+        log.append({'method': name, **params, 'error_px': value})
+        if progress is not None:
+            progress(f'{name} {params} -> {value:.3f} px')
+        return value
+
+    grids_slqe = {
+        'process_noise': [30.0, 100.0, 300.0, 1000.0, 3000.0],
+        'measurement_noise_px': [2.0, 3.0, 4.5, 6.0, 9.0],
+        'gate_chi2': [6.0, 9.21, 13.8, 20.0],
+        'coupling': [0.0, 0.05, 0.1, 0.2, 0.4],
+        'output': ['filtered', 'detection'],
+    }
+    grids_cv = {
+        'process_noise': [10.0, 30.0, 100.0, 300.0, 1000.0],
+        'measurement_noise_px': [2.0, 3.0, 4.5, 6.0, 9.0, 13.0],
+    }
+    grids_cvg = {
+        'process_noise': [10.0, 30.0, 100.0, 300.0, 1000.0],
+        'measurement_noise_px': [2.0, 3.0, 4.5, 6.0, 9.0],
+        'gate_chi2': [6.0, 9.21, 13.8, 20.0],
+    }
+
+    def search(name: str, config, grids: dict, make: Callable) -> object:
+        cache: dict[tuple, float] = {}
+
+        def value(cfg) -> float:
+            key = tuple(getattr(cfg, k) for k in grids)
+            if key not in cache:
+                cache[key] = score(name, lambda: make(cfg), {k: getattr(cfg, k) for k in grids})
+            return cache[key]
+
+        best = config
+        for _ in range(rounds):
+            for key, values in grids.items():
+                trials = [replace(best, **{key: v}) for v in values]
+                best = min(trials, key=value)
+        return best
+
+    slqe = search('slqe', SlqeConfig(), grids_slqe, lambda c: SlqeTracker(c, tree))
+    cv = search('cv', CvConfig(), grids_cv, lambda c: ConstantVelocityTracker(c, tree))
+    cvg = search('cv_gated', CvConfig(gate_chi2=13.8), grids_cvg,
+                 lambda c: ConstantVelocityTracker(c, tree))
+    return slqe, cv, cvg, log  # type: ignore[return-value]
+
+
+def config_dict(config: object) -> dict:
+    """A JSON-friendly dict of a config dataclass (inf -> 'inf')."""
+    out = {}
+    for k, v in asdict(config).items():  # type: ignore[call-overload]
+        out[k] = 'inf' if isinstance(v, float) and math.isinf(v) else v
+    return out
+
+
+# ---------------------------------------------------------------------------------------------
+# IK on real motion
+
+# UTKinect joints of each limb (root, middle, end), in `LIMBS` order.
+LIMB_JOINTS: dict[str, tuple[str, str, str]] = {
+    limb: (root, middle, end) for limb, (root, middle, end) in LIMBS.items()
+}
+
+# Bones of the stand-in depth body: (joint a, joint b, radius in metres).
+SPLAT_BONES: tuple[tuple[str, str, float], ...] = (
+    ('head', 'shoulder_center', 0.09), ('shoulder_center', 'spine', 0.13),
+    ('spine', 'hip_center', 0.13), ('left_shoulder', 'right_shoulder', 0.06),
+    ('left_hip', 'right_hip', 0.08), ('left_shoulder', 'left_hip', 0.08),
+    ('right_shoulder', 'right_hip', 0.08),
+    ('left_shoulder', 'left_elbow', 0.045), ('left_elbow', 'left_wrist', 0.038),
+    ('left_wrist', 'left_hand', 0.035),
+    ('right_shoulder', 'right_elbow', 0.045), ('right_elbow', 'right_wrist', 0.038),
+    ('right_wrist', 'right_hand', 0.035),
+    ('left_hip', 'left_knee', 0.07), ('left_knee', 'left_ankle', 0.05),
+    ('left_ankle', 'left_foot', 0.04),
+    ('right_hip', 'right_knee', 0.07), ('right_knee', 'right_ankle', 0.05),
+    ('right_ankle', 'right_foot', 0.04),
+)
+
+
+def kinect_depth_noise_m(z: NDArray[np.floating]) -> NDArray[np.float64]:
+    """Axial noise (standard deviation, metres) of a Kinect v1 at depth z (metres).
+
+    Nguyen, Izadi and Lovell, "Modeling Kinect sensor noise for improved 3D reconstruction and
+    tracking", 3DIMPVT 2012: ``0.0012 + 0.0019 (z - 0.4)^2``.
+    """
+    z = np.asarray(z, dtype=np.float64)
+    return 0.0012 + 0.0019 * (z - 0.4) ** 2
+
+
+def splat_capsules(ends: NDArray[np.floating], radii: NDArray[np.floating],
+                   intrinsics: Intrinsics, *, step_m: float = 0.01,
+                   rng: np.random.Generator | None = None) -> NDArray[np.float32]:
+    """Render capsules into a depth image by splatting spheres along their axes (z-buffer).
+
+    A simple stand-in for a body renderer: each capsule is a chain of spheres every `step_m`;
+    a sphere of radius R at depth z covers the pixels within ``f R / z`` of its centre's
+    projection with the depth of its front surface.
+
+    Parameters
+    ----------
+    ends : (K, 2, 3) float metres, optical frame: the two ends of each capsule's axis.
+    radii : (K,) float metres.
+    intrinsics : the camera.
+    step_m : spacing of the spheres, metres.
+    rng : if given, Kinect v1 axial noise (`kinect_depth_noise_m`) is added.
+
+    Returns
+    -------
+    (H, W) float32 metres, NaN where nothing was rendered.
+    """
+    ends = np.asarray(ends, dtype=np.float64).reshape(-1, 2, 3)
+    radii = np.asarray(radii, dtype=np.float64).reshape(-1)
+    if len(radii) != len(ends):
+        raise ValueError(f'{len(ends)} capsules but {len(radii)} radii')
+    h, w = intrinsics.height, intrinsics.width
+    centres, rads = [], []
+    for (a, b), rad in zip(ends, radii, strict=True):
+        if not (np.isfinite(a).all() and np.isfinite(b).all()):
+            continue
+        n = max(int(np.ceil(np.linalg.norm(b - a) / step_m)), 1)
+        t = np.linspace(0.0, 1.0, n + 1)[:, None]
+        centres.append(a + t * (b - a))
+        rads.append(np.full(n + 1, rad))
+    zbuf = np.full(h * w, np.inf)
+    if centres:
+        c = np.concatenate(centres)
+        r = np.concatenate(rads)
+        front = c[:, 2] > r
+        c, r = c[front], r[front]
+        uv = project(c, intrinsics)
+        half = np.ceil(intrinsics.fx * r / c[:, 2]).astype(np.int64)
+        # Spheres of one patch size at a time, so small spheres do not pay for big patches.
+        for size in np.unique(half):
+            sel = np.flatnonzero(half == size)
+            off = np.arange(-size, size + 1)
+            du, dv = np.meshgrid(off, off)
+            du, dv = du.reshape(-1), dv.reshape(-1)
+            cu = np.rint(uv[sel, 0])[:, None] + du[None]
+            cv = np.rint(uv[sel, 1])[:, None] + dv[None]
+            # Metric offset of each pixel's ray from the sphere centre, at the centre's depth.
+            z = c[sel, 2][:, None]
+            dx = (cu - intrinsics.cx) * z / intrinsics.fx - c[sel, 0][:, None]
+            dy = (cv - intrinsics.cy) * z / intrinsics.fy - c[sel, 1][:, None]
+            rho2 = dx * dx + dy * dy
+            rr = r[sel][:, None]
+            ok = (rho2 < rr * rr) & (cu >= 0) & (cu < w) & (cv >= 0) & (cv < h)
+            depth = z - np.sqrt(np.maximum(rr * rr - rho2, 0.0))
+            idx = (cv[ok] * w + cu[ok]).astype(np.int64)
+            np.minimum.at(zbuf, idx, depth[ok])
+    out = np.where(np.isfinite(zbuf), zbuf, np.nan).reshape(h, w)
+    if rng is not None:
+        hit = np.isfinite(out)
+        out[hit] += rng.normal(0.0, 1.0, int(hit.sum())) * kinect_depth_noise_m(out[hit])
+    return out.astype(np.float32)
+
+
+def splat_body(joints: NDArray[np.floating], intrinsics: Intrinsics, *,
+               rng: np.random.Generator | None = None) -> NDArray[np.float32]:
+    """A depth image of a capsule body on a UTKinect skeleton (20, 3), metres, optical frame."""
+    j = np.asarray(joints, dtype=np.float64)
+    idx = {n: i for i, n in enumerate(UTKINECT_JOINTS)}
+    ends = np.stack([[j[idx[a]], j[idx[b]]] for a, b, _ in SPLAT_BONES])
+    radii = np.array([r for _, _, r in SPLAT_BONES])
+    return splat_capsules(ends, radii, intrinsics, rng=rng)
+
+
+def take_lengths(segments: Sequence[Segment], mode: str) -> dict[str, dict[str, tuple]]:
+    """Bone lengths per take for the IK evaluation.
+
+    mode 'take': learned from each take's frames with the elbows/knees visible (medians);
+    'reach': learned without them (the reach percentile of `LimbLengths`);
+    'fixed': `DEFAULT_LIMB_LENGTHS_M`.
+    """
+    if mode not in ('take', 'reach', 'fixed'):
+        raise ValueError(f"lengths mode must be 'take', 'reach' or 'fixed', got {mode!r}")
+    out: dict[str, dict[str, tuple]] = {}
+    by_take: dict[str, list[Segment]] = {}
+    for seg in segments:
+        by_take.setdefault(seg.name.partition('/')[0], []).append(seg)
+    for take, segs in by_take.items():
+        learner = LimbLengths(window=10 ** 6)
+        if mode != 'fixed':
+            for seg in segs:
+                for limb, (a, m, b) in LIMB_JOINTS.items():
+                    learner.observe_many(limb, seg.joints[:, _UT[a]],
+                                         seg.joints[:, _UT[m]] if mode == 'take' else None,
+                                         seg.joints[:, _UT[b]])
+        out[take] = learner.as_dict()
+    return out
+
+
+_UT = {n: i for i, n in enumerate(UTKINECT_JOINTS)}
+
+
+def _limb_arrays(seg: Segment, stride: int) -> dict[str, NDArray[np.float64]]:
+    j = seg.joints[::stride]
+    return {name: j[:, i] for name, i in _UT.items()}
+
+
+def _limb_samples(segments: Sequence[Segment], lengths: dict[str, dict[str, tuple]],
+                  stride: int) -> dict[str, dict[str, NDArray[np.float64]]]:
+    """Per limb: root, middle, end (F, 3), body frames (F, 3, 3) and lengths (F,) x 2."""
+    out: dict[str, dict[str, list]] = {limb: {} for limb in LIMB_JOINTS}
+    for seg in segments:
+        j = seg.joints[::stride]
+        frames = np.stack([body_frame(f[_UT['left_shoulder']], f[_UT['right_shoulder']],
+                                      f[_UT['left_hip']], f[_UT['right_hip']]) for f in j])
+        take = seg.name.partition('/')[0]
+        for limb, (a, m, b) in LIMB_JOINTS.items():
+            upper, lower = lengths[take][limb]
+            for key, value in (('root', j[:, _UT[a]]), ('middle', j[:, _UT[m]]),
+                               ('end', j[:, _UT[b]]), ('frame', frames),
+                               ('upper', np.full(len(j), upper)),
+                               ('lower', np.full(len(j), lower))):
+                out[limb].setdefault(key, []).append(value)
+    return {limb: {k: np.concatenate(v) for k, v in d.items()} for limb, d in out.items()}
+
+
+def fit_swivel_prior(segments: Sequence[Segment], lengths: dict[str, dict[str, tuple]], *,
+                     stride: int = 3, n_directions: int = 2000, shrink: bool = True
+                     ) -> dict[str, tuple[tuple[float, float, float], float]]:
+    """Fit the joint-limit prior on (training) segments: direction and shrink per limb type.
+
+    For each of `n_directions` unit vectors (a Fibonacci sphere) of (outward, up, forward)
+    coefficients, the middle joint is put at ``centre + s * radius * u`` (u = the direction in
+    the circle's plane) with s fitted by least squares (or 1 if not `shrink`); the direction
+    with the lowest mean 3-D error wins. Arms and legs separately.
+
+    Returns
+    -------
+    {'arm': ((out, up, forward), s), 'leg': (...)}.
+    """
+    k = np.arange(n_directions) + 0.5
+    polar = np.arccos(1.0 - 2.0 * k / n_directions)
+    azim = math.pi * (1.0 + 5.0 ** 0.5) * k
+    dirs = np.stack([np.sin(polar) * np.cos(azim), np.sin(polar) * np.sin(azim),
+                     np.cos(polar)], axis=1)
+    data = _limb_samples(segments, lengths, stride)
+    parts: dict[str, list] = {'arm': [], 'leg': []}
+    for limb, d in data.items():
+        circles = [middle_joint_circle(r0, e0, u, lo) for r0, e0, u, lo in zip(
+            d['root'], d['end'], d['upper'], d['lower'], strict=True)]
+        centre = np.stack([c.centre for c in circles])
+        axis = np.stack([c.axis for c in circles])
+        radius = np.array([c.radius for c in circles])
+        side = 1.0 if limb.startswith('left') else -1.0
+        v = np.einsum('fij,dj->dfi', d['frame'], dirs * np.array([side, 1.0, 1.0]))
+        v = v - np.einsum('dfi,fi->df', v, axis)[..., None] * axis[None]
+        v /= np.maximum(np.linalg.norm(v, axis=2, keepdims=True), 1e-9)
+        parts['arm' if limb.endswith('arm') else 'leg'].append(
+            (centre, radius, v, d['middle']))
+    out = {}
+    for kind, items in parts.items():
+        centre = np.concatenate([c for c, _, _, _ in items])
+        radius = np.concatenate([r for _, r, _, _ in items])
+        v = np.concatenate([x for _, _, x, _ in items], axis=1)
+        truth = np.concatenate([m for _, _, _, m in items])
+        e = truth - centre
+        if shrink:
+            proj = np.einsum('dfi,fi->df', v, e)
+            s = np.clip((proj * radius).sum(axis=1) / max(float((radius ** 2).sum()), 1e-12),
+                        0.0, 1.0)
+        else:
+            s = np.ones(n_directions)
+        err = np.linalg.norm(centre[None] + (s[:, None] * radius[None])[..., None] * v
+                             - truth[None], axis=2).mean(axis=1)
+        best = int(np.argmin(err))
+        out[kind] = (tuple(float(x) for x in np.round(dirs[best], 3)), round(float(s[best]), 3))
+    return out
+
+
+@dataclass
+class IkErrors:
+    """Sums of 3-D errors (metres) per middle joint and flag counts."""
+
+    def __post_init__(self) -> None:
+        self.sum: dict[str, float] = {}
+        self.count: dict[str, int] = {}
+        self.flags = np.zeros(len(IkFlag), np.int64)
+
+    def add(self, limb: str, err: float, flag: int) -> None:
+        self.flags[flag] += 1
+        if math.isfinite(err):
+            self.sum[limb] = self.sum.get(limb, 0.0) + err
+            self.count[limb] = self.count.get(limb, 0) + 1
+
+    def table(self) -> dict[str, object]:
+        """{'elbow': mm, 'knee': mm, 'average': mm, 'n': frames, 'flags': {name: count}}."""
+        out: dict[str, object] = {}
+        for kind, limbs in (('elbow', ('left_arm', 'right_arm')),
+                            ('knee', ('left_leg', 'right_leg'))):
+            s = sum(self.sum.get(limb, 0.0) for limb in limbs)
+            n = sum(self.count.get(limb, 0) for limb in limbs)
+            out[kind] = 1000.0 * s / max(n, 1)
+        total = sum(self.count.values())
+        out['average'] = 1000.0 * sum(self.sum.values()) / max(total, 1)
+        out['n'] = int(total)
+        out['flags'] = {f.name.lower(): int(self.flags[f]) for f in IkFlag}
+        return out
+
+
+IkFrame = tuple[str, NDArray | None, NDArray | None, NDArray[np.float64]]
+
+
+def ik_frames(segments: Sequence[Segment], *, depth: str = 'none', stride: int = 1,
+              seed: int = 0, intrinsics: Intrinsics | None = None,
+              renderer: Callable | None = None) -> Iterator[IkFrame]:
+    """The frames of an IK evaluation: (take, depth_m or None, mask or None, truth (20, 3)).
+
+    depth : 'none' (joint-limit prior only), 'splat' (a capsule body splatted on the real
+        skeleton with Kinect noise, `splat_body`; the real joints are the truth) or 'render'
+        (``renderer(joints (20, 3), rng) -> (depth_m, mask, truth (20, 3))``, e.g. the
+        synthetic body renderer, whose joints are the truth of its depth image).
+    """
+    if depth not in ('none', 'splat', 'render'):
+        raise ValueError(f"depth must be 'none', 'splat' or 'render', got {depth!r}")
+    if depth == 'render' and renderer is None:
+        raise ValueError("depth='render' needs a renderer")
+    if stride < 1:
+        raise ValueError(f'stride must be >= 1, got {stride}')
+    intrinsics = intrinsics or cad60_intrinsics()
+    for seg in segments:
+        rng = segment_rng(seed, seg)
+        take = seg.name.partition('/')[0]
+        for frame in seg.joints[::stride]:
+            if depth == 'splat':
+                depth_m = splat_body(frame, intrinsics, rng=rng)
+                yield take, depth_m, np.isfinite(depth_m), frame
+            elif depth == 'render':
+                depth_m, mask, truth = renderer(frame, rng)  # type: ignore[misc]
+                yield take, depth_m, mask, np.asarray(truth, dtype=np.float64)
+            else:
+                yield take, None, None, frame
+
+
+def score_ik(frames: Iterable[IkFrame], lengths: dict[str, dict[str, tuple]], *,
+             config: IkConfig | None = None, intrinsics: Intrinsics | None = None
+             ) -> dict[str, object]:
+    """Hide elbows and knees, infer them with `infer_middle_joints`, score in millimetres.
+
+    The inputs are the truth's shoulders, hips, wrists and ankles (3-D) and the frame's depth.
+    """
+    intrinsics = intrinsics or cad60_intrinsics()
+    config = config or IkConfig()
+    acc = IkErrors()
+    pidx = part_indices(PARTS_10)
+    for take, depth_m, mask, truth in frames:
+        res = infer_middle_joints(depth_m, truth[pidx], intrinsics, lengths[take],
+                                  names=PARTS_10.names, mask=mask, config=config)
+        for k, (limb, (_, m, _)) in enumerate(LIMB_JOINTS.items()):
+            acc.add(limb, float(np.linalg.norm(res.positions[k] - truth[_UT[m]])),
+                    int(res.flags[k]))
+    return acc.table()
+
+
+def evaluate_ik(segments: Sequence[Segment], lengths: dict[str, dict[str, tuple]], *,
+                depth: str = 'none', config: IkConfig | None = None, stride: int = 1,
+                seed: int = 0, intrinsics: Intrinsics | None = None,
+                renderer: Callable | None = None) -> dict[str, object]:
+    """`score_ik` over `ik_frames` (see both)."""
+    frames = ik_frames(segments, depth=depth, stride=stride, seed=seed, intrinsics=intrinsics,
+                       renderer=renderer)
+    return score_ik(frames, lengths, config=config, intrinsics=intrinsics)
+
+
+def tune_ik_depth(frames: Sequence[IkFrame], lengths: dict[str, dict[str, tuple]],
+                  config: IkConfig, *, rounds: int = 2,
+                  progress: Callable[[str], None] | None = None
+                  ) -> tuple[IkConfig, list[dict]]:
+    """Coordinate search of the depth-support parameters on (training) frames with depth.
+
+    The objective is the mean 3-D error of elbows and knees.
+    """
+    grids: dict[str, list] = {
+        'occluded_weight': [0.05, 0.15, 0.3, 0.6],
+        'surface_offset_m': [(0.03, 0.05), (0.04, 0.06), (0.05, 0.07), (0.04, 0.08)],
+        'depth_scale_m': [0.015, 0.03, 0.05, 0.08],
+        'unknown_cost': [0.2, 0.5, 0.8],
+        'scale_weight': [0.0, 0.1, 0.3, 1.0],
+        'prior_weight': [0.0, 0.05, 0.15, 0.4],
+    }
+    log: list[dict] = []
+    cache: dict[tuple, float] = {}
+
+    def value(cfg: IkConfig) -> float:
+        key = tuple(getattr(cfg, k) for k in grids)
+        if key not in cache:
+            cache[key] = float(score_ik(frames, lengths, config=cfg)['average'])  # type: ignore
+            params = {k: getattr(cfg, k) for k in grids}
+            log.append({**params, 'error_mm': cache[key]})
+            if progress is not None:
+                progress(f'ik {params} -> {cache[key]:.1f} mm')
+        return cache[key]
+
+    best = config
+    for _ in range(rounds):
+        for key, values in grids.items():
+            best = min((replace(best, **{key: v}) for v in values), key=value)
+    return best, log

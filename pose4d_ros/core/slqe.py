@@ -1,0 +1,593 @@
+"""SLQE: a skeleton-constrained Kalman filter for the parts of a tracked person.
+
+After Martinez Berti, Sanchez Salmeron and Ricolfe Viala, "4-Dimensional deformation part model
+for pose estimation using Kalman filter constraints", eqs. (6)-(16). Everything is in the colour
+image, pixels (u, v), as in the paper.
+
+Model
+-----
+Each part i has the state ``s_i = (x, y, vx, vy, ax, ay)`` (pixels, px/s, px/s^2; eq. 6) and the
+whole pose is ``s = (s_0, ..., s_{P-1})``. With ``dt`` the time between two frames (taken from
+the stamps, so irregular frame rates are handled), the prediction is (eqs. 7-9)::
+
+    s' = A(dt) s,    Sigma' = A Sigma A^T + Q(dt)
+
+``A`` couples connected parts (eqs. 10-12). The paper writes it for 8 joints as blocks ``A1`` (a
+part's own constant-acceleration kinematics) and ``A2`` (the pull of the connected part); here it
+is built from any part tree (`core.skeleton.PARTS_10` by default): a child's velocity and
+acceleration are blended with its parent's before they are integrated,
+
+    d_c <- (1 - k) d_c + k d_p          (d = velocity and acceleration)
+    A_cc = F(dt) diag(1, 1 - k, 1 - k) (x) I2,      A_cp = F(dt) diag(0, k, k) (x) I2,
+
+with ``F(dt)`` the constant-acceleration transition of one axis (``A1`` of the paper) and ``k``
+the coupling (`SlqeConfig.coupling` per 1/30 s, rescaled for other ``dt`` so that the pull per
+second does not depend on the frame rate). ``k = 0`` gives independent parts. The root (neck)
+has ``A_rr = F``. An occluded wrist thus keeps moving with its shoulder rather than flying off
+along its last velocity.
+
+``Q(dt)`` is the discretised white noise of the highest derivative (jerk for constant
+acceleration, acceleration for constant velocity) with spectral density
+``process_noise**2``. The measurement (eq. 13) is ``z_i = H s_i + r_i``, ``H`` picking the
+positions, ``R_i = measurement_noise_px**2 / confidence_i * I2``. The update is the Kalman update
+(eqs. 14-15), Joseph form.
+
+The choice of eq. (16) between the filter's estimate and the detection is made per part from the
+innovation ``y_i = z_i - H s'_i`` and its covariance ``S_i``:
+
+- ``y_i^T S_i^-1 y_i <= gate_chi2``: the detection agrees with the prediction; it is used for the
+  update and the part is DETECTED (its output is the filtered estimate, or the detection itself
+  with ``output='detection'``, the literal reading of eq. 16).
+- beyond the gate: an outlier; the detection is rejected and the prediction is used (TRACKED).
+- when ``drift_frames`` consecutive detections are rejected but agree with each other (each within
+  ``drift_radius_px`` of the previous one), the filter is the one that drifted: the part is
+  re-initialised on the detection (DETECTED).
+
+Parts without a detection (NaN) are predicted only (TRACKED). A part that has had no accepted
+detection for more than ``max_missed_frames`` is dropped (MISSING, NaN) and re-initialised when
+detected again; a time gap over ``max_dt_s``, a stamp going backwards or `reset` restart the
+whole track.
+
+Design: `SlqeConfig` (frozen) + `TrackState` (frozen arrays) + the pure functions `predict`,
+`update` and `output`; `SlqeTracker` wraps them behind one per-frame call,
+``tracker.step(uv, confidence, stamp_s)``. `ConstantVelocityTracker` is the plain per-part
+constant-velocity Kalman filter used for comparison, with the same interface.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field, replace
+from enum import IntEnum
+
+import numpy as np
+from numpy.typing import NDArray
+
+from pose4d_ros.core.skeleton import PARTS_10, PartTree
+
+# The frame period at which `SlqeConfig.coupling` is stated (the paper's 30 fps Kinect).
+NOMINAL_DT_S = 1.0 / 30.0
+
+
+class Source(IntEnum):
+    """Where a joint estimate came from; the values of pose4d_msgs/Joint's constants."""
+
+    DETECTED = 0
+    TRACKED = 1
+    INFERRED = 2
+    MISSING = 3
+
+
+@dataclass(frozen=True)
+class SlqeConfig:
+    """Parameters of the SLQE filter (units: pixels and seconds).
+
+    Attributes
+    ----------
+    order : 3 = constant acceleration (the paper's state), 2 = constant velocity.
+    coupling : pull of a part's velocity/acceleration towards its parent's per 1/30 s, 0..1
+        (eqs. 10-12's A2); 0 = independent parts.
+    process_noise : spectral density (square root) of the white noise on the highest derivative,
+        px/s^order per sqrt(Hz) (jerk for order 3, acceleration for order 2); Q(dt) of eq. 8.
+    measurement_noise_px : standard deviation of a detection per axis at confidence 1, pixels
+        (R of eq. 13).
+    gate_chi2 : eq. (16)'s gate on the squared Mahalanobis innovation (2 degrees of freedom;
+        9.21 = 99 %); `inf` accepts every detection.
+    output : 'filtered' (posterior estimate for accepted detections) or 'detection' (the
+        detection itself, the literal eq. 16).
+    drift_frames : consecutive rejected but mutually consistent detections after which the part
+        is re-initialised on the detection; 0 disables.
+    drift_radius_px : two rejected detections in a row are consistent when this close, pixels.
+    max_missed_frames : frames without an accepted detection before a part is dropped.
+    max_dt_s : a longer gap between stamps restarts the track, seconds.
+    init_velocity_std : prior standard deviation of a new part's velocity, px/s.
+    init_accel_std : prior standard deviation of a new part's acceleration, px/s^2.
+    min_confidence : detections with a lower confidence are ignored (treated as missing).
+    confidence_decay : factor applied to a part's confidence per frame it is only predicted.
+    """
+
+    order: int = 3
+    coupling: float = 0.2
+    process_noise: float = 3000.0
+    measurement_noise_px: float = 3.0
+    gate_chi2: float = 13.8
+    output: str = 'filtered'
+    drift_frames: int = 3
+    drift_radius_px: float = 15.0
+    max_missed_frames: int = 30
+    max_dt_s: float = 0.5
+    init_velocity_std: float = 100.0
+    init_accel_std: float = 1000.0
+    min_confidence: float = 0.0
+    confidence_decay: float = 0.9
+
+    def __post_init__(self) -> None:
+        if self.order not in (2, 3):
+            raise ValueError(f'order must be 2 (constant velocity) or 3 (constant acceleration), '
+                             f'got {self.order}')
+        if not 0.0 <= self.coupling < 1.0:
+            raise ValueError(f'coupling must be in [0, 1), got {self.coupling}')
+        for name in ('process_noise', 'measurement_noise_px', 'gate_chi2', 'drift_radius_px',
+                     'max_dt_s', 'init_velocity_std', 'init_accel_std'):
+            value = getattr(self, name)
+            if not value > 0:
+                raise ValueError(f'{name} must be positive, got {value}')
+        if self.output not in ('filtered', 'detection'):
+            raise ValueError(f"output must be 'filtered' or 'detection', got {self.output!r}")
+        if self.drift_frames < 0 or self.max_missed_frames < 0:
+            raise ValueError(f'drift_frames ({self.drift_frames}) and max_missed_frames '
+                             f'({self.max_missed_frames}) must be >= 0')
+        if not 0.0 <= self.min_confidence <= 1.0:
+            raise ValueError(f'min_confidence must be in [0, 1], got {self.min_confidence}')
+        if not 0.0 < self.confidence_decay <= 1.0:
+            raise ValueError(f'confidence_decay must be in (0, 1], got {self.confidence_decay}')
+
+    @property
+    def block(self) -> int:
+        """State size per part: 2 axes x `order` derivatives."""
+        return 2 * self.order
+
+
+@dataclass(frozen=True)
+class TrackState:
+    """The filter's state for P parts (treat as immutable; functions return new states).
+
+    Attributes
+    ----------
+    x : (P * B,) float64 state, per part (x, y, vx, vy[, ax, ay]), px, px/s, px/s^2; B =
+        `SlqeConfig.block`. Zero for inactive parts.
+    cov : (P * B, P * B) float64 covariance of `x`.
+    active : (P,) bool, the part is being tracked.
+    missed : (P,) int64, consecutive frames without an accepted detection.
+    rejected : (P,) int64, consecutive rejected detections that agree with each other.
+    last_rejected : (P, 2) float64, the last rejected detection (NaN if none), pixels.
+    confidence : (P,) float64, 0..1, confidence of the current estimate.
+    stamp : time of the last frame, seconds; None before the first frame.
+    """
+
+    x: NDArray[np.float64]
+    cov: NDArray[np.float64]
+    active: NDArray[np.bool_]
+    missed: NDArray[np.int64]
+    rejected: NDArray[np.int64]
+    last_rejected: NDArray[np.float64]
+    confidence: NDArray[np.float64]
+    stamp: float | None = None
+
+    @property
+    def n_parts(self) -> int:
+        return len(self.active)
+
+
+@dataclass(frozen=True)
+class TrackOutput:
+    """One frame of tracked parts.
+
+    Attributes
+    ----------
+    positions : (P, 2) float64 pixel (u, v); NaN where MISSING.
+    covariances : (P, 2, 2) float64 position covariance, px^2; NaN where MISSING.
+    velocities : (P, 2) float64 px/s; NaN where MISSING.
+    source : (P,) uint8 `Source` values (DETECTED, TRACKED, MISSING).
+    confidence : (P,) float32, 0..1; 0 where MISSING.
+    stamp : seconds.
+    """
+
+    positions: NDArray[np.float64]
+    covariances: NDArray[np.float64]
+    velocities: NDArray[np.float64]
+    source: NDArray[np.uint8]
+    confidence: NDArray[np.float32]
+    stamp: float
+
+
+@dataclass(frozen=True)
+class UpdateInfo:
+    """What `update` did with each part's detection.
+
+    Attributes
+    ----------
+    source : (P,) uint8 `Source` values for this frame.
+    nis : (P,) float64 squared Mahalanobis innovation of the gated detections (NaN otherwise).
+    """
+
+    source: NDArray[np.uint8]
+    nis: NDArray[np.float64]
+
+
+def initial_state(n_parts: int, config: SlqeConfig) -> TrackState:
+    """A state with no part tracked yet."""
+    if n_parts <= 0:
+        raise ValueError(f'n_parts must be positive, got {n_parts}')
+    n = n_parts * config.block
+    return TrackState(
+        x=np.zeros(n), cov=np.zeros((n, n)), active=np.zeros(n_parts, bool),
+        missed=np.zeros(n_parts, np.int64), rejected=np.zeros(n_parts, np.int64),
+        last_rejected=np.full((n_parts, 2), np.nan), confidence=np.zeros(n_parts), stamp=None)
+
+
+def _kron_i2(m: NDArray[np.float64]) -> NDArray[np.float64]:
+    """``m (x) I2`` (per-axis block -> interleaved (x, y) block), without np.kron's overhead."""
+    n = m.shape[0]
+    out = np.zeros((2 * n, 2 * n))
+    out[0::2, 0::2] = m
+    out[1::2, 1::2] = m
+    return out
+
+
+def axis_transition(dt: float, order: int) -> NDArray[np.float64]:
+    """F(dt): one axis's (order x order) kinematic transition, ``F_ij = dt^(j-i) / (j-i)!``."""
+    f = np.zeros((order, order))
+    for i in range(order):
+        for j in range(i, order):
+            f[i, j] = dt ** (j - i) / math.factorial(j - i)
+    return f
+
+
+def axis_process_noise(dt: float, order: int, q: float) -> NDArray[np.float64]:
+    """One axis's discretised white noise on the highest derivative (spectral density ``q**2``).
+
+    ``Q_ij = q^2 dt^(2n-1-i-j) / ((n-1-i)! (n-1-j)! (2n-1-i-j))`` with n = order, e.g. the
+    familiar ``[[dt^3/3, dt^2/2], [dt^2/2, dt]]`` for constant velocity.
+    """
+    n = order
+    out = np.empty((n, n))
+    for i in range(n):
+        for j in range(n):
+            p = 2 * n - 1 - i - j
+            out[i, j] = dt ** p / (math.factorial(n - 1 - i) * math.factorial(n - 1 - j) * p)
+    return q * q * out
+
+
+def coupling_at(dt: float, coupling: float) -> float:
+    """The per-step coupling for a step of `dt` seconds (`coupling` is stated per 1/30 s)."""
+    return 1.0 - (1.0 - coupling) ** (max(dt, 0.0) / NOMINAL_DT_S)
+
+
+def transition_matrix(dt: float, config: SlqeConfig, tree: PartTree,
+                      active: NDArray[np.bool_] | None = None) -> NDArray[np.float64]:
+    """A(dt) of eqs. (10)-(12) for the whole pose, built from the part tree.
+
+    Parameters
+    ----------
+    dt : seconds.
+    config : the filter's parameters (order, coupling).
+    tree : parts and parents; state blocks follow `tree.names`.
+    active : (P,) bool, optional; a child is coupled only to an active parent.
+
+    Returns
+    -------
+    (P * B, P * B) float64, B = `config.block`, blocks ``A1`` on the diagonal and ``A2`` at
+    (child, parent).
+    """
+    n_parts = len(tree)
+    order, b = config.order, config.block
+    f = axis_transition(dt, order)
+    k = coupling_at(dt, config.coupling)
+    own = _kron_i2(f)
+    d_own = np.ones(order)
+    d_own[1:] = 1.0 - k
+    d_par = np.zeros(order)
+    d_par[1:] = k
+    own_coupled = _kron_i2(f * d_own[None, :])
+    from_parent = _kron_i2(f * d_par[None, :])
+    a = np.zeros((n_parts * b, n_parts * b))
+    for i, p in enumerate(tree.parents):
+        rows = slice(i * b, (i + 1) * b)
+        coupled = p >= 0 and k > 0.0 and (active is None or (active[i] and active[p]))
+        if coupled:
+            a[rows, rows] = own_coupled
+            a[rows, p * b:(p + 1) * b] = from_parent
+        else:
+            a[rows, rows] = own
+    return a
+
+
+def process_noise_matrix(dt: float, config: SlqeConfig, n_parts: int) -> NDArray[np.float64]:
+    """Q(dt) of eq. (8): block diagonal, one ``axis_process_noise (x) I2`` per part."""
+    q = _kron_i2(axis_process_noise(dt, config.order, config.process_noise))
+    b = config.block
+    out = np.zeros((n_parts * b, n_parts * b))
+    for i in range(n_parts):
+        out[i * b:(i + 1) * b, i * b:(i + 1) * b] = q
+    return out
+
+
+def predict(state: TrackState, dt: float, config: SlqeConfig, tree: PartTree) -> TrackState:
+    """The prediction of eqs. (7)-(9) over `dt` seconds (0 = no motion).
+
+    Parameters
+    ----------
+    state : the state at the previous frame (not modified).
+    dt : seconds, >= 0.
+    config, tree : the model.
+
+    Returns
+    -------
+    The predicted state (same stamp; `update` or the caller sets the new one).
+    """
+    if not dt >= 0.0:
+        raise ValueError(f'dt must be >= 0 seconds, got {dt}')
+    if state.n_parts != len(tree):
+        raise ValueError(f'state has {state.n_parts} parts, tree {len(tree)}')
+    if dt == 0.0 or not state.active.any():
+        return state
+    a = transition_matrix(dt, config, tree, state.active)
+    q = process_noise_matrix(dt, config, state.n_parts)
+    x = a @ state.x
+    cov = a @ state.cov @ a.T + q
+    inactive = np.repeat(~state.active, config.block)
+    # Inactive parts carry no information: keep their blocks zero rather than growing noise.
+    x[inactive] = 0.0
+    cov[inactive, :] = 0.0
+    cov[:, inactive] = 0.0
+    return replace(state, x=x, cov=0.5 * (cov + cov.T))
+
+
+def _check_measurement(uv: NDArray, confidence: NDArray | None, n_parts: int
+                       ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    z = np.asarray(uv, dtype=np.float64)
+    if z.shape != (n_parts, 2):
+        raise ValueError(f'uv must have shape ({n_parts}, 2), got {z.shape}')
+    if confidence is None:
+        c = np.ones(n_parts)
+    else:
+        c = np.asarray(confidence, dtype=np.float64)
+        if c.shape != (n_parts,):
+            raise ValueError(f'confidence must have shape ({n_parts},), got {c.shape}')
+        if np.any(c[np.isfinite(c)] < 0) or np.any(c[np.isfinite(c)] > 1):
+            raise ValueError(f'confidence must be in [0, 1], got {c}')
+    return z, c
+
+
+def _init_part(x: NDArray, cov: NDArray, i: int, z: NDArray, parent: int,
+               active: NDArray, config: SlqeConfig, r: float) -> None:
+    """(Re-)start part i at detection z; its velocity/acceleration start as its parent's."""
+    b = config.block
+    sl = slice(i * b, (i + 1) * b)
+    x[sl] = 0.0
+    x[i * b:i * b + 2] = z
+    if parent >= 0 and active[parent]:
+        x[i * b + 2:(i + 1) * b] = x[parent * b + 2:(parent + 1) * b]
+    cov[sl, :] = 0.0
+    cov[:, sl] = 0.0
+    stds = [math.sqrt(r)] * 2 + [config.init_velocity_std] * 2
+    if config.order == 3:
+        stds += [config.init_accel_std] * 2
+    cov[sl, sl] = np.diag(np.square(stds))
+
+
+def update(state: TrackState, uv: NDArray[np.floating], confidence: NDArray[np.floating] | None,
+           config: SlqeConfig, tree: PartTree) -> tuple[TrackState, UpdateInfo]:
+    """The measurement update of eqs. (13)-(15) with eq. (16)'s choice per part.
+
+    Parameters
+    ----------
+    state : the predicted state (not modified).
+    uv : (P, 2) float detections, pixel (u, v); NaN rows = not detected.
+    confidence : (P,) float in [0, 1] or None (all 1); NaN or below `config.min_confidence` =
+        not detected. Scales R as ``R / confidence``.
+    config, tree : the model.
+
+    Returns
+    -------
+    The updated state and what happened to each detection.
+    """
+    n_parts = state.n_parts
+    if n_parts != len(tree):
+        raise ValueError(f'state has {n_parts} parts, tree {len(tree)}')
+    z, conf = _check_measurement(uv, confidence, n_parts)
+    b = config.block
+    valid = np.isfinite(z).all(axis=1) & np.isfinite(conf) & (conf > 0) & \
+        (conf >= config.min_confidence)
+    safe_conf = np.where(valid, conf, 1.0)
+    r_var = config.measurement_noise_px ** 2 / safe_conf
+    x, cov = state.x.copy(), state.cov.copy()
+    active = state.active.copy()
+    missed, rejected = state.missed.copy(), state.rejected.copy()
+    last_rejected, out_conf = state.last_rejected.copy(), state.confidence.copy()
+    source = np.full(n_parts, Source.MISSING, np.uint8)
+    source[active] = Source.TRACKED
+    nis = np.full(n_parts, np.nan)
+
+    # Gate each active part's detection on its own innovation (eq. 16's choice).
+    accepted: list[int] = []
+    restart: list[int] = []
+    gated = np.flatnonzero(valid & active)
+    if len(gated):
+        pos = gated[:, None] * b + np.arange(2)[None, :]
+        y_all = z[gated] - x[pos]
+        s_all = cov[pos[:, :, None], pos[:, None, :]] + r_var[gated, None, None] * np.eye(2)
+        det = s_all[:, 0, 0] * s_all[:, 1, 1] - s_all[:, 0, 1] * s_all[:, 1, 0]
+        with np.errstate(divide='ignore', invalid='ignore'):
+            d2_all = (s_all[:, 1, 1] * y_all[:, 0] ** 2 + s_all[:, 0, 0] * y_all[:, 1] ** 2
+                      - (s_all[:, 0, 1] + s_all[:, 1, 0]) * y_all[:, 0] * y_all[:, 1]) / det
+        d2_all = np.where(det > 0, d2_all, math.inf)
+        nis[gated] = d2_all
+    for i, d2 in zip(gated, d2_all if len(gated) else [], strict=True):
+        if d2 <= config.gate_chi2:
+            accepted.append(int(i))
+            rejected[i] = 0
+            last_rejected[i] = np.nan
+            continue
+        consistent = np.all(np.isfinite(last_rejected[i])) and \
+            float(np.hypot(*(z[i] - last_rejected[i]))) <= config.drift_radius_px
+        rejected[i] = rejected[i] + 1 if consistent else 1
+        last_rejected[i] = z[i]
+        if config.drift_frames > 0 and rejected[i] >= config.drift_frames:
+            restart.append(int(i))
+
+    if accepted:
+        idx = np.concatenate([np.arange(i * b, i * b + 2) for i in accepted])
+        y = (z[accepted] - x[idx].reshape(-1, 2)).reshape(-1)
+        r = np.diag(np.repeat(r_var[accepted], 2))
+        ph = cov[:, idx]
+        s = cov[np.ix_(idx, idx)] + r
+        gain = np.linalg.solve(s, ph.T).T
+        x = x + gain @ y
+        ikh = np.eye(len(x))
+        ikh[:, idx] -= gain
+        cov = ikh @ cov @ ikh.T + gain @ r @ gain.T
+        cov = 0.5 * (cov + cov.T)
+        source[accepted] = Source.DETECTED
+        missed[accepted] = 0
+        out_conf[accepted] = conf[accepted]
+
+    # New parts and drifted parts start on their detection, parents first.
+    for i in sorted(set(np.flatnonzero(valid & ~state.active)) | set(restart)):
+        _init_part(x, cov, i, z[i], tree.parents[i], active, config, r_var[i])
+        active[i] = True
+        source[i] = Source.DETECTED
+        missed[i] = 0
+        rejected[i] = 0
+        last_rejected[i] = np.nan
+        out_conf[i] = conf[i]
+
+    coasting = active & (source == Source.TRACKED)
+    missed[coasting] += 1
+    out_conf[coasting] *= config.confidence_decay
+    lost = coasting & (missed > config.max_missed_frames)
+    if lost.any():
+        drop = np.repeat(lost, b)
+        x[drop] = 0.0
+        cov[drop, :] = 0.0
+        cov[:, drop] = 0.0
+        active[lost] = False
+        source[lost] = Source.MISSING
+        missed[lost] = 0
+        rejected[lost] = 0
+        last_rejected[lost] = np.nan
+        out_conf[lost] = 0.0
+    new = replace(state, x=x, cov=cov, active=active, missed=missed, rejected=rejected,
+                  last_rejected=last_rejected, confidence=out_conf)
+    return new, UpdateInfo(source=source, nis=nis)
+
+
+def output(state: TrackState, info: UpdateInfo, uv: NDArray[np.floating],
+           confidence: NDArray[np.floating] | None, config: SlqeConfig) -> TrackOutput:
+    """Positions, per-part covariance, source and confidence of an updated state.
+
+    `uv` and `confidence` are the frame's detections (used when ``config.output ==
+    'detection'``).
+    """
+    n_parts, b = state.n_parts, config.block
+    xs = state.x.reshape(n_parts, b)
+    pos = xs[:, 0:2].copy()
+    vel = xs[:, 2:4].copy()
+    covs = np.stack([state.cov[i * b:i * b + 2, i * b:i * b + 2] for i in range(n_parts)])
+    if config.output == 'detection':
+        z, conf = _check_measurement(uv, confidence, n_parts)
+        det = info.source == Source.DETECTED
+        pos[det] = z[det]
+        safe = np.where(det, np.maximum(np.nan_to_num(conf, nan=1.0), 1e-6), 1.0)
+        r_var = config.measurement_noise_px ** 2 / safe
+        covs[det] = r_var[det, None, None] * np.eye(2)
+    missing = info.source == Source.MISSING
+    pos[missing] = np.nan
+    vel[missing] = np.nan
+    covs[missing] = np.nan
+    conf_out = np.where(missing, 0.0, np.clip(state.confidence, 0.0, 1.0)).astype(np.float32)
+    return TrackOutput(positions=pos, covariances=covs, velocities=vel,
+                       source=info.source.astype(np.uint8), confidence=conf_out,
+                       stamp=float(state.stamp) if state.stamp is not None else math.nan)
+
+
+@dataclass
+class SlqeTracker:
+    """Per-frame front door to the SLQE filter (what the `tracker` node calls).
+
+    >>> tracker = SlqeTracker(SlqeConfig(), PARTS_10)
+    >>> out = tracker.step(uv, confidence, stamp_s)   # doctest: +SKIP
+
+    `uv` is (P, 2) pixels in `tree.names` order with NaN rows for undetected parts, `confidence`
+    (P,) in [0, 1] (or None), `stamp_s` the frame's capture time in seconds. The tracker restarts
+    by itself when the stamps jump back or leave a gap over `config.max_dt_s`.
+    """
+
+    config: SlqeConfig = field(default_factory=SlqeConfig)
+    tree: PartTree = PARTS_10
+    state: TrackState = field(init=False)
+
+    def __post_init__(self) -> None:
+        self.state = initial_state(len(self.tree), self.config)
+
+    def reset(self) -> None:
+        """Forget every part (a lost track or a new person)."""
+        self.state = initial_state(len(self.tree), self.config)
+
+    def step(self, uv: NDArray[np.floating], confidence: NDArray[np.floating] | None,
+             stamp_s: float) -> TrackOutput:
+        """Predict to `stamp_s`, update with the frame's detections and return the estimates."""
+        stamp_s = float(stamp_s)
+        if not math.isfinite(stamp_s):
+            raise ValueError(f'stamp must be finite seconds, got {stamp_s}')
+        last = self.state.stamp
+        if last is not None and not 0.0 <= stamp_s - last <= self.config.max_dt_s:
+            self.reset()  # time went backwards (a looped bag) or the track was lost in a gap
+            last = None
+        dt = 0.0 if last is None else stamp_s - last
+        state = predict(self.state, dt, self.config, self.tree)
+        state, info = update(state, uv, confidence, self.config, self.tree)
+        self.state = replace(state, stamp=stamp_s)
+        return output(self.state, info, uv, confidence, self.config)
+
+
+@dataclass(frozen=True)
+class CvConfig:
+    """The plain constant-velocity Kalman filter used for comparison.
+
+    Attributes
+    ----------
+    process_noise : white-acceleration spectral density (square root), px/s^2 per sqrt(Hz).
+    measurement_noise_px : detection standard deviation per axis, pixels.
+    gate_chi2 : innovation gate; `inf` (the default) = a plain filter that takes every detection.
+    max_missed_frames, max_dt_s, drift_frames, drift_radius_px : as in `SlqeConfig`.
+    """
+
+    process_noise: float = 300.0
+    measurement_noise_px: float = 3.0
+    gate_chi2: float = math.inf
+    max_missed_frames: int = 30
+    max_dt_s: float = 0.5
+    drift_frames: int = 3
+    drift_radius_px: float = 15.0
+
+    def to_slqe(self) -> SlqeConfig:
+        """The same filter as an `SlqeConfig` (order 2, no coupling)."""
+        return SlqeConfig(order=2, coupling=0.0, process_noise=self.process_noise,
+                          measurement_noise_px=self.measurement_noise_px,
+                          gate_chi2=self.gate_chi2, max_missed_frames=self.max_missed_frames,
+                          max_dt_s=self.max_dt_s, drift_frames=self.drift_frames,
+                          drift_radius_px=self.drift_radius_px)
+
+
+class ConstantVelocityTracker(SlqeTracker):
+    """A per-part constant-velocity Kalman filter, no coupling: the comparison baseline.
+
+    Same interface as `SlqeTracker`: ``ConstantVelocityTracker(CvConfig(), PARTS_10).step(uv,
+    confidence, stamp_s)``.
+    """
+
+    def __init__(self, config: CvConfig | None = None, tree: PartTree = PARTS_10) -> None:
+        self.cv_config = config if config is not None else CvConfig()
+        super().__init__(self.cv_config.to_slqe(), tree)

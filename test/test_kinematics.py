@@ -1,0 +1,290 @@
+"""DH chains and elbow/knee inference (core/kinematics.py)."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from numpy.testing import assert_allclose
+
+from pose4d_ros.core.camera import cad60_intrinsics, robust_depth
+from pose4d_ros.core.kinematics import (
+    DEFAULT_LIMB_LENGTHS_M,
+    IkConfig,
+    IkFlag,
+    LimbLengths,
+    body_frame,
+    circle_points,
+    dh_transform,
+    forward_kinematics,
+    infer_middle_joints,
+    limb_angles,
+    middle_joint_circle,
+    sample_depth,
+    solve_limb,
+)
+from pose4d_ros.core.motion_eval import splat_capsules
+from pose4d_ros.core.skeleton import PARTS_10
+
+K = cad60_intrinsics()
+UPPER, LOWER = 0.28, 0.25
+
+
+def rot(axis: str, a: float) -> np.ndarray:
+    c, s = math.cos(a), math.sin(a)
+    m = {'x': [[1, 0, 0], [0, c, -s], [0, s, c]], 'z': [[c, -s, 0], [s, c, 0], [0, 0, 1]]}[axis]
+    out = np.eye(4)
+    out[:3, :3] = m
+    return out
+
+
+def trans(x: float, y: float, z: float) -> np.ndarray:
+    out = np.eye(4)
+    out[:3, 3] = [x, y, z]
+    return out
+
+
+def random_base(rng: np.random.Generator, origin) -> np.ndarray:
+    q, _ = np.linalg.qr(rng.normal(size=(3, 3)))
+    if np.linalg.det(q) < 0:
+        q[:, 0] *= -1
+    base = np.eye(4)
+    base[:3, :3] = q
+    base[:3, 3] = origin
+    return base
+
+
+def random_angles(rng: np.random.Generator) -> np.ndarray:
+    return rng.uniform([-math.pi, 0.2, -math.pi, 0.35], [math.pi, math.pi - 0.2, math.pi, 2.6])
+
+
+def test_dh_transform_is_rz_tz_tx_rx() -> None:
+    rng = np.random.default_rng(0)
+    for theta, d, a, alpha in rng.uniform(-2, 2, (5, 4)):
+        expect = rot('z', theta) @ trans(0, 0, d) @ trans(a, 0, 0) @ rot('x', alpha)
+        assert_allclose(dh_transform(theta, d, a, alpha), expect, atol=1e-12)
+
+
+def test_forward_kinematics_bones_and_bend() -> None:
+    rng = np.random.default_rng(0)
+    for _ in range(20):
+        q = random_angles(rng)
+        base = random_base(rng, rng.uniform(-1, 1, 3))
+        root, mid, end = forward_kinematics(q, UPPER, LOWER, base)
+        assert_allclose(root, base[:3, 3], atol=1e-12)
+        assert_allclose(np.linalg.norm(mid - root), UPPER, rtol=1e-12)
+        assert_allclose(np.linalg.norm(end - mid), LOWER, rtol=1e-12)
+        cos_bend = (mid - root) @ (end - mid) / (UPPER * LOWER)
+        assert_allclose(cos_bend, math.cos(q[3]), atol=1e-12)  # q4 = 0 is a straight limb
+
+
+def test_limb_angles_round_trip() -> None:
+    rng = np.random.default_rng(1)
+    for _ in range(20):
+        q = random_angles(rng)
+        base = random_base(rng, rng.uniform(-1, 1, 3))
+        joints = forward_kinematics(q, UPPER, LOWER, base)
+        q2 = limb_angles(*joints, base[:3, :3])
+        assert_allclose(forward_kinematics(q2, UPPER, LOWER, base), joints, atol=1e-9)
+        assert_allclose(q2, q, atol=1e-9)
+
+
+def test_ik_returns_a_point_on_the_true_circle() -> None:
+    rng = np.random.default_rng(2)
+    for _ in range(30):
+        q = random_angles(rng)
+        root, mid, end = forward_kinematics(q, UPPER, LOWER, random_base(rng, [0, 0, 2.5]))
+        circle = middle_joint_circle(root, end, UPPER, LOWER)
+        # The true middle joint is on it ...
+        assert_allclose(np.linalg.norm(mid - circle.centre), circle.radius, atol=1e-9)
+        assert abs((mid - circle.centre) @ circle.axis) < 1e-9
+        # ... and so is whatever the prior picks, at the right bone lengths.
+        sol = solve_limb(None, root, end, UPPER, LOWER, K, prior=rng.normal(size=3))
+        assert sol.flag == IkFlag.PRIOR
+        assert_allclose(np.linalg.norm(sol.position - root), UPPER, rtol=1e-9)
+        assert_allclose(np.linalg.norm(end - sol.position), LOWER, rtol=1e-9)
+
+
+def test_prior_direction_is_followed() -> None:
+    root, end = np.array([0.0, 0.0, 2.0]), np.array([0.0, 0.4, 2.0])
+    sol = solve_limb(None, root, end, UPPER, LOWER, K, prior=np.array([0.0, 0.0, -1.0]))
+    assert sol.position[2] < 2.0 - 0.1  # bent towards the camera, as asked
+    assert 0 < sol.confidence < 1
+
+
+def arm_scene(rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """A bent arm beside a torso, in front of the camera; returns root, middle, end, depth."""
+    shoulder = np.array([0.15, -0.25, 2.2])
+    while True:
+        root, mid, end = forward_kinematics(random_angles(rng), UPPER, LOWER,
+                                            trans(*shoulder))
+        # Keep the arm beside the torso (no self-occlusion by it) and the bend clear.
+        bend = math.acos(np.clip((mid - root) @ (end - mid) / (UPPER * LOWER), -1, 1))
+        if mid[0] > shoulder[0] - 0.05 and end[0] > shoulder[0] - 0.1 and 0.6 < bend < 2.2:
+            break
+    torso = [[shoulder[0] - 0.2, shoulder[1] + 0.05, 2.22], [shoulder[0] - 0.2, 0.3, 2.22]]
+    depth = splat_capsules(np.array([[root, mid], [mid, end], torso]),
+                           np.array([0.045, 0.04, 0.13]), K, rng=rng)
+    return root, mid, end, depth
+
+
+def test_depth_recovers_the_true_elbow() -> None:
+    """With a depth image of the arm, the swivel comes from depth whatever the prior says."""
+    rng = np.random.default_rng(3)
+    cfg = IkConfig(length_scales=(1.0,))
+    errors, prior_errors = [], []
+    for _ in range(12):
+        root, mid, end, depth = arm_scene(rng)
+        prior = rng.normal(size=3)
+        sol = solve_limb(depth, root, end, UPPER, LOWER, K, prior=prior,
+                         mask=np.isfinite(depth), config=cfg)
+        assert sol.flag == IkFlag.DEPTH
+        assert np.isfinite(sol.pixel).all()
+        errors.append(np.linalg.norm(sol.position - mid))
+        alone = solve_limb(None, root, end, UPPER, LOWER, K, prior=prior, config=cfg)
+        prior_errors.append(np.linalg.norm(alone.position - mid))
+    errors = np.array(errors)
+    # Tolerance: 2 cm for most arms (Kinect noise ~6 mm at 2.2 m, 10/5 degree swivel steps).
+    assert np.median(errors) < 0.02, errors
+    assert np.mean(errors < 0.04) >= 0.75, errors
+    assert np.median(errors) < 0.25 * np.median(prior_errors)
+
+
+def test_depth_without_support_falls_back_on_the_prior() -> None:
+    root, end = np.array([0.0, 0.0, 2.0]), np.array([0.0, 0.4, 2.0])
+    holes = np.full((240, 320), np.nan, np.float32)
+    prior = np.array([0.0, 0.0, -1.0])
+    sol = solve_limb(holes, root, end, UPPER, LOWER, K, prior=prior)
+    ref = solve_limb(None, root, end, UPPER, LOWER, K, prior=prior)
+    assert sol.flag == IkFlag.PRIOR
+    assert_allclose(sol.position, ref.position)
+
+
+@pytest.mark.parametrize('stretch', [1.2, 2.0])
+def test_unreachable_is_on_the_line_and_flagged(stretch: float) -> None:
+    root = np.array([0.1, -0.2, 2.0])
+    end = root + np.array([0.6, 0.8, 0.0]) * (UPPER + LOWER) * stretch
+    sol = solve_limb(None, root, end, UPPER, LOWER, K, prior=np.array([0.0, 0.0, -1.0]))
+    assert sol.flag == IkFlag.UNREACHABLE
+    assert sol.confidence <= 0.25
+    assert_allclose(sol.position, root + (end - root) * UPPER / (UPPER + LOWER))
+
+
+@pytest.mark.parametrize('root, end, flag', [
+    ([np.nan, 0.0, 2.0], [0.0, 0.4, 2.0], IkFlag.MISSING),
+    ([0.0, 0.0, 2.0], [0.0, np.nan, 2.0], IkFlag.MISSING),
+    ([0.0, 0.0, -0.5], [0.0, 0.4, 2.0], IkFlag.BEHIND_CAMERA),
+    ([0.0, 0.0, 2.0], [0.0, 0.4, 0.0], IkFlag.BEHIND_CAMERA),
+])
+def test_invalid_input_is_flagged_never_nan_valid(root, end, flag) -> None:
+    sol = solve_limb(None, np.array(root), np.array(end), UPPER, LOWER, K,
+                     prior=np.array([0.0, 0.0, -1.0]))
+    assert sol.flag == flag
+    assert np.isnan(sol.position).all() and np.isnan(sol.pixel).all()
+    assert sol.confidence == 0.0
+
+
+def test_nan_lengths_are_missing() -> None:
+    sol = solve_limb(None, np.array([0.0, 0.0, 2.0]), np.array([0.0, 0.4, 2.0]), math.nan,
+                     LOWER, K, prior=np.array([0.0, 0.0, -1.0]))
+    assert sol.flag == IkFlag.MISSING
+
+
+def standing_person() -> np.ndarray:
+    """The 10 parts (PARTS_10 order) of a person facing the camera at 2.5 m, arms bent."""
+    p = {
+        'neck': [0.0, -0.45, 2.5], 'head': [0.0, -0.65, 2.5],
+        'left_shoulder': [0.18, -0.42, 2.5], 'right_shoulder': [-0.18, -0.42, 2.5],
+        'left_wrist': [0.25, -0.1, 2.25], 'right_wrist': [-0.25, -0.1, 2.25],
+        'left_hip': [0.1, 0.05, 2.5], 'right_hip': [-0.1, 0.05, 2.5],
+        'left_ankle': [0.12, 0.85, 2.45], 'right_ankle': [-0.12, 0.85, 2.45],
+    }
+    return np.array([p[n] for n in PARTS_10.names])
+
+
+def test_body_frame_of_a_person_facing_the_camera() -> None:
+    pts = dict(zip(PARTS_10.names, standing_person(), strict=True))
+    frame = body_frame(pts['left_shoulder'], pts['right_shoulder'], pts['left_hip'],
+                       pts['right_hip'])
+    assert_allclose(frame, np.array([[1, 0, 0], [0, -1, 0], [0, 0, -1]]).T, atol=0.05)
+    nan = np.full(3, np.nan)
+    assert_allclose(body_frame(nan, nan, nan, nan), np.diag([1.0, -1.0, -1.0]), atol=1e-12)
+
+
+def test_infer_middle_joints_frame() -> None:
+    pts = standing_person()
+    pts[PARTS_10.index('right_ankle')] = np.nan
+    res = infer_middle_joints(None, pts, K, DEFAULT_LIMB_LENGTHS_M)
+    assert res.names == ('left_elbow', 'right_elbow', 'left_knee', 'right_knee')
+    assert res.positions.shape == (4, 3) and res.pixels.shape == (4, 2)
+    assert res.flags[3] == IkFlag.MISSING and np.isnan(res.positions[3]).all()
+    valid = res.flags != IkFlag.MISSING
+    assert np.isfinite(res.positions[valid]).all() and np.isfinite(res.pixels[valid]).all()
+    # Elbows hang below the shoulder-wrist line, towards their own side.
+    for k, side in ((0, 1.0), (1, -1.0)):
+        shoulder = pts[PARTS_10.index(('left' if side > 0 else 'right') + '_shoulder')]
+        assert res.positions[k][1] > shoulder[1]
+        assert side * (res.positions[k][0] - shoulder[0]) > -0.05
+
+
+def test_infer_middle_joints_refuses_bad_input() -> None:
+    with pytest.raises(ValueError, match='shape'):
+        infer_middle_joints(None, np.zeros((9, 3)), K, DEFAULT_LIMB_LENGTHS_M)
+    with pytest.raises(ValueError, match='left_wrist'):
+        infer_middle_joints(None, np.zeros((2, 3)), K, DEFAULT_LIMB_LENGTHS_M,
+                            names=('left_shoulder', 'neck'))
+    with pytest.raises(ValueError, match='intrinsics'):
+        solve_limb(np.zeros((240, 320)), np.array([0, 0, 2.0]), np.array([0, 0.4, 2.0]),
+                   UPPER, LOWER, None, prior=np.ones(3))
+
+
+@pytest.mark.parametrize('use_mask', [False, True])
+def test_sample_depth_matches_robust_depth(use_mask: bool) -> None:
+    rng = np.random.default_rng(4)
+    depth = rng.uniform(1.0, 3.0, (40, 50)).astype(np.float32)
+    depth[rng.random(depth.shape) < 0.3] = np.nan
+    depth[10:20, 10:20] = np.nan  # a hole bigger than the window
+    mask = rng.random(depth.shape) < 0.7 if use_mask else None
+    uv = np.concatenate([rng.uniform(-3, 53, (200, 2)), [[np.nan, 4.0], [15.0, 15.0],
+                                                         [0.0, 0.0], [49.4, 39.5]]])
+    expect = robust_depth(depth, uv, radius=2, mask=mask)
+    assert_allclose(sample_depth(depth, uv, radius=2, mask=mask), expect, rtol=1e-6)
+
+
+def test_limb_lengths_learn_and_fall_back() -> None:
+    rng = np.random.default_rng(5)
+    lengths = LimbLengths(min_samples=10)
+    assert lengths.lengths('left_arm') == DEFAULT_LIMB_LENGTHS_M['left_arm']
+    for _ in range(50):  # a 14-part detector sees the elbow: bone lengths ~ (0.3, 0.2)
+        q = random_angles(rng)
+        root, mid, end = forward_kinematics(q, 0.3, 0.2, random_base(rng, [0, 0, 2]))
+        noise = rng.normal(0, 0.005, (3, 3))
+        lengths.observe('left_arm', root + noise[0], mid + noise[1], end + noise[2])
+    assert_allclose(lengths.lengths('left_arm'), (0.3, 0.2), atol=0.005)
+    # Only root-end distances: the longest reach, split like the defaults.
+    for d in np.linspace(0.5, 0.9, 40):
+        lengths.observe('right_leg', np.zeros(3), None, np.array([0.0, d, 0.0]))
+    a, b = lengths.lengths('right_leg')
+    da, db = DEFAULT_LIMB_LENGTHS_M['right_leg']
+    assert_allclose(a + b, np.percentile(np.linspace(0.5, 0.9, 40), 95))
+    assert_allclose(a / b, da / db)
+    lengths.observe('left_leg', np.full(3, np.nan), None, np.zeros(3))  # ignored
+    assert lengths.lengths('left_leg') == DEFAULT_LIMB_LENGTHS_M['left_leg']
+    with pytest.raises(ValueError):
+        lengths.lengths('tail')
+
+
+def test_circle_points_are_on_the_circle() -> None:
+    circle = middle_joint_circle(np.array([0.0, 0.0, 2.0]), np.array([0.3, 0.2, 2.1]),
+                                 UPPER, LOWER)
+    pts = circle_points(circle, np.array([0.0, 0.0, -1.0]), np.linspace(-3, 3, 13))
+    assert_allclose(np.linalg.norm(pts - circle.centre, axis=1), circle.radius)
+    assert_allclose((pts - circle.centre) @ circle.axis, 0.0, atol=1e-12)
+
+
+@pytest.mark.parametrize('kwargs', [{'n_candidates': 2}, {'arm_prior': (0, 0, 0)},
+                                    {'length_scales': ()}, {'prior_shrink': (1.5, 1.0)}])
+def test_bad_ik_config_is_refused(kwargs) -> None:
+    with pytest.raises(ValueError):
+        IkConfig(**kwargs)

@@ -1,0 +1,312 @@
+"""SLQE tracker (core/slqe.py): model matrices, gating, coasting, resets, interface."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from numpy.testing import assert_allclose
+
+from pose4d_ros.core.skeleton import PARTS_10, PartTree
+from pose4d_ros.core.slqe import (
+    ConstantVelocityTracker,
+    CvConfig,
+    SlqeConfig,
+    SlqeTracker,
+    Source,
+    axis_process_noise,
+    axis_transition,
+    coupling_at,
+    initial_state,
+    predict,
+    process_noise_matrix,
+    transition_matrix,
+    update,
+)
+
+CHAIN = PartTree(('a', 'b', 'c'), (-1, 0, 1))
+FPS = 30.0
+
+
+def linear_tracks(rng: np.random.Generator, n: int = 240, *, accel: bool = False
+                  ) -> tuple[np.ndarray, np.ndarray]:
+    """(T,) times and (T, 10, 2) clean pixel tracks at constant velocity/acceleration.
+
+    Like a body: a common motion of all parts plus a small motion of each part.
+    """
+    t = np.arange(n) / FPS
+    start = rng.uniform(60, 260, (10, 2))
+    vel = rng.uniform(-40, 40, 2) + rng.uniform(-8, 8, (10, 2))
+    acc = rng.uniform(-20, 20, 2) + rng.uniform(-4, 4, (10, 2)) if accel else np.zeros((10, 2))
+    uv = start + vel * t[:, None, None] + 0.5 * acc * t[:, None, None] ** 2
+    return t, uv
+
+
+def run(tracker: SlqeTracker, times: np.ndarray, uv: np.ndarray,
+        conf: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+    pos, src = [], []
+    for k, stamp in enumerate(times):
+        out = tracker.step(uv[k], None if conf is None else conf[k], stamp)
+        pos.append(out.positions)
+        src.append(out.source)
+    return np.array(pos), np.array(src)
+
+
+def err(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    return np.linalg.norm(a - b, axis=-1)
+
+
+# --- model matrices -------------------------------------------------------------------------
+
+
+def test_transition_has_tree_block_structure() -> None:
+    """A for a 3-part chain: own blocks on the diagonal, A2 at (child, parent) only."""
+    cfg = SlqeConfig(order=3, coupling=0.3)
+    dt = 1.0 / FPS
+    a = transition_matrix(dt, cfg, CHAIN)
+    assert a.shape == (18, 18)
+    f = axis_transition(dt, 3)
+    k = coupling_at(dt, 0.3)
+    assert_allclose(k, 0.3)
+    blk = {(i, j): a[6 * i:6 * i + 6, 6 * j:6 * j + 6] for i in range(3) for j in range(3)}
+    assert_allclose(blk[0, 0], np.kron(f, np.eye(2)))  # the root: plain kinematics (A1)
+    a1 = np.kron(f * np.array([1.0, 1 - k, 1 - k]), np.eye(2))
+    a2 = np.kron(f * np.array([0.0, k, k]), np.eye(2))
+    for child, parent in ((1, 0), (2, 1)):
+        assert_allclose(blk[child, child], a1)
+        assert_allclose(blk[child, parent], a2)
+    for i, j in ((0, 1), (0, 2), (1, 2), (2, 0)):
+        assert not blk[i, j].any(), (i, j)
+    # No coupling: block diagonal.
+    a0 = transition_matrix(dt, SlqeConfig(coupling=0.0), CHAIN)
+    assert_allclose(a0, np.kron(np.eye(3), np.kron(f, np.eye(2))))
+
+
+def test_coupling_keeps_common_motion() -> None:
+    """Parts moving together are predicted as without coupling; a child follows its parent."""
+    cfg = SlqeConfig(coupling=0.4)
+    dt = 0.05
+    s = np.array([10, 20, 30, -5, 2, 1] * 3, float)
+    s[6:8] = [50, 60]  # positions differ, motion is common
+    s[12:14] = [80, 90]
+    a = transition_matrix(dt, cfg, CHAIN)
+    a0 = transition_matrix(dt, SlqeConfig(coupling=0.0), CHAIN)
+    assert_allclose(a @ s, a0 @ s)
+    # A still child pulled towards its moving parent.
+    s2 = s.copy()
+    s2[8:12] = 0.0
+    nxt = a @ s2
+    assert nxt[8] > 0 and nxt[9] < 0  # velocity picks up the parent's sign
+    assert nxt[6] > 50  # and the position moves with it
+
+
+def test_irregular_dt_composes() -> None:
+    """F(a) F(b) = F(a + b) and Q(a + b) = F(b) Q(a) F(b)^T + Q(b): dt from stamps is exact."""
+    for order in (2, 3):
+        fa, fb = axis_transition(0.03, order), axis_transition(0.11, order)
+        assert_allclose(fb @ fa, axis_transition(0.14, order), atol=1e-12)
+        qa, qb = axis_process_noise(0.03, order, 7.0), axis_process_noise(0.11, order, 7.0)
+        assert_allclose(fb @ qa @ fb.T + qb, axis_process_noise(0.14, order, 7.0), rtol=1e-9)
+    assert_allclose(coupling_at(0.1, 0.2), 1 - 0.8 ** 3)
+
+
+def test_process_noise_is_block_diagonal_psd() -> None:
+    q = process_noise_matrix(0.04, SlqeConfig(), 3)
+    assert q.shape == (18, 18)
+    assert not q[:6, 6:].any()
+    assert np.linalg.eigvalsh(q).min() > -1e-12
+
+
+def test_predict_update_do_not_mutate() -> None:
+    cfg = SlqeConfig()
+    state = initial_state(3, cfg)
+    z = np.array([[10.0, 20.0], [30.0, np.nan], [50.0, 60.0]])
+    z_copy = z.copy()
+    s1, _ = update(state, z, None, cfg, CHAIN)
+    assert not state.active.any() and not state.x.any()
+    x_before, cov_before = s1.x.copy(), s1.cov.copy()
+    s2 = predict(s1, 0.1, cfg, CHAIN)
+    s3, _ = update(s2, z + 1.0, np.ones(3), cfg, CHAIN)
+    assert_allclose(s1.x, x_before)
+    assert_allclose(s1.cov, cov_before)
+    assert_allclose(z, z_copy)
+    assert s3 is not s2
+
+
+# --- tracking behaviour ---------------------------------------------------------------------
+
+
+@pytest.mark.parametrize('accel', [False, True])
+@pytest.mark.parametrize('make', [
+    lambda: SlqeTracker(SlqeConfig(), PARTS_10),
+    lambda: ConstantVelocityTracker(CvConfig(), PARTS_10),
+], ids=['slqe', 'cv'])
+def test_filter_reduces_noise(accel: bool, make) -> None:
+    rng = np.random.default_rng(0)
+    t, truth = linear_tracks(rng, accel=accel)
+    noisy = truth + rng.normal(0, 3.0, truth.shape)
+    pos, src = run(make(), t, noisy)
+    raw = err(noisy, truth)[30:].mean()
+    filt = err(pos, truth)[30:].mean()
+    assert (src == Source.DETECTED).mean() > 0.98  # a 99.9 % gate rejects few true detections
+    assert filt < 0.8 * raw, (filt, raw)
+
+
+def test_outlier_is_rejected() -> None:
+    rng = np.random.default_rng(0)
+    t, truth = linear_tracks(rng, 90)
+    noisy = truth + rng.normal(0, 2.0, truth.shape)
+    noisy[60, 3] += [35.0, -25.0]  # a wrist detection jumps 43 px away
+    tracker = SlqeTracker(SlqeConfig(), PARTS_10)
+    pos, src = run(tracker, t, noisy)
+    assert src[60, 3] == Source.TRACKED
+    assert (np.delete(src[60], 3) == Source.DETECTED).all()
+    assert err(pos[60, 3], truth[60, 3]) < 6.0
+    # Without the gate the same outlier drags the estimate far away.
+    pos0, _ = run(SlqeTracker(SlqeConfig(gate_chi2=math.inf), PARTS_10), t, noisy)
+    assert err(pos0[60, 3], truth[60, 3]) > 3 * err(pos[60, 3], truth[60, 3])
+
+
+def test_coasts_through_dropouts() -> None:
+    rng = np.random.default_rng(0)
+    t, truth = linear_tracks(rng, 120)
+    noisy = truth + rng.normal(0, 2.0, truth.shape)
+    noisy[70:80, 5] = np.nan  # ten frames without the right wrist
+    noisy[75, :] = np.nan  # and one frame without anything
+    cfg = SlqeConfig()
+    tracker = SlqeTracker(cfg, PARTS_10)
+    pos, src = run(tracker, t, noisy)
+    assert (src[70:80, 5] == Source.TRACKED).all()
+    assert (src[75] == Source.TRACKED).all()
+    assert np.isfinite(pos[70:80, 5]).all()
+    assert err(pos[70:80, 5], truth[70:80, 5]).max() < 8.0
+    assert src[80, 5] == Source.DETECTED
+
+
+def test_covariance_grows_while_coasting() -> None:
+    tracker = SlqeTracker(SlqeConfig(), PARTS_10)
+    rng = np.random.default_rng(0)
+    t, truth = linear_tracks(rng, 60)
+    for k in range(40):
+        tracker.step(truth[k], None, t[k])
+    traces = []
+    for k in range(40, 50):
+        out = tracker.step(np.full((10, 2), np.nan), None, t[k])
+        traces.append(np.trace(out.covariances[4]))
+        assert_allclose(out.covariances, np.swapaxes(out.covariances, 1, 2))
+        assert out.confidence[4] < 1.0
+    assert np.all(np.diff(traces) > 0)
+
+
+def test_lost_track_is_dropped_then_restarts() -> None:
+    cfg = SlqeConfig(max_missed_frames=5)
+    tracker = SlqeTracker(cfg, PARTS_10)
+    rng = np.random.default_rng(0)
+    t, truth = linear_tracks(rng, 40)
+    for k in range(10):
+        tracker.step(truth[k], None, t[k])
+    gone = truth.copy()
+    gone[:, 1] = np.nan
+    srcs = [tracker.step(gone[k], None, t[k]).source[1] for k in range(10, 17)]
+    assert srcs[:5] == [Source.TRACKED] * 5
+    assert srcs[5:] == [Source.MISSING] * 2
+    out = tracker.step(gone[17], None, t[17])
+    assert np.isnan(out.positions[1]).all() and out.confidence[1] == 0
+    assert np.isnan(out.covariances[1]).all()
+    # Detected again far away: restarts there.
+    z = truth[18].copy()
+    z[1] += 100.0
+    out = tracker.step(z, None, t[18])
+    assert out.source[1] == Source.DETECTED
+    assert_allclose(out.positions[1], z[1])
+
+
+def test_drifted_filter_yields_to_consistent_detections() -> None:
+    """A part that really jumped (consistent detections far from the prediction) is re-acquired."""
+    cfg = SlqeConfig(drift_frames=3)
+    tracker = SlqeTracker(cfg, PARTS_10)
+    rng = np.random.default_rng(0)
+    t, truth = linear_tracks(rng, 60)
+    truth[30:, 7] += [60.0, 0.0]
+    srcs, pos = [], []
+    for k in range(60):
+        out = tracker.step(truth[k] + rng.normal(0, 1.0, (10, 2)), None, t[k])
+        srcs.append(out.source[7])
+        pos.append(out.positions[7])
+    assert srcs[30:32] == [Source.TRACKED] * 2
+    assert srcs[32] == Source.DETECTED
+    assert err(np.array(pos[40:]), truth[40:, 7]).max() < 5.0
+
+
+def test_reset_and_time_going_back() -> None:
+    tracker = SlqeTracker(SlqeConfig(), PARTS_10)
+    z = np.tile([[100.0, 100.0]], (10, 1))
+    tracker.step(z, None, 1.0)
+    tracker.step(z, None, 1.033)
+    tracker.reset()
+    assert not tracker.state.active.any() and tracker.state.stamp is None
+    tracker.step(z, None, 5.0)
+    out = tracker.step(z + 50, None, 4.0)  # a looped bag: starts again on the detections
+    assert (out.source == Source.DETECTED).all()
+    assert_allclose(out.positions, z + 50)
+    out = tracker.step(z, None, 6.0)  # a gap over max_dt_s: starts again too
+    assert_allclose(out.positions, z)
+
+
+def test_low_confidence_moves_the_estimate_less() -> None:
+    def moved(conf: float) -> float:
+        tracker = SlqeTracker(SlqeConfig(gate_chi2=math.inf), PARTS_10)
+        z = np.tile([[100.0, 100.0]], (10, 1))
+        for k in range(20):
+            tracker.step(z, None, k / FPS)
+        out = tracker.step(z + [6.0, 0.0], np.full(10, conf), 20 / FPS)
+        return float(out.positions[0, 0] - 100.0)
+
+    assert 0 < moved(0.1) < 0.5 * moved(1.0)
+
+
+def test_detection_output_mode_returns_the_detection() -> None:
+    tracker = SlqeTracker(SlqeConfig(output='detection'), PARTS_10)
+    rng = np.random.default_rng(0)
+    t, truth = linear_tracks(rng, 30)
+    noisy = truth + rng.normal(0, 2.0, truth.shape)
+    for k in range(30):
+        out = tracker.step(noisy[k], None, t[k])
+    assert_allclose(out.positions, noisy[29])
+    assert_allclose(out.covariances[:, 0, 0], 9.0)
+
+
+@pytest.mark.parametrize('uv, conf, stamp', [
+    (np.zeros((9, 2)), None, 0.0),
+    (np.zeros((10, 3)), None, 0.0),
+    (np.zeros((10, 2)), np.full(10, 1.5), 0.0),
+    (np.zeros((10, 2)), np.ones(9), 0.0),
+    (np.zeros((10, 2)), None, math.nan),
+])
+def test_bad_input_is_refused(uv, conf, stamp) -> None:
+    with pytest.raises(ValueError):
+        SlqeTracker(SlqeConfig(), PARTS_10).step(uv, conf, stamp)
+
+
+@pytest.mark.parametrize('kwargs', [
+    {'order': 4}, {'coupling': 1.0}, {'coupling': -0.1}, {'process_noise': 0.0},
+    {'gate_chi2': -1.0}, {'output': 'best'}, {'confidence_decay': 0.0},
+])
+def test_bad_config_is_refused(kwargs) -> None:
+    with pytest.raises(ValueError):
+        SlqeConfig(**kwargs)
+
+
+def test_output_shapes_and_missing_parts() -> None:
+    tracker = ConstantVelocityTracker(CvConfig(), PARTS_10)
+    z = np.tile([[100.0, 120.0]], (10, 1))
+    z[2] = np.nan
+    out = tracker.step(z, np.where(np.isnan(z[:, 0]), np.nan, 0.8), 0.0)
+    assert out.positions.shape == (10, 2) and out.covariances.shape == (10, 2, 2)
+    assert out.velocities.shape == (10, 2)
+    assert out.source.dtype == np.uint8 and out.confidence.dtype == np.float32
+    assert out.source[2] == Source.MISSING and np.isnan(out.positions[2]).all()
+    assert_allclose(out.confidence[[0, 1, 3]], 0.8)
+    valid = out.source != Source.MISSING
+    assert np.isfinite(out.positions[valid]).all()
