@@ -74,9 +74,9 @@ def test_affine_fit_is_close_to_perspective_near_2_6_m() -> None:
     persp = skel.pixels(model='perspective')
     affine = skel.pixels(model='affine')
     err = np.linalg.norm(persp - affine, axis=-1)
-    # The README's fit is a few pixels off the OpenNI model at 2.5 m (its offset is ~3 px).
-    assert err.max() < 10.0
-    assert err.max() > 0.1  # it is a different model, not the same one
+    # The README's fit is a few pixels off the OpenNI model at 2.5 m (1-6 px on this person):
+    # close, but a different model.
+    assert 1.0 < err.mean() < 6.0 and err.max() < 8.0
     with pytest.raises(ValueError, match='projection model'):
         skel.pixels(model='orthographic')
 

@@ -23,6 +23,7 @@ import math
 
 import numpy as np
 from numba import njit
+from numpy.typing import NDArray
 
 _EPS = 1e-9
 
@@ -38,7 +39,8 @@ def _mirror(i: int, n: int) -> int:
 
 
 @njit(cache=True)
-def sample_tile(tiles, scale, m, s, t, out):
+def sample_tile(tiles: NDArray[np.float32], scale: NDArray[np.float32], m: int, s: float,
+                t: float, out: NDArray[np.float64]) -> None:
     """Bilinear, mirrored-repeat sample of material m at (s, t) metres into out[0:3]."""
     n = tiles.shape[1]
     x = s / scale[m, 0] * n - 0.5
@@ -58,8 +60,12 @@ def sample_tile(tiles, scale, m, s, t, out):
 
 
 @njit(cache=True)
-def raycast_boxes(fx, fy, cx, cy, height, width, centers, rots, halves, mats, tiles, scale,
-                  depth, normal, albedo, ids):
+def raycast_boxes(fx: float, fy: float, cx: float, cy: float, height: int, width: int,
+                  centers: NDArray[np.float64], rots: NDArray[np.float64],
+                  halves: NDArray[np.float64], mats: NDArray[np.int64],
+                  tiles: NDArray[np.float32], scale: NDArray[np.float32],
+                  depth: NDArray[np.float32], normal: NDArray[np.float32],
+                  albedo: NDArray[np.float32], ids: NDArray[np.int32]) -> None:
     """Render oriented boxes for every pixel (the room, once per scene).
 
     Parameters
@@ -150,7 +156,8 @@ def raycast_boxes(fx, fy, cx, cy, height, width, centers, rots, halves, mats, ti
 
 
 @njit(cache=True)
-def _sphere_box(cx3, cy3, cz3, rad, fx, fy, cx, cy, width, height):
+def _sphere_box(cx3: float, cy3: float, cz3: float, rad: float, fx: float, fy: float,
+                cx: float, cy: float, width: int, height: int) -> tuple[int, int, int, int]:
     """Conservative pixel box (u0, u1, v0, v1) of a sphere; empty when behind the camera."""
     if cz3 + rad <= 0.05:
         return 0, -1, 0, -1
@@ -170,8 +177,12 @@ def _sphere_box(cx3, cy3, cz3, rad, fx, fy, cx, cy, width, height):
 
 
 @njit(cache=True)
-def raycast_body(fx, fy, cx, cy, zbuf, cap_a, cap_b, cap_r, cap_e1, ell_c, ell_rot, ell_r,
-                 ids, normal, st):
+def raycast_body(fx: float, fy: float, cx: float, cy: float, zbuf: NDArray[np.float32],
+                 cap_a: NDArray[np.float64], cap_b: NDArray[np.float64],
+                 cap_r: NDArray[np.float64], cap_e1: NDArray[np.float64],
+                 ell_c: NDArray[np.float64], ell_rot: NDArray[np.float64],
+                 ell_r: NDArray[np.float64], ids: NDArray[np.int32],
+                 normal: NDArray[np.float32], st: NDArray[np.float32]) -> None:
     """Ray-cast the body's capsules and ellipsoids into a depth buffer.
 
     Parameters
@@ -297,9 +308,13 @@ def raycast_body(fx, fy, cx, cy, zbuf, cap_a, cap_b, cap_r, cap_e1, ell_c, ell_r
 
 
 @njit(cache=True)
-def shade(bg_albedo, bg_normal, bg_ids, depth, body_ids, body_normal, body_st, prim_mat,
-          tiles, scale, light, ambient, diffuse, colour, floor_id, blobs, fx, fy, cx, cy,
-          out):
+def shade(bg_albedo: NDArray[np.float32], bg_normal: NDArray[np.float32],
+          bg_ids: NDArray[np.int32], depth: NDArray[np.float32], body_ids: NDArray[np.int32],
+          body_normal: NDArray[np.float32], body_st: NDArray[np.float32],
+          prim_mat: NDArray[np.int64], tiles: NDArray[np.float32], scale: NDArray[np.float32],
+          light: NDArray[np.float64], ambient: float, diffuse: float,
+          colour: NDArray[np.float64], floor_id: int, blobs: NDArray[np.float64], fx: float,
+          fy: float, cx: float, cy: float, out: NDArray[np.float32]) -> None:
     """Lambertian + ambient shading of the composed room and body, into out (H, W, 3) float32.
 
     light : (3,) unit vector towards the light, optical frame. colour : (3,) light colour.
@@ -340,7 +355,7 @@ def shade(bg_albedo, bg_normal, bg_ids, depth, body_ids, body_normal, body_st, p
 
 
 @njit(cache=True)
-def projector_shadow(depth, fb):
+def projector_shadow(depth: NDArray[np.float32], fb: float) -> NDArray[np.bool_]:
     """Pixels the Kinect's infrared projector cannot see (no reading), per image row.
 
     The projector sits a baseline b beside the camera, so a point at depth z appears in the
