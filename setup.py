@@ -15,6 +15,8 @@ EXECUTABLES = {
     'pose4d': 'pose4d_ros.cli.main:main',
     'replay': 'pose4d_ros.nodes.replay:main',
     'recorder': 'pose4d_ros.nodes.recorder:main',
+    'tracker': 'pose4d_ros.nodes.tracker:main',
+    'ik': 'pose4d_ros.nodes.ik:main',
 }
 
 setup(

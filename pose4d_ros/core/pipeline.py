@@ -1,0 +1,207 @@
+"""The stages of the tracker as objects with one per-frame call, shared by nodes and tools.
+
+The ROS nodes (`foreground`, `detector`, `tracker`, `ik`, and `pipeline` with all of them in one
+process) and the offline tools (`pose4d eval`, `bench`, `demo`) call these same objects, so an
+offline evaluation and a live run of the graph give the same answers on the same frames.
+
+- `TrackerStage`: the SLQE Kalman filter (`core.slqe`, eqs. 6-16) on the detected parts' pixels,
+  plus each part's depth carried from its last detection, so tracked parts have a 3-D position
+  too (back-projected with the camera's intrinsics).
+- `IkStage`: Denavit-Hartenberg inverse kinematics (`core.kinematics`, eqs. 17-24) completing
+  elbows and knees from shoulders/hips and wrists/ankles in 3-D, the swivel chosen by the depth
+  image; output the 14-joint skeleton (`skeleton.SKELETON_14`).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping
+
+import numpy as np
+from numpy.typing import NDArray
+
+from pose4d_ros.core import joints as cj
+from pose4d_ros.core.camera import Intrinsics, backproject, project
+from pose4d_ros.core.joints import JointSet
+from pose4d_ros.core.kinematics import IkConfig, IkFlag, LimbLengths, infer_middle_joints
+from pose4d_ros.core.skeleton import LIMBS, PARTS_10, SKELETON_14, PartTree
+from pose4d_ros.core.slqe import ConstantVelocityTracker, CvConfig, SlqeConfig, SlqeTracker
+
+
+def _valid_xyz(xyz: NDArray[np.float64]) -> NDArray[np.bool_]:
+    """Finite and in front of the camera."""
+    with np.errstate(invalid='ignore'):
+        return np.isfinite(xyz).all(axis=1) & (xyz[:, 2] > 0)
+
+
+def reorder(joints: JointSet, names: tuple[str, ...]) -> JointSet:
+    """`joints` in the order of `names`; names it lacks are MISSING."""
+    n = len(names)
+    uv = np.full((n, 2), np.nan)
+    xyz = np.full((n, 3), np.nan)
+    conf = np.zeros(n, np.float32)
+    src = np.full(n, cj.MISSING, np.uint8)
+    cov = np.zeros((n, 3, 3))
+    for i, name in enumerate(names):
+        k = joints.get(name)
+        if k is not None:
+            uv[i], xyz[i], conf[i], src[i], cov[i] = (joints.uv[k], joints.xyz[k],
+                                                      joints.confidence[k], joints.source[k],
+                                                      joints.covariance[k])
+    return JointSet(names, uv, xyz, confidence=conf, source=src, covariance=cov,
+                    score=joints.score, track_id=joints.track_id)
+
+
+class TrackerStage:
+    """SLQE tracking of the detected parts (or the constant-velocity filter, `kind='cv'`).
+
+    Parameters
+    ----------
+    kind : 'slqe' (the paper's filter) or 'cv' (plain per-part constant velocity, comparison).
+    slqe, cv : their configurations.
+    tree : the part tree (default: the 10-part model).
+    depth_std_m : standard deviation put on a tracked part's depth in its covariance, metres.
+    """
+
+    def __init__(self, *, kind: str = 'slqe', slqe: SlqeConfig | None = None,
+                 cv: CvConfig | None = None, tree: PartTree = PARTS_10,
+                 depth_std_m: float = 0.05) -> None:
+        if kind not in ('slqe', 'cv'):
+            raise ValueError(f"tracker kind must be 'slqe' or 'cv', got {kind!r}")
+        if not depth_std_m >= 0:
+            raise ValueError(f'depth_std_m must be >= 0, got {depth_std_m}')
+        self.kind = kind
+        self.tree = tree
+        self.depth_std_m = depth_std_m
+        self.filter: SlqeTracker = (SlqeTracker(slqe or SlqeConfig(), tree) if kind == 'slqe'
+                                    else ConstantVelocityTracker(cv or CvConfig(), tree))
+        self.track_id = 0
+        self.depth = np.full(len(tree), np.nan)
+
+    def reset(self) -> None:
+        self.filter.reset()
+        self.depth[:] = np.nan
+
+    def step(self, parts: JointSet, stamp_s: float, intrinsics: Intrinsics | None) -> JointSet:
+        """Track one frame of detected parts; returns the tracked parts in the tree's order.
+
+        Parts the detector missed are predicted (TRACKED); parts lost for too long are MISSING.
+        3-D positions: the tracked pixel back-projected at the part's depth, which is the depth
+        of its detection in this frame or, if not detected now, of its last detection.
+        """
+        parts = reorder(parts, self.tree.names)
+        state = self.filter.state
+        cfg = self.filter.config
+        new_track = not state.active.any() or (
+            state.stamp is not None and not 0.0 <= stamp_s - state.stamp <= cfg.max_dt_s)
+        if new_track:
+            self.depth[:] = np.nan
+        detected = parts.source == cj.DETECTED
+        uv = np.where(detected[:, None], parts.uv, np.nan)
+        out = self.filter.step(uv, np.where(detected, parts.confidence, 0.0), stamp_s)
+        if new_track and self.filter.state.active.any():
+            self.track_id += 1
+        measured = detected & _valid_xyz(parts.xyz)
+        self.depth[measured] = parts.xyz[measured, 2]
+        missing = out.source == cj.MISSING
+        self.depth[missing] = np.nan
+        xyz = np.full((len(self.tree), 3), np.nan)
+        cov = np.zeros((len(self.tree), 3, 3))
+        if intrinsics is not None:
+            xyz = backproject(out.positions, self.depth, intrinsics)
+            # pixel covariance -> metric x/y at the part's depth; z from the depth parameter
+            scale = np.stack([self.depth / intrinsics.fx, self.depth / intrinsics.fy], axis=1)
+            cov[:, :2, :2] = out.covariances * scale[:, :, None] * scale[:, None, :]
+            cov[:, 2, 2] = self.depth_std_m ** 2
+            cov[~_valid_xyz(xyz)] = 0.0
+        live = ~missing
+        score = float(np.mean(out.confidence[live])) if live.any() else float('nan')
+        return JointSet(self.tree.names, out.positions, xyz, confidence=out.confidence,
+                        source=out.source, covariance=np.nan_to_num(cov), score=score,
+                        track_id=self.track_id if live.any() else 0)
+
+
+class IkStage:
+    """Complete the skeleton: elbows and knees by inverse kinematics, 14 joints in 3-D.
+
+    Parameters
+    ----------
+    config : the IK parameters (`core.kinematics.IkConfig`).
+    lengths : (upper, lower) bone lengths per limb, metres (default: the UTKinect medians).
+    learn : learn each track's bone lengths from its observed reach (`LimbLengths`), starting
+        from `lengths`; False = always `lengths`.
+    use_depth : choose the swivel angle with the depth image (else the joint-limit prior).
+    """
+
+    def __init__(self, config: IkConfig | None = None, *,
+                 lengths: Mapping[str, tuple[float, float]] | None = None, learn: bool = True,
+                 use_depth: bool = True) -> None:
+        self.config = config or IkConfig()
+        self.defaults = dict(lengths) if lengths is not None else None
+        self.learn = learn
+        self.learner = LimbLengths(self.defaults)
+        self.use_depth = use_depth
+        self.track_id: int | None = None
+
+    def lengths(self) -> dict[str, tuple[float, float]]:
+        return self.learner.as_dict() if self.learn else dict(self.learner.defaults)
+
+    def step(self, tracked: JointSet, depth_m: NDArray[np.floating] | None,
+             intrinsics: Intrinsics | None, *, mask: NDArray[np.bool_] | None = None
+             ) -> JointSet:
+        """The 14-joint skeleton of one frame (`skeleton.SKELETON_14` order).
+
+        Joints of `tracked` are copied (a 3-D position behind the camera or not finite makes the
+        joint MISSING); elbows and knees `tracked` does not have (or has MISSING) are INFERRED
+        where IK finds them, MISSING otherwise (root or end unknown).
+        """
+        if tracked.track_id != self.track_id:  # a new person: learn their limbs anew
+            self.learner = LimbLengths(self.defaults)
+            self.track_id = tracked.track_id
+        out = reorder(tracked, SKELETON_14)
+        valid = _valid_xyz(out.xyz)
+        uv, xyz = out.uv.copy(), out.xyz.copy()
+        conf, src, cov = out.confidence.copy(), out.source.copy(), out.covariance.copy()
+        bad = (src != cj.MISSING) & ~valid & np.isfinite(xyz).any(axis=1)
+        # a 3-D position behind the camera is never passed on as valid
+        uv[bad], xyz[bad], conf[bad], src[bad], cov[bad] = np.nan, np.nan, 0.0, cj.MISSING, 0.0
+        points = np.where(valid[:, None], xyz, np.nan)
+        if self.learn:
+            self.learner.observe_skeleton(SKELETON_14, points)
+        result = infer_middle_joints(
+            depth_m if self.use_depth else None, points, intrinsics, self.lengths(),
+            names=SKELETON_14, mask=mask if self.use_depth else None, config=self.config)
+        for k, name in enumerate(result.names):
+            i = SKELETON_14.index(name)
+            if src[i] != cj.MISSING and valid[i]:
+                continue  # measured by a 14-part detector: keep it
+            if result.flags[k] in (IkFlag.MISSING, IkFlag.BEHIND_CAMERA) or \
+                    not np.isfinite(result.positions[k]).all():
+                uv[i], xyz[i], conf[i], src[i] = np.nan, np.nan, 0.0, cj.MISSING
+                continue
+            xyz[i] = result.positions[k]
+            uv[i] = result.pixels[k] if intrinsics is not None else np.nan
+            if intrinsics is not None and not np.isfinite(uv[i]).all():
+                uv[i] = project(xyz[i][None], intrinsics)[0]
+            conf[i], src[i] = result.confidence[k], cj.INFERRED
+            # kinematics' confidence is exp(-sigma / confidence_scale_m): invert it for sigma
+            sigma = -self.config.confidence_scale_m * math.log(max(float(conf[i]), 1e-3))
+            cov[i] = np.eye(3) * sigma ** 2
+        live = src != cj.MISSING
+        score = float(np.mean(conf[live])) if live.any() else math.nan
+        return JointSet(SKELETON_14, uv, xyz, confidence=conf, source=src, covariance=cov,
+                        score=score, track_id=tracked.track_id)
+
+
+def limb_bones() -> list[tuple[int, int]]:
+    """Bones of the 14-joint skeleton as index pairs (for drawing)."""
+    names = SKELETON_14
+    bones = [(names.index('head'), names.index('neck'))]
+    for root, middle, end in LIMBS.values():
+        bones += [(names.index(root), names.index(middle)), (names.index(middle),
+                                                              names.index(end))]
+    for side in ('left', 'right'):
+        bones.append((names.index('neck'), names.index(f'{side}_shoulder')))
+        bones.append((names.index(f'{side}_shoulder'), names.index(f'{side}_hip')))
+    bones.append((names.index('left_hip'), names.index('right_hip')))
+    return bones

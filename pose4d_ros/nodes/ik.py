@@ -1,0 +1,135 @@
+"""`ik`: complete the skeleton with inverse kinematics (eqs. 17-24): 14 joints in 3-D.
+
+Elbows and knees come from shoulders/hips and wrists/ankles in 3-D and the bone lengths (fixed
+parameters, or learned per track); the swivel angle on the circle of possible elbows is chosen by
+the depth image of the person, with a joint-limit prior where depth cannot tell. Tracked parts
+and depth are paired by stamp (exact, or nearest within `ik.depth_slop_s`).
+
+Subscriptions
+    pose4d/parts/tracked (pose4d_msgs/JointArray, 10 parts)
+    pose4d/foreground/depth (sensor_msgs/Image, 16UC1 or 32FC1; only when ik.use_depth)
+    camera/color/camera_info (sensor_msgs/CameraInfo; the latest)
+Publications
+    pose4d/skeleton (pose4d_msgs/JointArray, 14 joints, input header)
+    pose4d/skeleton/markers (visualization_msgs/MarkerArray, joints and bones by source)
+    /diagnostics
+Parameters (config/ik.yaml)
+    ik.use_depth, ik.learn_lengths, ik.upper_arm_length_m, ik.forearm_length_m,
+    ik.thigh_length_m, ik.shin_length_m, ik.depth_slop_s, ik.marker_lifetime_s
+"""
+
+from __future__ import annotations
+
+import time
+from typing import Any
+
+from pose4d_msgs.msg import JointArray
+from rclpy.node import Node
+from sensor_msgs.msg import CameraInfo, Image
+from visualization_msgs.msg import MarkerArray
+
+from pose4d_ros.core.camera import Intrinsics
+from pose4d_ros.core.kinematics import DEFAULT_LIMB_LENGTHS_M
+from pose4d_ros.core.pipeline import IkStage, limb_bones
+from pose4d_ros.core.sync import StampSync
+from pose4d_ros.nodes import qos
+from pose4d_ros.nodes.common import StageMonitor, run
+from pose4d_ros.nodes.convert import (
+    depth_from_msg,
+    intrinsics_from_msg,
+    joints_from_msg,
+    joints_to_msg,
+    skeleton_markers,
+    stamp_to_ns,
+)
+from pose4d_ros.nodes.params import Param, declare
+
+_ARM, _LEG = DEFAULT_LIMB_LENGTHS_M['left_arm'], DEFAULT_LIMB_LENGTHS_M['left_leg']
+PARAMS = (
+    Param('ik.use_depth', True, 'Choose the elbow/knee swivel with the depth image '
+          '(pose4d/foreground/depth); false = joint-limit prior only, no depth subscription.'),
+    Param('ik.learn_lengths', True, "Learn each track's bone lengths from the observed reach; "
+          'false = the fixed lengths below.'),
+    Param('ik.upper_arm_length_m', _ARM[0], 'Shoulder-elbow length, metres.',
+          range=(0.05, 1.0)),
+    Param('ik.forearm_length_m', _ARM[1], 'Elbow-wrist length, metres.', range=(0.05, 1.0)),
+    Param('ik.thigh_length_m', _LEG[0], 'Hip-knee length, metres.', range=(0.05, 1.5)),
+    Param('ik.shin_length_m', _LEG[1], 'Knee-ankle length, metres.', range=(0.05, 1.5)),
+    Param('ik.depth_slop_s', 0.0, 'Largest stamp difference between tracked parts and depth, '
+          'seconds (0 = the same stamp).', range=(0.0, 1.0)),
+    Param('ik.marker_lifetime_s', 0.5, 'Lifetime of the RViz markers, seconds.',
+          range=(0.0, 60.0)),
+)
+
+
+def ik_stage(p: dict[str, Any]) -> IkStage:
+    """The IK stage configured by the parameters (also used by the pipeline node)."""
+    arm = (p['ik.upper_arm_length_m'], p['ik.forearm_length_m'])
+    leg = (p['ik.thigh_length_m'], p['ik.shin_length_m'])
+    fixed = {'left_arm': arm, 'right_arm': arm, 'left_leg': leg, 'right_leg': leg}
+    return IkStage(lengths=fixed, learn=p['ik.learn_lengths'], use_depth=p['ik.use_depth'])
+
+
+class IkNode(Node):
+    """Completes the tracked parts to a 14-joint skeleton; see the module docstring."""
+
+    def __init__(self) -> None:
+        super().__init__('ik')
+        p = declare(self, PARAMS)
+        self.stage = ik_stage(p)
+        self.marker_lifetime_s = p['ik.marker_lifetime_s']
+        self.bones = limb_bones()
+        self.intrinsics: Intrinsics | None = None
+        self.monitor = StageMonitor(self, 'ik')
+        self.pub = self.create_publisher(JointArray, 'pose4d/skeleton', qos.OUTPUT_QOS)
+        self.markers = self.create_publisher(MarkerArray, 'pose4d/skeleton/markers',
+                                             qos.OUTPUT_QOS)
+        self.sync = StampSync(2, slop_ns=int(p['ik.depth_slop_s'] * 1e9))
+        self.create_subscription(JointArray, 'pose4d/parts/tracked', self.on_tracked,
+                                 qos.OUTPUT_QOS)
+        if self.stage.use_depth:
+            self.create_subscription(Image, 'pose4d/foreground/depth', self.on_depth,
+                                     qos.SENSOR_QOS)
+        self.create_subscription(CameraInfo, 'camera/color/camera_info', self.on_info,
+                                 qos.SENSOR_QOS)
+        self.get_logger().info(
+            f'completing {self.resolve_topic_name("pose4d/parts/tracked")} -> '
+            f'{self.resolve_topic_name("pose4d/skeleton")} (depth: {self.stage.use_depth}, '
+            f'learn lengths: {p["ik.learn_lengths"]})')
+
+    def on_info(self, msg: CameraInfo) -> None:
+        try:
+            self.intrinsics = intrinsics_from_msg(msg)
+        except ValueError as exc:
+            self.monitor.bad_input(f'camera_info refused: {exc}')
+
+    def on_tracked(self, msg: JointArray) -> None:
+        if not self.stage.use_depth:
+            self.process(msg, None)
+            return
+        for _, (tracked, depth) in self.sync.push(0, stamp_to_ns(msg.header.stamp), msg):
+            self.process(tracked, depth)
+
+    def on_depth(self, msg: Image) -> None:
+        before = self.sync.dropped[0]
+        for _, (tracked, depth) in self.sync.push(1, stamp_to_ns(msg.header.stamp), msg):
+            self.process(tracked, depth)
+        self.monitor.dropped(self.sync.dropped[0] - before)
+
+    def process(self, msg: JointArray, depth_msg: Image | None) -> None:
+        t0 = time.perf_counter()
+        stamp = stamp_to_ns(msg.header.stamp)
+        try:
+            depth = depth_from_msg(depth_msg) if depth_msg is not None else None
+            skeleton = self.stage.step(joints_from_msg(msg), depth, self.intrinsics)
+        except ValueError as exc:
+            self.monitor.bad_input(f'frame at {stamp} ns refused: {exc}')
+            return
+        self.pub.publish(joints_to_msg(skeleton, msg.header))
+        self.markers.publish(skeleton_markers(skeleton, self.bones, msg.header,
+                                              lifetime_s=self.marker_lifetime_s))
+        self.monitor.frame(stamp, time.perf_counter() - t0)
+
+
+def main(args: list[str] | None = None) -> int:
+    return run(IkNode, args)

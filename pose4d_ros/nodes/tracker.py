@@ -1,0 +1,108 @@
+"""`tracker`: SLQE Kalman tracking of the detected parts (eqs. 6-16 of the paper).
+
+Subscriptions
+    pose4d/parts (pose4d_msgs/JointArray, 10 parts, DETECTED or MISSING)
+    camera/color/camera_info (sensor_msgs/CameraInfo; the latest, for 3-D positions)
+Publications
+    pose4d/parts/tracked (pose4d_msgs/JointArray, 10 parts: DETECTED / TRACKED / MISSING, with
+    the input header), /diagnostics
+Parameters (config/tracker.yaml)
+    tracker.kind, tracker.coupling, tracker.process_noise, tracker.measurement_noise_px,
+    tracker.gate_chi2, tracker.max_missed_frames, tracker.max_dt_s, tracker.depth_std_m
+"""
+
+from __future__ import annotations
+
+import time
+from typing import Any
+
+from pose4d_msgs.msg import JointArray
+from rclpy.node import Node
+from sensor_msgs.msg import CameraInfo
+
+from pose4d_ros.core.camera import Intrinsics
+from pose4d_ros.core.pipeline import TrackerStage
+from pose4d_ros.core.slqe import CvConfig, SlqeConfig
+from pose4d_ros.nodes import qos
+from pose4d_ros.nodes.common import StageMonitor, run
+from pose4d_ros.nodes.convert import (
+    intrinsics_from_msg,
+    joints_from_msg,
+    joints_to_msg,
+    stamp_to_ns,
+)
+from pose4d_ros.nodes.params import Param, declare
+
+_D = SlqeConfig()
+PARAMS = (
+    Param('tracker.kind', 'slqe', "'slqe': the paper's skeleton-coupled filter; 'cv': a plain "
+          'per-part constant-velocity filter (for comparison).', choices=('slqe', 'cv')),
+    Param('tracker.coupling', _D.coupling, "Pull of a part's velocity and acceleration towards "
+          "its parent's per 1/30 s (0 = independent parts).", range=(0.0, 0.99)),
+    Param('tracker.process_noise', _D.process_noise, 'White jerk spectral density (square '
+          'root), px/s^3 per sqrt(Hz) (Q).', range=(1e-3, 1e7)),
+    Param('tracker.measurement_noise_px', _D.measurement_noise_px, 'Detection standard '
+          'deviation per axis at confidence 1, pixels (R).', range=(0.01, 1000.0)),
+    Param('tracker.gate_chi2', _D.gate_chi2, 'Gate on the squared Mahalanobis innovation '
+          '(eq. 16): beyond it a detection is rejected and the prediction used.',
+          range=(0.1, 1e9)),
+    Param('tracker.max_missed_frames', _D.max_missed_frames, 'Frames without an accepted '
+          'detection before a part is dropped (MISSING).', range=(0, 100000)),
+    Param('tracker.max_dt_s', _D.max_dt_s, 'A longer gap between stamps restarts the track, '
+          'seconds.', range=(0.001, 3600.0)),
+    Param('tracker.depth_std_m', 0.05, "Standard deviation of a tracked part's depth in its "
+          'covariance, metres.', range=(0.0, 10.0)),
+)
+
+
+def tracker_stage(p: dict[str, Any]) -> TrackerStage:
+    """The tracker stage configured by the parameters (also used by the pipeline node)."""
+    slqe = SlqeConfig(coupling=p['tracker.coupling'], process_noise=p['tracker.process_noise'],
+                      measurement_noise_px=p['tracker.measurement_noise_px'],
+                      gate_chi2=p['tracker.gate_chi2'],
+                      max_missed_frames=p['tracker.max_missed_frames'],
+                      max_dt_s=p['tracker.max_dt_s'])
+    cv = CvConfig(max_missed_frames=p['tracker.max_missed_frames'],
+                  max_dt_s=p['tracker.max_dt_s'],
+                  measurement_noise_px=p['tracker.measurement_noise_px'])
+    return TrackerStage(kind=p['tracker.kind'], slqe=slqe, cv=cv,
+                        depth_std_m=p['tracker.depth_std_m'])
+
+
+class TrackerNode(Node):
+    """Tracks the parts of one person; see the module docstring."""
+
+    def __init__(self) -> None:
+        super().__init__('tracker')
+        self.stage = tracker_stage(declare(self, PARAMS))
+        self.intrinsics: Intrinsics | None = None
+        self.monitor = StageMonitor(self, 'tracker')
+        self.pub = self.create_publisher(JointArray, 'pose4d/parts/tracked', qos.OUTPUT_QOS)
+        self.create_subscription(JointArray, 'pose4d/parts', self.on_parts, qos.OUTPUT_QOS)
+        self.create_subscription(CameraInfo, 'camera/color/camera_info', self.on_info,
+                                 qos.SENSOR_QOS)
+        self.get_logger().info(
+            f'tracking {self.resolve_topic_name("pose4d/parts")} -> '
+            f'{self.resolve_topic_name("pose4d/parts/tracked")} with {self.stage.kind}')
+
+    def on_info(self, msg: CameraInfo) -> None:
+        try:
+            self.intrinsics = intrinsics_from_msg(msg)
+        except ValueError as exc:
+            self.monitor.bad_input(f'camera_info refused: {exc}')
+
+    def on_parts(self, msg: JointArray) -> None:
+        t0 = time.perf_counter()
+        stamp = stamp_to_ns(msg.header.stamp)
+        try:
+            parts = joints_from_msg(msg)
+            tracked = self.stage.step(parts, stamp * 1e-9, self.intrinsics)
+        except ValueError as exc:
+            self.monitor.bad_input(f'pose4d/parts frame at {stamp} ns refused: {exc}')
+            return
+        self.pub.publish(joints_to_msg(tracked, msg.header))
+        self.monitor.frame(stamp, time.perf_counter() - t0)
+
+
+def main(args: list[str] | None = None) -> int:
+    return run(TrackerNode, args)

@@ -1,0 +1,123 @@
+"""`tracker` and `ik` executables over Fast DDS: content, header stamp and frame."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from harness import start
+from test_pipeline_stages import BODY, INTR
+
+from pose4d_ros.core import joints as cj
+from pose4d_ros.core.camera import project
+from pose4d_ros.core.joints import JointSet
+from pose4d_ros.core.skeleton import PARTS_10, SKELETON_14
+
+
+def _header(k: int):
+    from std_msgs.msg import Header
+
+    from pose4d_ros.nodes.convert import ns_to_stamp
+
+    return Header(stamp=ns_to_stamp(1_700_000_000_000_000_000 + k * 33_333_334),
+                  frame_id='camera_color_optical_frame')
+
+
+def _parts_msg(k: int, header, *, missing=()):
+    from pose4d_ros.nodes.convert import joints_to_msg
+
+    xyz = np.array([BODY[n] for n in PARTS_10.names]) + [0.002 * k, 0, 0]
+    uv = project(xyz, INTR)
+    src = np.full(10, cj.DETECTED, np.uint8)
+    for name in missing:
+        i = PARTS_10.index(name)
+        uv[i], xyz[i], src[i] = np.nan, np.nan, cj.MISSING
+    return joints_to_msg(JointSet(PARTS_10.names, uv, xyz, source=src,
+                                  confidence=np.where(src == 0, 0.9, 0.0)), header)
+
+
+@pytest.fixture
+def info_pub(ros):
+    from sensor_msgs.msg import CameraInfo
+
+    from pose4d_ros.nodes import qos
+
+    return ros.node.create_publisher(CameraInfo, 'camera/color/camera_info', qos.OUTPUT_QOS)
+
+
+def test_tracker_node(ros, info_pub, tmp_path):
+    from pose4d_msgs.msg import JointArray
+
+    from pose4d_ros.nodes import qos
+    from pose4d_ros.nodes.convert import intrinsics_to_msg, joints_from_msg
+
+    node = start('tracker', {'tracker.kind': 'slqe'}, log_dir=tmp_path)
+    try:
+        pub = ros.node.create_publisher(JointArray, 'pose4d/parts', qos.OUTPUT_QOS)
+        got = ros.collect(JointArray, 'pose4d/parts/tracked', qos.OUTPUT_QOS)
+        ros.wait_for_subscribers(pub)
+        ros.wait_for_subscribers(info_pub)
+        ros.wait_for_publishers('pose4d/parts/tracked')
+        sent = []
+        info_pub.publish(intrinsics_to_msg(INTR, _header(0)))  # the camera is known first
+        ros.spin_for(0.3)
+        for k in range(20):
+            header = _header(k)
+            info_pub.publish(intrinsics_to_msg(INTR, header))
+            ros.spin_for(0.01)
+            msg = _parts_msg(k, header, missing=('left_wrist',) if k == 19 else ())
+            pub.publish(msg)
+            sent.append(header)
+            ros.spin_for(0.02)
+        ros.spin_until(lambda: len(got) == 20, 10, '20 tracked frames')
+    finally:
+        assert node.stop() == 0, node.output()
+    assert [m.header for m in got] == sent
+    last = joints_from_msg(got[-1])
+    assert last.names == PARTS_10.names and last.track_id == 1
+    i = PARTS_10.index('left_wrist')
+    assert last.source[i] == cj.TRACKED and np.isfinite(last.xyz[i]).all()
+    assert (last.source[np.arange(10) != i] == cj.DETECTED).all()
+
+
+@pytest.mark.parametrize('use_depth', [False, True])
+def test_ik_node(ros, info_pub, tmp_path, use_depth):
+    from pose4d_msgs.msg import JointArray
+    from sensor_msgs.msg import Image
+    from visualization_msgs.msg import MarkerArray
+
+    from pose4d_ros.nodes import qos
+    from pose4d_ros.nodes.convert import array_to_image, intrinsics_to_msg, joints_from_msg
+
+    node = start('ik', {'ik.use_depth': use_depth}, log_dir=tmp_path)
+    try:
+        pub = ros.node.create_publisher(JointArray, 'pose4d/parts/tracked', qos.OUTPUT_QOS)
+        depth_pub = ros.node.create_publisher(Image, 'pose4d/foreground/depth', qos.OUTPUT_QOS)
+        got = ros.collect(JointArray, 'pose4d/skeleton', qos.OUTPUT_QOS)
+        markers = ros.collect(MarkerArray, 'pose4d/skeleton/markers', qos.OUTPUT_QOS)
+        ros.wait_for_subscribers(pub)
+        ros.wait_for_subscribers(info_pub)
+        if use_depth:
+            ros.wait_for_subscribers(depth_pub)
+        ros.wait_for_publishers('pose4d/skeleton')
+        depth = np.full((INTR.height, INTR.width), 2500, np.uint16)
+        headers = [_header(k) for k in range(5)]
+        info_pub.publish(intrinsics_to_msg(INTR, headers[0]))  # the camera is known first
+        ros.spin_for(0.3)
+        for header in headers:
+            info_pub.publish(intrinsics_to_msg(INTR, header))
+            ros.spin_for(0.01)
+            pub.publish(_parts_msg(0, header))
+            if use_depth:
+                depth_pub.publish(array_to_image(depth, '16UC1', header))
+            ros.spin_for(0.02)
+        ros.spin_until(lambda: len(got) == 5 and len(markers) == 5, 10, '5 skeletons')
+    finally:
+        assert node.stop() == 0, node.output()
+    assert [m.header for m in got] == headers
+    skeleton = joints_from_msg(got[-1])
+    assert skeleton.names == SKELETON_14
+    for name in ('left_elbow', 'right_elbow', 'left_knee', 'right_knee'):
+        i = SKELETON_14.index(name)
+        assert skeleton.source[i] == cj.INFERRED and np.isfinite(skeleton.xyz[i]).all()
+    assert markers[-1].markers[0].header == headers[-1]
+    assert len(markers[-1].markers[0].points) == 14

@@ -1,0 +1,139 @@
+"""The tracker and IK stages that nodes and offline tools share (core/pipeline.py)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from numpy.testing import assert_allclose
+
+from pose4d_ros.core import joints as cj
+from pose4d_ros.core.camera import backproject, cad60_intrinsics, project
+from pose4d_ros.core.joints import JointSet
+from pose4d_ros.core.pipeline import IkStage, TrackerStage, limb_bones, reorder
+from pose4d_ros.core.skeleton import PARTS_10, SKELETON_14
+
+INTR = cad60_intrinsics()
+
+# A person 2.5 m away, optical frame (metres): 14 joints, elbows and knees bent.
+BODY = {
+    'head': (0.0, -0.75, 2.5), 'neck': (0.0, -0.5, 2.5),
+    'left_shoulder': (0.18, -0.48, 2.5), 'right_shoulder': (-0.18, -0.48, 2.5),
+    'left_elbow': (0.30, -0.30, 2.42), 'right_elbow': (-0.30, -0.30, 2.42),
+    'left_wrist': (0.38, -0.12, 2.35), 'right_wrist': (-0.38, -0.12, 2.35),
+    'left_hip': (0.1, 0.0, 2.5), 'right_hip': (-0.1, 0.0, 2.5),
+    'left_knee': (0.12, 0.45, 2.42), 'right_knee': (-0.12, 0.45, 2.42),
+    'left_ankle': (0.12, 0.9, 2.5), 'right_ankle': (-0.12, 0.9, 2.5),
+}
+
+
+def _parts(offset=(0.0, 0.0, 0.0), noise_px=0.0, rng=None, drop=()):
+    names = PARTS_10.names
+    xyz = np.array([BODY[n] for n in names]) + offset
+    uv = project(xyz, INTR)
+    if noise_px:
+        uv = uv + rng.normal(0, noise_px, uv.shape)
+    src = np.full(len(names), cj.DETECTED, np.uint8)
+    for n in drop:
+        i = names.index(n)
+        uv[i], xyz[i], src[i] = np.nan, np.nan, cj.MISSING
+    return JointSet(names, uv, xyz, confidence=np.where(src == cj.DETECTED, 0.9, 0.0),
+                    source=src)
+
+
+def test_tracker_reduces_noise_and_lifts_to_3d():
+    rng = np.random.default_rng(0)
+    stage = TrackerStage()
+    velocity = np.array([0.3, 0.0, 0.0])  # m/s sideways
+    raw, filt = [], []
+    for k in range(90):
+        t = k / 30
+        truth = project(np.array([BODY[n] for n in PARTS_10.names]) + velocity * t, INTR)
+        det = _parts(velocity * t, 3.0, rng)
+        out = stage.step(det, 100.0 + t, INTR)
+        if k >= 30:
+            raw.append(np.linalg.norm(det.uv - truth, axis=1).mean())
+            filt.append(np.linalg.norm(out.uv - truth, axis=1).mean())
+    assert out.names == PARTS_10.names and out.track_id == 1
+    assert np.mean(filt) < 0.75 * np.mean(raw), (np.mean(filt), np.mean(raw))
+    # 3-D: the tracked pixel back-projected at the detection's depth
+    assert_allclose(out.xyz, backproject(out.uv, det.xyz[:, 2], INTR), atol=1e-9)
+    assert (out.covariance[:, 2, 2] > 0).all()
+
+
+def test_tracker_coasts_through_dropouts_and_restarts_after_a_gap():
+    stage = TrackerStage()
+    for k in range(10):
+        stage.step(_parts(), 10.0 + k / 30, INTR)
+    out = stage.step(_parts(drop=('left_wrist',)), 10.0 + 10 / 30, INTR)
+    i = PARTS_10.index('left_wrist')
+    assert out.source[i] == cj.TRACKED
+    assert np.isfinite(out.xyz[i]).all() and out.xyz[i, 2] == pytest.approx(2.35)
+    out = stage.step(_parts(), 20.0, INTR)  # 10 s later: the track was lost, a new one starts
+    assert out.track_id == 2
+
+
+def test_tracker_with_no_detection_gives_missing_not_nan_as_valid():
+    stage = TrackerStage()
+    empty = JointSet.missing(PARTS_10.names)
+    out = stage.step(empty, 1.0, INTR)
+    assert (out.source == cj.MISSING).all() and out.track_id == 0
+    assert np.isnan(out.uv).all() and (out.confidence == 0).all()
+
+
+def _tracked():
+    parts = _parts()
+    return parts.with_(source=np.full(10, cj.TRACKED, np.uint8), track_id=1)
+
+
+def test_ik_completes_fourteen_joints_with_inferred_elbows_and_knees():
+    lengths = {}
+    for limb, (a, m, b) in {'left_arm': ('left_shoulder', 'left_elbow', 'left_wrist'),
+                            'right_arm': ('right_shoulder', 'right_elbow', 'right_wrist'),
+                            'left_leg': ('left_hip', 'left_knee', 'left_ankle'),
+                            'right_leg': ('right_hip', 'right_knee', 'right_ankle')}.items():
+        pa, pm, pb = (np.array(BODY[x]) for x in (a, m, b))
+        lengths[limb] = (float(np.linalg.norm(pm - pa)), float(np.linalg.norm(pb - pm)))
+    stage = IkStage(lengths=lengths, learn=False, use_depth=False)
+    out = stage.step(_tracked(), None, INTR)
+    assert out.names == SKELETON_14
+    for name in ('left_elbow', 'right_elbow', 'left_knee', 'right_knee'):
+        i = SKELETON_14.index(name)
+        assert out.source[i] == cj.INFERRED and 0 < out.confidence[i] <= 1
+        limb = {'left_elbow': 'left_arm', 'right_elbow': 'right_arm',
+                'left_knee': 'left_leg', 'right_knee': 'right_leg'}[name]
+        root = 'left_shoulder right_shoulder left_hip right_hip'.split()[
+            ['left_arm', 'right_arm', 'left_leg', 'right_leg'].index(limb)]
+        # on the circle: the upper bone has its length
+        assert np.linalg.norm(out.xyz[i] - np.array(BODY[root])) == \
+            pytest.approx(lengths[limb][0], abs=1e-6)
+        assert_allclose(out.uv[i], project(out.xyz[i][None], INTR)[0], atol=1e-6)
+    i = SKELETON_14.index('head')
+    assert out.source[i] == cj.TRACKED
+
+
+def test_ik_flags_bad_joints_missing():
+    parts = _tracked()
+    xyz = parts.xyz.copy()
+    xyz[PARTS_10.index('left_wrist'), 2] = -1.0  # behind the camera
+    out = IkStage(use_depth=False).step(parts.with_(xyz=xyz), None, INTR)
+    i = SKELETON_14.index('left_wrist')
+    assert out.source[i] == cj.MISSING and np.isnan(out.xyz[i]).all()
+    e = SKELETON_14.index('left_elbow')  # its end is unknown: no elbow either
+    assert out.source[e] == cj.MISSING and np.isnan(out.xyz[e]).all()
+    r = SKELETON_14.index('right_elbow')
+    assert out.source[r] == cj.INFERRED
+
+
+def test_ik_with_an_all_nan_depth_image_falls_back_on_the_prior():
+    depth = np.full((INTR.height, INTR.width), np.nan, np.float32)
+    out = IkStage().step(_tracked(), depth, INTR)
+    for name in ('left_elbow', 'left_knee'):
+        assert out.source[SKELETON_14.index(name)] == cj.INFERRED
+
+
+def test_reorder_and_bones():
+    js = reorder(_parts(), SKELETON_14)
+    assert js.source[SKELETON_14.index('left_elbow')] == cj.MISSING
+    assert js.source[SKELETON_14.index('head')] == cj.DETECTED
+    bones = limb_bones()
+    assert len(bones) == 14 and all(0 <= a < 14 and 0 <= b < 14 for a, b in bones)
