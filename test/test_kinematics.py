@@ -100,10 +100,17 @@ def test_ik_returns_a_point_on_the_true_circle() -> None:
         assert_allclose(np.linalg.norm(mid - circle.centre), circle.radius, atol=1e-9)
         assert abs((mid - circle.centre) @ circle.axis) < 1e-9
         # ... and so is whatever the prior picks, at the right bone lengths.
-        sol = solve_limb(None, root, end, UPPER, LOWER, K, prior=rng.normal(size=3))
+        prior = rng.normal(size=3)
+        on = IkConfig(prior_shrink=(1.0, 1.0))
+        sol = solve_limb(None, root, end, UPPER, LOWER, K, prior=prior, config=on)
         assert sol.flag == IkFlag.PRIOR
         assert_allclose(np.linalg.norm(sol.position - root), UPPER, rtol=1e-9)
         assert_allclose(np.linalg.norm(end - sol.position), LOWER, rtol=1e-9)
+        # Shrunk: the same direction from the centre, at the shrink's fraction of the radius.
+        half = IkConfig(prior_shrink=(0.5, 0.5))
+        inner = solve_limb(None, root, end, UPPER, LOWER, K, prior=prior, config=half)
+        assert_allclose(inner.position - circle.centre, 0.5 * (sol.position - circle.centre),
+                        atol=1e-12)
 
 
 def test_prior_direction_is_followed() -> None:

@@ -267,14 +267,15 @@ def test_low_confidence_moves_the_estimate_less() -> None:
 
 
 def test_detection_output_mode_returns_the_detection() -> None:
-    tracker = SlqeTracker(SlqeConfig(output='detection'), PARTS_10)
+    cfg = SlqeConfig(output='detection')
+    tracker = SlqeTracker(cfg, PARTS_10)
     rng = np.random.default_rng(0)
     t, truth = linear_tracks(rng, 30)
     noisy = truth + rng.normal(0, 2.0, truth.shape)
     for k in range(30):
         out = tracker.step(noisy[k], None, t[k])
     assert_allclose(out.positions, noisy[29])
-    assert_allclose(out.covariances[:, 0, 0], 9.0)
+    assert_allclose(out.covariances[:, 0, 0], cfg.measurement_noise_px ** 2)
 
 
 @pytest.mark.parametrize('uv, conf, stamp', [

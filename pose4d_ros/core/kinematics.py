@@ -59,7 +59,7 @@ from pose4d_ros.core.skeleton import LIMBS, PARTS_10
 # Default bone lengths (upper, lower), metres: medians of the Kinect v1 skeletons of UTKinect
 # subjects s01-s06 (shoulder-elbow, elbow-wrist, hip-knee, knee-ankle), rounded to 5 mm.
 DEFAULT_LIMB_LENGTHS_M: dict[str, tuple[float, float]] = {
-    'left_arm': (0.26, 0.23), 'right_arm': (0.26, 0.23),
+    'left_arm': (0.26, 0.235), 'right_arm': (0.26, 0.235),
     'left_leg': (0.47, 0.37), 'right_leg': (0.47, 0.37),
 }
 
@@ -333,6 +333,12 @@ def sample_depth(depth_m: NDArray[np.floating], uv: NDArray[np.floating], *, rad
 class IkConfig:
     """Parameters of the middle-joint inference.
 
+    The prior (`arm_prior`, `leg_prior`, `prior_shrink`) was fitted and the depth cost
+    (`surface_offset_m`, `depth_scale_m`, `occluded_weight`, `unknown_cost`, `prior_weight`,
+    `length_scales`, `scale_weight`) tuned on real Kinect motion of UTKinect subjects s01-s06
+    (`core.motion_eval.fit_swivel_prior`, `tune_ik_depth`; depth from capsules splatted on the
+    recorded skeletons).
+
     Attributes
     ----------
     n_candidates : swivel angles sampled on the circle (coarse search).
@@ -367,19 +373,19 @@ class IkConfig:
     refine_steps: int = 4
     bone_samples: int = 3
     depth_radius_px: int = 2
-    surface_offset_m: tuple[float, float] = (0.04, 0.06)
+    surface_offset_m: tuple[float, float] = (0.03, 0.05)
     depth_scale_m: float = 0.03
     free_space_weight: float = 1.0
     occluded_weight: float = 0.6
-    unknown_cost: float = 0.5
+    unknown_cost: float = 0.8
     min_valid_fraction: float = 0.3
     ambiguity_margin: float = 0.05
-    prior_weight: float = 0.05
-    length_scales: tuple[float, ...] = (0.85, 0.9, 0.95, 1.0, 1.05, 1.1)
+    prior_weight: float = 0.15
+    length_scales: tuple[float, ...] = (0.8, 0.85, 0.9, 0.95, 1.0, 1.05, 1.1, 1.15)
     scale_weight: float = 0.1
-    prior_shrink: tuple[float, float] = (1.0, 1.0)
-    arm_prior: tuple[float, float, float] = (0.3, -0.8, -0.5)
-    leg_prior: tuple[float, float, float] = (0.1, 0.0, 1.0)
+    prior_shrink: tuple[float, float] = (0.68, 0.14)
+    arm_prior: tuple[float, float, float] = (0.54, -0.80, -0.25)
+    leg_prior: tuple[float, float, float] = (0.48, 0.53, 0.70)
     prior_angle_std_rad: float = 0.6
     confidence_scale_m: float = 0.1
     reach_tolerance: float = 0.05

@@ -58,6 +58,10 @@ from pose4d_ros.datasets.utkinect import (
 # UTKinect joint used for each part name that it spells differently.
 UTKINECT_NAMES: dict[str, str] = {'neck': 'shoulder_center'}
 
+# The constant-velocity filter with the innovation gate, tuned like SlqeConfig's defaults
+# (subjects s01-s06, seed 0; `tune_tracking`).
+GATED_CV = CvConfig(process_noise=30.0, measurement_noise_px=3.0, gate_chi2=20.0)
+
 TRAIN_SUBJECTS: tuple[int, ...] = (1, 2, 3, 4, 5, 6)
 TEST_SUBJECTS: tuple[int, ...] = (7, 8)
 
@@ -255,7 +259,7 @@ def default_methods(slqe: SlqeConfig | None = None, cv: CvConfig | None = None,
     """The compared trackers: plain CV filter, CV filter with the gate, SLQE."""
     slqe = slqe or SlqeConfig()
     cv = cv or CvConfig()
-    cv_gated = cv_gated or CvConfig(gate_chi2=slqe.gate_chi2)
+    cv_gated = cv_gated or GATED_CV
     return {
         'cv': lambda: ConstantVelocityTracker(cv, tree),
         'cv_gated': lambda: ConstantVelocityTracker(cv_gated, tree),
@@ -633,6 +637,58 @@ class IkErrors:
 IkFrame = tuple[str, NDArray | None, NDArray | None, NDArray[np.float64]]
 
 
+def take_bones(segments: Sequence[Segment]) -> dict[str, NDArray[np.float64]]:
+    """Median length of the bone ending at each Kinect joint, per take: (20,) metres."""
+    from pose4d_ros.datasets.synth import PARENTS
+
+    by_take: dict[str, list[NDArray]] = {}
+    for seg in segments:
+        by_take.setdefault(seg.name.partition('/')[0], []).append(seg.joints)
+    out = {}
+    for take, parts in by_take.items():
+        j = np.concatenate(parts)
+        bones = np.zeros(len(UTKINECT_JOINTS))
+        for i, p in enumerate(PARENTS):
+            if p >= 0:
+                bones[i] = float(np.median(np.linalg.norm(j[:, i] - j[:, p], axis=1)))
+        out[take] = bones
+    return out
+
+
+def synth_renderer(segments: Sequence[Segment], *, seed: int = 0,
+                   intrinsics: Intrinsics | None = None, kinect_noise: bool = True
+                   ) -> tuple[Callable, dict[str, dict[str, tuple]]]:
+    """A renderer for `ik_frames(depth='render')` and the bone lengths of what it renders.
+
+    One random body per take (`datasets.synth.random_body`, seeded by `seed` and the take)
+    with the take's real median bone lengths; each frame is the real pose retargeted to it and
+    rendered alone (no room) with the Kinect v1 depth model. The rendered joints, not the
+    recorded ones, are the truth of that depth image; the returned lengths (per take, per limb)
+    are that body's bones, i.e. what `LimbLengths` learns from the take's rendered frames.
+    """
+    from dataclasses import replace as dc_replace
+
+    from pose4d_ros.core.camera import depth_to_metres
+    from pose4d_ros.datasets.synth import random_body, render
+
+    intrinsics = intrinsics or cad60_intrinsics()
+    bodies = {}
+    lengths: dict[str, dict[str, tuple]] = {}
+    for take, bones in take_bones(segments).items():
+        rng = np.random.default_rng([seed, int(take[1:3]), int(take[5:7]), 7])
+        bodies[take] = dc_replace(random_body(rng), bones=bones)
+        lengths[take] = {limb: (float(bones[_UT[m]]), float(bones[_UT[b]]))
+                         for limb, (_, m, b) in LIMB_JOINTS.items()}
+
+    def renderer(take: str, joints: NDArray, rng: np.random.Generator
+                 ) -> tuple[NDArray, NDArray, NDArray]:
+        out = render(joints, bodies[take], None, intrinsics, rng=rng,
+                     kinect_noise=kinect_noise)
+        return depth_to_metres(out.depth_mm), out.mask, out.joints
+
+    return renderer, lengths
+
+
 def ik_frames(segments: Sequence[Segment], *, depth: str = 'none', stride: int = 1,
               seed: int = 0, intrinsics: Intrinsics | None = None,
               renderer: Callable | None = None) -> Iterator[IkFrame]:
@@ -640,8 +696,8 @@ def ik_frames(segments: Sequence[Segment], *, depth: str = 'none', stride: int =
 
     depth : 'none' (joint-limit prior only), 'splat' (a capsule body splatted on the real
         skeleton with Kinect noise, `splat_body`; the real joints are the truth) or 'render'
-        (``renderer(joints (20, 3), rng) -> (depth_m, mask, truth (20, 3))``, e.g. the
-        synthetic body renderer, whose joints are the truth of its depth image).
+        (``renderer(take, joints (20, 3), rng) -> (depth_m, mask, truth (20, 3))``, e.g.
+        `synth_renderer`, whose joints are the truth of its depth image).
     """
     if depth not in ('none', 'splat', 'render'):
         raise ValueError(f"depth must be 'none', 'splat' or 'render', got {depth!r}")
@@ -658,7 +714,7 @@ def ik_frames(segments: Sequence[Segment], *, depth: str = 'none', stride: int =
                 depth_m = splat_body(frame, intrinsics, rng=rng)
                 yield take, depth_m, np.isfinite(depth_m), frame
             elif depth == 'render':
-                depth_m, mask, truth = renderer(frame, rng)  # type: ignore[misc]
+                depth_m, mask, truth = renderer(take, frame, rng)  # type: ignore[misc]
                 yield take, depth_m, mask, np.asarray(truth, dtype=np.float64)
             else:
                 yield take, None, None, frame
@@ -703,12 +759,14 @@ def tune_ik_depth(frames: Sequence[IkFrame], lengths: dict[str, dict[str, tuple]
     The objective is the mean 3-D error of elbows and knees.
     """
     grids: dict[str, list] = {
-        'occluded_weight': [0.05, 0.15, 0.3, 0.6],
-        'surface_offset_m': [(0.03, 0.05), (0.04, 0.06), (0.05, 0.07), (0.04, 0.08)],
-        'depth_scale_m': [0.015, 0.03, 0.05, 0.08],
-        'unknown_cost': [0.2, 0.5, 0.8],
-        'scale_weight': [0.0, 0.1, 0.3, 1.0],
-        'prior_weight': [0.0, 0.05, 0.15, 0.4],
+        'occluded_weight': [0.15, 0.3, 0.6, 1.0],
+        'surface_offset_m': [(0.02, 0.04), (0.03, 0.05), (0.04, 0.06), (0.03, 0.07)],
+        'depth_scale_m': [0.02, 0.03, 0.05, 0.08],
+        'unknown_cost': [0.5, 0.8, 1.0],
+        'scale_weight': [0.0, 0.1, 0.3],
+        'prior_weight': [0.05, 0.15, 0.4],
+        'length_scales': [(1.0,), (0.9, 1.0, 1.1), (0.85, 0.9, 0.95, 1.0, 1.05, 1.1),
+                          (0.8, 0.85, 0.9, 0.95, 1.0, 1.05, 1.1, 1.15)],
     }
     log: list[dict] = []
     cache: dict[tuple, float] = {}
