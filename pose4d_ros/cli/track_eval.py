@@ -60,6 +60,8 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument('--depth-stride', type=int, default=15,
                    help='every N-th frame for the IK with depth (rendering is slow)')
     p.add_argument('--no-ik', action='store_true', help='tracking only')
+    p.add_argument('--no-ablations', action='store_true',
+                   help='skip SLQE without coupling and SLQE with a constant-velocity state')
     p.add_argument('--no-render', action='store_true',
                    help='skip the synthetic-body renderer variant of the IK')
     p.add_argument('--quiet', action='store_true', help='no progress messages')
@@ -140,7 +142,7 @@ def run(args: argparse.Namespace) -> int:
         report['tracking_tuning_log'] = log
     report['tracker_configs'] = {'slqe': me.config_dict(slqe), 'cv': me.config_dict(cv),
                                  'cv_gated': me.config_dict(cvg)}
-    methods = me.default_methods(slqe, cv, cvg)
+    methods = me.default_methods(slqe, cv, cvg, ablations=not args.no_ablations)
     tracking = {}
     for name, segs in (('train', train), ('test', test)):
         say(f'tracking on the {name} subjects')
@@ -185,15 +187,22 @@ def _run_ik(args: argparse.Namespace, train: list, test: list, say) -> dict:
                       'render': 'the rendered body\'s bones (= the take\'s median bones)'}
     if args.tune:
         say('fitting the IK prior on the training subjects')
-        prior = me.fit_swivel_prior(train, lengths['train']['take'])
-        config = replace(config, arm_prior=prior['arm'][0], leg_prior=prior['leg'][0],
-                         prior_shrink=(prior['arm'][1], prior['leg'][1]))
+        prior = me.fit_swivel_prior(train, lengths['train']['take'], shrink=False)
+        config = replace(config, arm_prior=prior['arm'][0], leg_prior=prior['leg'][0])
+        out['prior_fit'] = prior
         say('tuning the depth cost on training frames (minutes)')
         frames = list(me.ik_frames(train, depth='splat', stride=30, seed=args.seed))
         config, log = me.tune_ik_depth(frames, lengths['train']['take'], config,
                                        progress=say)
         out['tuning_log'] = log
+    shrink = me.SHRUNK_PRIOR
+    if args.tune:
+        fit = me.fit_swivel_prior(train, lengths['train']['take'], directions={
+            'arm': config.arm_prior, 'leg': config.leg_prior})
+        shrink = (fit['arm'][1], fit['leg'][1])
     out['config'] = me.config_dict(config)
+    out['prior_shrink'] = shrink
+    shrunk = replace(config, prior_shrink=shrink)
     renderer = None
     if not args.no_render:
         try:
@@ -207,6 +216,8 @@ def _run_ik(args: argparse.Namespace, train: list, test: list, say) -> dict:
             say(f'IK on the {name} subjects, prior only, lengths {mode}')
             rows[f'prior, lengths {mode}'] = me.evaluate_ik(
                 segs, lengths[name][mode], config=config, stride=args.ik_stride)
+        rows['prior shrunk, lengths take'] = me.evaluate_ik(
+            segs, lengths[name]['take'], config=shrunk, stride=args.ik_stride)
         say(f'IK on the {name} subjects, depth (splatted capsules on the real skeleton)')
         rows['depth splat, lengths take'] = me.evaluate_ik(
             segs, lengths[name]['take'], depth='splat', config=config,

@@ -333,7 +333,7 @@ def sample_depth(depth_m: NDArray[np.floating], uv: NDArray[np.floating], *, rad
 class IkConfig:
     """Parameters of the middle-joint inference.
 
-    The prior (`arm_prior`, `leg_prior`, `prior_shrink`) was fitted and the depth cost
+    The prior's directions (`arm_prior`, `leg_prior`) were fitted and the depth cost
     (`surface_offset_m`, `depth_scale_m`, `occluded_weight`, `unknown_cost`, `prior_weight`,
     `length_scales`, `scale_weight`) tuned on real Kinect motion of UTKinect subjects s01-s06
     (`core.motion_eval.fit_swivel_prior`, `tune_ik_depth`; depth from capsules splatted on the
@@ -359,7 +359,9 @@ class IkConfig:
     length_scales : factors applied to both bone lengths to make the depth search's circles.
     scale_weight : cost per unit of |log(scale)| (prefers the given lengths).
     prior_shrink : (arm, leg) fraction of the radius at which the prior puts the joint (1 = on
-        the circle; less = the expected position under the swivel's uncertainty).
+        the circle, the default; less = the expected position under the swivel's uncertainty,
+        closer on average but off the bone lengths; `core.motion_eval.SHRUNK_PRIOR` was
+        fitted on Kinect skeletons).
     arm_prior, leg_prior : preferred direction of the elbow / knee from the circle's centre, as
         (outward, up, forward) coefficients in the body frame (outward = away from the body's
         midline on that limb's side).
@@ -383,9 +385,9 @@ class IkConfig:
     prior_weight: float = 0.15
     length_scales: tuple[float, ...] = (0.8, 0.85, 0.9, 0.95, 1.0, 1.05, 1.1, 1.15)
     scale_weight: float = 0.1
-    prior_shrink: tuple[float, float] = (0.68, 0.14)
+    prior_shrink: tuple[float, float] = (1.0, 1.0)
     arm_prior: tuple[float, float, float] = (0.54, -0.80, -0.25)
-    leg_prior: tuple[float, float, float] = (0.48, 0.53, 0.70)
+    leg_prior: tuple[float, float, float] = (0.23, -0.22, 0.95)
     prior_angle_std_rad: float = 0.6
     confidence_scale_m: float = 0.1
     reach_tolerance: float = 0.05

@@ -62,6 +62,16 @@ UTKINECT_NAMES: dict[str, str] = {'neck': 'shoulder_center'}
 # (subjects s01-s06, seed 0; `tune_tracking`).
 GATED_CV = CvConfig(process_noise=30.0, measurement_noise_px=3.0, gate_chi2=20.0)
 
+# Ablation: SLQE's tree coupling on a constant-velocity state (order 2), tuned on a small grid
+# around GATED_CV (subjects s01-s06, seed 0).
+SLQE_ORDER2 = SlqeConfig(order=2, coupling=0.1, process_noise=30.0, measurement_noise_px=3.0,
+                         gate_chi2=20.0)
+
+# `IkConfig.prior_shrink` fitted with the defaults' prior directions on subjects s01-s06
+# (`fit_swivel_prior`): without depth, elbows at 0.68 and knees at 0.16 of the circle's radius
+# from its centre are closer on average to Kinect's joints than points on the circle.
+SHRUNK_PRIOR: tuple[float, float] = (0.68, 0.16)
+
 TRAIN_SUBJECTS: tuple[int, ...] = (1, 2, 3, 4, 5, 6)
 TEST_SUBJECTS: tuple[int, ...] = (7, 8)
 
@@ -254,17 +264,26 @@ class ErrorAccumulator:
 
 
 def default_methods(slqe: SlqeConfig | None = None, cv: CvConfig | None = None,
-                    cv_gated: CvConfig | None = None, tree: PartTree = PARTS_10
-                    ) -> dict[str, TrackerFactory]:
-    """The compared trackers: plain CV filter, CV filter with the gate, SLQE."""
+                    cv_gated: CvConfig | None = None, tree: PartTree = PARTS_10, *,
+                    ablations: bool = False) -> dict[str, TrackerFactory]:
+    """The compared trackers: plain CV filter, CV filter with the gate, SLQE.
+
+    With `ablations`, also SLQE without the coupling ('slqe_no_coupling', the same filter with
+    k = 0) and SLQE on a constant-velocity state ('slqe_order2', `SLQE_ORDER2`).
+    """
     slqe = slqe or SlqeConfig()
     cv = cv or CvConfig()
     cv_gated = cv_gated or GATED_CV
-    return {
+    out: dict[str, TrackerFactory] = {
         'cv': lambda: ConstantVelocityTracker(cv, tree),
         'cv_gated': lambda: ConstantVelocityTracker(cv_gated, tree),
         'slqe': lambda: SlqeTracker(slqe, tree),
     }
+    if ablations:
+        uncoupled = replace(slqe, coupling=0.0)
+        out['slqe_no_coupling'] = lambda: SlqeTracker(uncoupled, tree)
+        out['slqe_order2'] = lambda: SlqeTracker(SLQE_ORDER2, tree)
+    return out
 
 
 def evaluate_tracking(segments: Sequence[Segment], methods: dict[str, TrackerFactory], *,
@@ -552,14 +571,16 @@ def _limb_samples(segments: Sequence[Segment], lengths: dict[str, dict[str, tupl
 
 
 def fit_swivel_prior(segments: Sequence[Segment], lengths: dict[str, dict[str, tuple]], *,
-                     stride: int = 3, n_directions: int = 2000, shrink: bool = True
+                     stride: int = 3, n_directions: int = 2000, shrink: bool = True,
+                     directions: dict[str, tuple[float, float, float]] | None = None
                      ) -> dict[str, tuple[tuple[float, float, float], float]]:
     """Fit the joint-limit prior on (training) segments: direction and shrink per limb type.
 
     For each of `n_directions` unit vectors (a Fibonacci sphere) of (outward, up, forward)
     coefficients, the middle joint is put at ``centre + s * radius * u`` (u = the direction in
     the circle's plane) with s fitted by least squares (or 1 if not `shrink`); the direction
-    with the lowest mean 3-D error wins. Arms and legs separately.
+    with the lowest mean 3-D error wins. Arms and legs separately. With `directions`
+    ({'arm': (out, up, forward), 'leg': ...}) only the shrink is fitted, for those directions.
 
     Returns
     -------
@@ -571,19 +592,21 @@ def fit_swivel_prior(segments: Sequence[Segment], lengths: dict[str, dict[str, t
     dirs = np.stack([np.sin(polar) * np.cos(azim), np.sin(polar) * np.sin(azim),
                      np.cos(polar)], axis=1)
     data = _limb_samples(segments, lengths, stride)
+    kind_dirs = {kind: dirs if directions is None else
+                 np.asarray([directions[kind]], dtype=np.float64) for kind in ('arm', 'leg')}
     parts: dict[str, list] = {'arm': [], 'leg': []}
     for limb, d in data.items():
+        kind = 'arm' if limb.endswith('arm') else 'leg'
         circles = [middle_joint_circle(r0, e0, u, lo) for r0, e0, u, lo in zip(
             d['root'], d['end'], d['upper'], d['lower'], strict=True)]
         centre = np.stack([c.centre for c in circles])
         axis = np.stack([c.axis for c in circles])
         radius = np.array([c.radius for c in circles])
         side = 1.0 if limb.startswith('left') else -1.0
-        v = np.einsum('fij,dj->dfi', d['frame'], dirs * np.array([side, 1.0, 1.0]))
+        v = np.einsum('fij,dj->dfi', d['frame'], kind_dirs[kind] * np.array([side, 1.0, 1.0]))
         v = v - np.einsum('dfi,fi->df', v, axis)[..., None] * axis[None]
         v /= np.maximum(np.linalg.norm(v, axis=2, keepdims=True), 1e-9)
-        parts['arm' if limb.endswith('arm') else 'leg'].append(
-            (centre, radius, v, d['middle']))
+        parts[kind].append((centre, radius, v, d['middle']))
     out = {}
     for kind, items in parts.items():
         centre = np.concatenate([c for c, _, _, _ in items])
@@ -596,11 +619,12 @@ def fit_swivel_prior(segments: Sequence[Segment], lengths: dict[str, dict[str, t
             s = np.clip((proj * radius).sum(axis=1) / max(float((radius ** 2).sum()), 1e-12),
                         0.0, 1.0)
         else:
-            s = np.ones(n_directions)
+            s = np.ones(len(v))
         err = np.linalg.norm(centre[None] + (s[:, None] * radius[None])[..., None] * v
                              - truth[None], axis=2).mean(axis=1)
         best = int(np.argmin(err))
-        out[kind] = (tuple(float(x) for x in np.round(dirs[best], 3)), round(float(s[best]), 3))
+        out[kind] = (tuple(float(x) for x in np.round(kind_dirs[kind][best], 3)),
+                     round(float(s[best]), 3))
     return out
 
 
