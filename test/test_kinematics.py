@@ -192,6 +192,14 @@ def test_invalid_input_is_flagged_never_nan_valid(root, end, flag) -> None:
     assert sol.confidence == 0.0
 
 
+def test_middle_joint_behind_the_camera_is_flagged() -> None:
+    # Root and end just in front of the camera, the prior bends the elbow behind it.
+    sol = solve_limb(None, np.array([0.0, 0.0, 0.05]), np.array([0.0, 0.4, 0.05]), UPPER,
+                     LOWER, K, prior=np.array([0.0, 0.0, -1.0]))
+    assert sol.flag == IkFlag.BEHIND_CAMERA
+    assert np.isnan(sol.position).all() and sol.confidence == 0.0
+
+
 def test_nan_lengths_are_missing() -> None:
     sol = solve_limb(None, np.array([0.0, 0.0, 2.0]), np.array([0.0, 0.4, 2.0]), math.nan,
                      LOWER, K, prior=np.array([0.0, 0.0, -1.0]))

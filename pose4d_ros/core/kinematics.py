@@ -566,8 +566,8 @@ def solve_limb(depth_m: NDArray[np.floating] | None, root: NDArray[np.floating],
     ref = np.asarray(prior, dtype=np.float64).reshape(3)
 
     def finish(p: NDArray[np.float64], confidence: float, flag: IkFlag) -> LimbSolution:
-        if p[2] <= 0:
-            return LimbSolution(p, np.full(2, np.nan), 0.0, IkFlag.BEHIND_CAMERA)
+        if not p[2] > 0:  # the inferred joint itself would be behind the camera
+            return _nan_solution(IkFlag.BEHIND_CAMERA)
         uv = np.full(2, np.nan) if intrinsics is None else project(p[None], intrinsics)[0]
         return LimbSolution(p, uv, float(confidence), flag)
 

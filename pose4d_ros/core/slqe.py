@@ -40,8 +40,8 @@ innovation ``y_i = z_i - H s'_i`` and its covariance ``S_i``:
   with ``output='detection'``, the literal reading of eq. 16).
 - beyond the gate: an outlier; the detection is rejected and the prediction is used (TRACKED).
 - when ``drift_frames`` consecutive detections are rejected but agree with each other (each within
-  ``drift_radius_px`` of the previous one), the filter is the one that drifted: the part is
-  re-initialised on the detection (DETECTED).
+  ``drift_radius_px`` per 1/30 s of the previous one), the filter is the one that drifted: the
+  part is re-initialised on the detection (DETECTED).
 
 Parts without a detection (NaN) are predicted only (TRACKED). A part that has had no accepted
 detection for more than ``max_missed_frames`` is dropped (MISSING, NaN) and re-initialised when
@@ -102,7 +102,8 @@ class SlqeConfig:
         detection itself, the literal eq. 16).
     drift_frames : consecutive rejected but mutually consistent detections after which the part
         is re-initialised on the detection; 0 disables.
-    drift_radius_px : two rejected detections in a row are consistent when this close, pixels.
+    drift_radius_px : two rejected detections in a row are consistent when this close, pixels
+        per 1/30 s (scaled up for longer frame intervals: a part moves farther between them).
     max_missed_frames : frames without an accepted detection before a part is dropped.
     max_dt_s : a longer gap between stamps restarts the track, seconds.
     init_velocity_std : prior standard deviation of a new part's velocity, px/s.
@@ -168,6 +169,7 @@ class TrackState:
     last_rejected : (P, 2) float64, the last rejected detection (NaN if none), pixels.
     confidence : (P,) float64, 0..1, confidence of the current estimate.
     stamp : time of the last frame, seconds; None before the first frame.
+    dt : the time step of the last prediction, seconds.
     """
 
     x: NDArray[np.float64]
@@ -178,6 +180,7 @@ class TrackState:
     last_rejected: NDArray[np.float64]
     confidence: NDArray[np.float64]
     stamp: float | None = None
+    dt: float = NOMINAL_DT_S
 
     @property
     def n_parts(self) -> int:
@@ -346,7 +349,7 @@ def predict(state: TrackState, dt: float, config: SlqeConfig, tree: PartTree) ->
     x[inactive] = 0.0
     cov[inactive, :] = 0.0
     cov[:, inactive] = 0.0
-    return replace(state, x=x, cov=0.5 * (cov + cov.T))
+    return replace(state, x=x, cov=0.5 * (cov + cov.T), dt=dt)
 
 
 def _check_measurement(uv: NDArray, confidence: NDArray | None, n_parts: int
@@ -418,6 +421,7 @@ def update(state: TrackState, uv: NDArray[np.floating], confidence: NDArray[np.f
     # Gate each active part's detection on its own innovation (eq. 16's choice).
     accepted: list[int] = []
     restart: list[int] = []
+    drift_radius = config.drift_radius_px * max(1.0, state.dt / NOMINAL_DT_S)
     gated = np.flatnonzero(valid & active)
     if len(gated):
         pos = gated[:, None] * b + np.arange(2)[None, :]
@@ -436,7 +440,7 @@ def update(state: TrackState, uv: NDArray[np.floating], confidence: NDArray[np.f
             last_rejected[i] = np.nan
             continue
         consistent = np.all(np.isfinite(last_rejected[i])) and \
-            float(np.hypot(*(z[i] - last_rejected[i]))) <= config.drift_radius_px
+            float(np.hypot(*(z[i] - last_rejected[i]))) <= drift_radius
         rejected[i] = rejected[i] + 1 if consistent else 1
         last_rejected[i] = z[i]
         if config.drift_frames > 0 and rejected[i] >= config.drift_frames:
