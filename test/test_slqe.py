@@ -311,3 +311,21 @@ def test_output_shapes_and_missing_parts() -> None:
     assert_allclose(out.confidence[[0, 1, 3]], 0.8)
     valid = out.source != Source.MISSING
     assert np.isfinite(out.positions[valid]).all()
+
+
+def test_irregular_stamps() -> None:
+    """Frame intervals of 1-8 frames at 30 fps: still filtered, and a real jump re-acquired."""
+    rng = np.random.default_rng(6)
+    steps = rng.choice([1, 2, 4, 8], 150) / FPS
+    t = np.concatenate([[0.0], np.cumsum(steps)])
+    start = rng.uniform(60, 260, (10, 2))
+    vel = rng.uniform(-30, 30, 2) + rng.uniform(-5, 5, (10, 2))
+    truth = start + vel * t[:, None, None]
+    truth[100:, 3] += [0.0, 80.0]  # the left wrist really jumps
+    noisy = truth + rng.normal(0, 3.0, truth.shape)
+    pos, src = run(SlqeTracker(SlqeConfig(), PARTS_10), t, noisy)
+    keep = np.ones(len(t), bool)
+    keep[:20] = keep[100:104] = False
+    assert err(pos, truth)[keep].mean() < 0.85 * err(noisy, truth)[keep].mean()
+    assert (src[104:, 3] == Source.DETECTED).mean() > 0.9
+    assert err(pos[110:, 3], truth[110:, 3]).max() < 10.0
