@@ -62,9 +62,9 @@ def tracker_stage(p: dict[str, Any]) -> TrackerStage:
                       gate_chi2=p['tracker.gate_chi2'],
                       max_missed_frames=p['tracker.max_missed_frames'],
                       max_dt_s=p['tracker.max_dt_s'])
+    # the comparison filter keeps its own tuned noise levels (core.slqe.CvConfig)
     cv = CvConfig(max_missed_frames=p['tracker.max_missed_frames'],
-                  max_dt_s=p['tracker.max_dt_s'],
-                  measurement_noise_px=p['tracker.measurement_noise_px'])
+                  max_dt_s=p['tracker.max_dt_s'])
     return TrackerStage(kind=p['tracker.kind'], slqe=slqe, cv=cv,
                         depth_std_m=p['tracker.depth_std_m'])
 
