@@ -4,6 +4,9 @@ The ROS nodes (`foreground`, `detector`, `tracker`, `ik`, and `pipeline` with al
 process) and the offline tools (`pose4d eval`, `bench`, `demo`) call these same objects, so an
 offline evaluation and a live run of the graph give the same answers on the same frames.
 
+- `DetectorStage`: the 4D deformable part model (`core.dpm`) on the masked frame; each part's
+  pixel is lifted to 3-D with the robust depth of the person's pixels around it.
+
 - `TrackerStage`: the SLQE Kalman filter (`core.slqe`, eqs. 6-16) on the detected parts' pixels,
   plus each part's depth carried from its last detection, so tracked parts have a 3-D position
   too (back-projected with the camera's intrinsics).
@@ -21,7 +24,9 @@ import numpy as np
 from numpy.typing import NDArray
 
 from pose4d_ros.core import joints as cj
-from pose4d_ros.core.camera import Intrinsics, backproject, project
+from pose4d_ros.core.camera import Intrinsics, backproject, project, robust_depth
+from pose4d_ros.core.dpm.infer import Detector, SearchConfig
+from pose4d_ros.core.dpm.model import PartModel
 from pose4d_ros.core.joints import JointSet
 from pose4d_ros.core.kinematics import IkConfig, IkFlag, LimbLengths, infer_middle_joints
 from pose4d_ros.core.skeleton import LIMBS, PARTS_10, SKELETON_14, PartTree
@@ -50,6 +55,58 @@ def reorder(joints: JointSet, names: tuple[str, ...]) -> JointSet:
                                                       joints.covariance[k])
     return JointSet(names, uv, xyz, confidence=conf, source=src, covariance=cov,
                     score=joints.score, track_id=joints.track_id)
+
+
+class DetectorStage:
+    """Part detection in one frame: the best pose of the part model, lifted to 3-D.
+
+    Parameters
+    ----------
+    model : a trained part model (`core.dpm.model.load_model`); its channels say whether the
+        depth HOG is used ('rgbd') or not ('rgb', the Yang & Ramanan baseline).
+    search : where and at which scales to search (`core.dpm.infer.SearchConfig`).
+    depth_radius_px : half-size of the window of the robust depth look-up, pixels.
+    min_confidence : parts less confident than this are reported MISSING.
+    """
+
+    def __init__(self, model: PartModel, *, search: SearchConfig | None = None,
+                 depth_radius_px: int = 3, min_confidence: float = 0.0) -> None:
+        if depth_radius_px < 0:
+            raise ValueError(f'depth_radius_px must be >= 0, got {depth_radius_px}')
+        if not 0.0 <= min_confidence <= 1.0:
+            raise ValueError(f'min_confidence must be in [0, 1], got {min_confidence}')
+        self.model = model
+        self.detector = Detector(model, search)
+        self.depth_radius_px = depth_radius_px
+        self.min_confidence = min_confidence
+        self.last_flags: tuple[str, ...] = ()
+
+    @property
+    def names(self) -> tuple[str, ...]:
+        return self.model.part_names
+
+    def step(self, color: NDArray[np.uint8], depth_m: NDArray[np.floating] | None,
+             intrinsics: Intrinsics | None, *, mask: NDArray[np.bool_] | None = None
+             ) -> JointSet:
+        """The detected parts of one frame (all MISSING when there is no person to search).
+
+        `last_flags` tells why a result is doubtful ('no_person', 'low_score', 'no_depth').
+        """
+        poses = self.detector.detect(color, depth_m, mask=mask, intrinsics=intrinsics)
+        if not poses:
+            self.last_flags = ('no_person',)
+            return JointSet.missing(self.names)
+        pose = poses[0]
+        self.last_flags = pose.flags
+        conf = pose.confidence.astype(np.float32)
+        src = np.where(conf >= self.min_confidence, cj.DETECTED, cj.MISSING).astype(np.uint8)
+        uv = np.where(src[:, None] == cj.DETECTED, pose.uv, np.nan)
+        xyz = np.full((len(self.names), 3), np.nan)
+        if depth_m is not None and intrinsics is not None:
+            z = robust_depth(depth_m, uv, radius=self.depth_radius_px, mask=mask)
+            xyz = backproject(uv, z, intrinsics)
+        return JointSet(self.names, uv, xyz, confidence=np.where(src == cj.DETECTED, conf, 0),
+                        source=src, score=float(pose.score))
 
 
 class TrackerStage:

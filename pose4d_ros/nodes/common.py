@@ -109,3 +109,30 @@ class StageMonitor:
         self._pub.publish(DiagnosticArray(
             header=Header(stamp=self._node.get_clock().now().to_msg()), status=[status]))
 
+
+
+class LatestOnly:
+    """Process only the newest of the frames that arrive while a slow callback runs.
+
+    `submit(item)` keeps `item` as the pending frame (a frame still pending is dropped and
+    counted on the monitor) and wakes the executor through a guard condition, whose callback
+    processes the pending frame. A slow stage thus never builds a backlog.
+    """
+
+    def __init__(self, node: Node, process: Callable[[object], None],
+                 monitor: StageMonitor) -> None:
+        self._process = process
+        self._monitor = monitor
+        self._pending: object | None = None
+        self._guard = node.create_guard_condition(self._run)
+
+    def submit(self, item: object) -> None:
+        if self._pending is not None:
+            self._monitor.dropped()
+        self._pending = item
+        self._guard.trigger()
+
+    def _run(self) -> None:
+        item, self._pending = self._pending, None
+        if item is not None:
+            self._process(item)
