@@ -20,7 +20,8 @@ import warnings
 import numpy as np
 from numpy.typing import NDArray
 
-from pose4d_ros.core.skeleton import JOINT_GROUPS, TABLE_GROUPS
+from pose4d_ros.core.joints import MISSING, JointSet
+from pose4d_ros.core.skeleton import JOINT_GROUPS, TABLE_GROUPS, ground_truth_name
 
 
 def reference_size(gt: NDArray[np.floating], visible: NDArray[np.bool_]) -> NDArray[np.float64]:
@@ -155,3 +156,38 @@ def _with_average(values: dict[str, float]) -> dict[str, float]:
     out = {g: values[g] for g in JOINT_GROUPS if g in values}
     out['average'] = float(np.mean(core)) if core else float('nan')
     return out
+
+
+def score_joint_sets(predictions: list[JointSet | None], truths: list[JointSet],
+                     names: tuple[str, ...], *, alphas: tuple[float, ...] = (0.1, 0.2)
+                     ) -> dict[str, dict[str, float]]:
+    """The table of `score_groups` for frame-aligned predictions and ground truths.
+
+    Parameters
+    ----------
+    predictions : one JointSet per frame (None = no output for that frame: every joint wrong).
+        MISSING joints count as not predicted; a joint's confidence is its APK score.
+    truths : the ground truth of each frame, e.g. CAD-60's 15 joints; a joint is visible when
+        its confidence is positive and its pixel finite. Names are looked up through
+        `skeleton.ground_truth_name` (a predicted `left_wrist` is scored against CAD-60's
+        `left_hand`).
+    names : the joints to score (predicted names).
+    """
+    if len(predictions) != len(truths):
+        raise ValueError(f'{len(predictions)} predictions for {len(truths)} frames')
+    f, j = len(truths), len(names)
+    pred = np.full((f, j, 2), np.nan)
+    scores = np.full((f, j), np.nan)
+    gt = np.full((f, j, 2), np.nan)
+    visible = np.zeros((f, j), bool)
+    for k, (p, t) in enumerate(zip(predictions, truths, strict=True)):
+        for i, name in enumerate(names):
+            ti = t.get(ground_truth_name(name))
+            if ti is not None:
+                gt[k, i] = t.uv[ti]
+                visible[k, i] = bool(t.confidence[ti] > 0) and bool(np.isfinite(t.uv[ti]).all())
+            pi = p.get(name) if p is not None else None
+            if pi is not None and p.source[pi] != MISSING:
+                pred[k, i] = p.uv[pi]
+                scores[k, i] = p.confidence[pi]
+    return score_groups(pred, scores, gt, visible, names, alphas=alphas)
