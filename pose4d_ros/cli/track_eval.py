@@ -93,12 +93,12 @@ def _jsonable(value: object) -> object:
 def _print_tracking(title: str, res: dict, out=sys.stdout) -> None:
     groups = [g for g in next(iter(res.values())) if g not in ('average', 'coverage')]
     print(f'\n{title}', file=out)
-    print(f"  {'method':<11}" + ''.join(f'{g:>9}' for g in groups) +
+    print(f"  {'method':<17}" + ''.join(f'{g:>9}' for g in groups) +
           f"{'average':>9}{'coverage':>9}{'vs input':>9}", file=out)
     base = res['input']['average']
     for method, table in res.items():
         red = 1.0 - table['average'] / base
-        print(f'  {method:<11}' + ''.join(f'{table[g]:9.2f}' for g in groups) +
+        print(f'  {method:<17}' + ''.join(f'{table[g]:9.2f}' for g in groups) +
               f"{table['average']:9.2f}{table['coverage']:9.3f}{100 * red:8.1f}%", file=out)
 
 
