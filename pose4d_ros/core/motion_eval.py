@@ -55,6 +55,9 @@ from pose4d_ros.datasets.utkinect import (
     to_optical,
 )
 
+# Index of each UTKinect joint by name.
+_UT = {n: i for i, n in enumerate(UTKINECT_JOINTS)}
+
 # UTKinect joint used for each part name that it spells differently.
 UTKINECT_NAMES: dict[str, str] = {'neck': 'shoulder_center'}
 
@@ -542,13 +545,6 @@ def take_lengths(segments: Sequence[Segment], mode: str) -> dict[str, dict[str, 
         out[take] = learner.as_dict()
     return out
 
-
-_UT = {n: i for i, n in enumerate(UTKINECT_JOINTS)}
-
-
-def _limb_arrays(seg: Segment, stride: int) -> dict[str, NDArray[np.float64]]:
-    j = seg.joints[::stride]
-    return {name: j[:, i] for name, i in _UT.items()}
 
 
 def _limb_samples(segments: Sequence[Segment], lengths: dict[str, dict[str, tuple]],
