@@ -1,0 +1,507 @@
+"""Exact inference in the 4D-DPM part model: the best poses of a colour (+ depth) image.
+
+Yang & Ramanan (PAMI 2013), section 4: for each pyramid level,
+
+1. all part-type filters (colour and depth halves alike) score every cell in ONE float32 GEMM:
+   the im2col matrix of the level's HOG (one row per filter position) times the stacked filters;
+2. messages pass from the leaves to the root (eq. 4): a child's score maps go through a
+   generalized distance transform per child type (`core.dpm.dt`, the spring of eq. 1 around
+   the type's anchor), then for each parent type the best child type is taken with the
+   co-occurrence bias b(t_parent, t_child) added;
+3. the root's map (plus its type bias) scores whole poses; the best root cells are backtracked
+   through the stored argmaxes to every part's cell and type.
+
+The 4D-DPM's use of depth (Martinez Berti et al.): the person's median depth z over the
+foreground mask gives the person's scale in pixels, fx * L / z (L = `model.scale_length_m`), so
+only the 1-3 pyramid levels that bring it to the model's canonical size are searched, and only
+inside the foreground box plus a margin. Without depth the whole scale range seen in training is
+searched (`SearchConfig.levels_per_octave`), as in Yang & Ramanan.
+
+Parallelism on the 2-core target: the GEMM is the only heavy dense kernel, so BLAS owns the
+threads (OpenBLAS's default); HOG, the distance transforms and backtracking are single-threaded
+numba (no `parallel=True`). Measured with `pose4d bench` (see the models' README): a second
+BLAS thread and numba threads never made the per-frame detector faster on the shared 2 cores.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numba as nb
+import numpy as np
+from numpy.typing import NDArray
+
+from pose4d_ros.core.camera import Intrinsics, cad60_intrinsics
+from pose4d_ros.core.dpm.dt import NEG, dt2d
+from pose4d_ros.core.dpm.model import PartModel
+from pose4d_ros.core.hog import Level, depth_image, feature_pyramid
+
+
+@dataclass(frozen=True)
+class SearchConfig:
+    """Where and at which scales the detector looks.
+
+    Attributes
+    ----------
+    n_levels : levels searched around the depth-predicted scale (1-3).
+    level_step : scale ratio between neighbouring levels (depth-guided search).
+    levels_per_octave : pyramid density of the depth-free search.
+    margin : search-box margin around the foreground box, in person scales (fx * L / z).
+    mask_input : blank colour (0) and depth (no reading) outside the mask before features.
+    low_score : poses scoring below this are flagged 'low_score' (0 = the SVM's boundary).
+    nms_overlap : top-k suppression: pose boxes overlapping more than this (IoU) are dropped.
+    """
+
+    n_levels: int = 3
+    level_step: float = 2.0 ** 0.2
+    levels_per_octave: int = 5
+    margin: float = 0.6
+    mask_input: bool = False
+    low_score: float = 0.0
+    nms_overlap: float = 0.5
+
+    def __post_init__(self) -> None:
+        if not 1 <= self.n_levels <= 9:
+            raise ValueError(f'n_levels must be in 1..9, got {self.n_levels}')
+        if not self.level_step > 1.0:
+            raise ValueError(f'level_step must be > 1, got {self.level_step}')
+        if not 1 <= self.levels_per_octave <= 20:
+            raise ValueError(f'levels_per_octave must be in 1..20, got {self.levels_per_octave}')
+        if not self.margin >= 0:
+            raise ValueError(f'margin must be >= 0, got {self.margin}')
+        if not 0 < self.nms_overlap <= 1:
+            raise ValueError(f'nms_overlap must be in (0, 1], got {self.nms_overlap}')
+
+
+@dataclass(frozen=True)
+class Pose:
+    """One detected pose.
+
+    Attributes
+    ----------
+    names : P part names (the model's).
+    uv : (P, 2) float64 pixel (u, v) of each part's centre in the full colour image.
+    part_scores : (P,) float64 each part's share of the score (filter + spring + bias).
+    confidence : (P,) float64 in [0, 1] (the model's logistic calibration).
+    score : whole-pose score (the sum of `part_scores`).
+    scale : level pixels per image pixel of the level the pose was found on.
+    types : (P,) int mixture type of each part.
+    flags : why the pose is doubtful: 'low_score' (score < SearchConfig.low_score),
+        'no_depth' (an rgbd model ran without usable depth). Empty when all is well.
+    """
+
+    names: tuple[str, ...]
+    uv: NDArray[np.float64]
+    part_scores: NDArray[np.float64]
+    confidence: NDArray[np.float64]
+    score: float
+    scale: float
+    types: NDArray[np.int64]
+    flags: tuple[str, ...] = ()
+
+    @property
+    def low_confidence(self) -> bool:
+        return bool(self.flags)
+
+
+# --------------------------------------------------------------------------- numba kernels
+
+
+@nb.njit(cache=True)
+def im2col(feat: NDArray[np.float32], fh: int, fw: int) -> NDArray[np.float32]:
+    """(ny*nx, fh*fw*C) float32: row (y*nx + x) = the (fh, fw, C) window at cell (y, x),
+    flattened row-major (the filters' layout)."""
+    h, w, c = feat.shape
+    ny = h - fh + 1
+    nx = w - fw + 1
+    row = fw * c
+    cols = np.empty((ny * nx, fh * row), np.float32)
+    for y in range(ny):
+        for x in range(nx):
+            r = y * nx + x
+            for i in range(fh):
+                base = i * row
+                for j in range(fw):
+                    for ch in range(c):
+                        cols[r, base + j * c + ch] = feat[y + i, x + j, ch]
+    return cols
+
+
+@nb.njit(cache=True)
+def tree_dp(resp: NDArray[np.float32], parents: NDArray[np.int64],
+            springs: NDArray[np.float32], anchors: NDArray[np.int32],
+            bias: NDArray[np.float32]):
+    """Message passing from the leaves to the root (Yang & Ramanan eq. 4).
+
+    Parameters
+    ----------
+    resp : (P, K, ny, nx) float32 filter responses.
+    parents, springs, anchors, bias : the model's (see `PartModel`).
+
+    Returns
+    -------
+    root : (K, ny, nx) float32 best pose score with the root of type k at each cell.
+    ix, iy : (P, K, ny, nx) int32 spring argmaxes of each child type (see `dt.dt2d`).
+    ik : (P, K, ny, nx) int32 best child type for each parent type and parent cell.
+    """
+    p_n, k_n, ny, nx = resp.shape
+    score = resp.copy()
+    ix = np.zeros((p_n, k_n, ny, nx), np.int32)
+    iy = np.zeros((p_n, k_n, ny, nx), np.int32)
+    ik = np.zeros((p_n, k_n, ny, nx), np.int32)
+    msg = np.empty((k_n, ny, nx), np.float32)
+    tmp = np.empty((ny, nx), np.float32)
+    for c in range(p_n - 1, 0, -1):
+        par = parents[c]
+        for k in range(k_n):
+            dt2d(score[c, k], springs[c, k, 0], springs[c, k, 1], springs[c, k, 2],
+                 springs[c, k, 3], anchors[c, k, 0], anchors[c, k, 1], msg[k], ix[c, k],
+                 iy[c, k], tmp)
+        for l in range(k_n):
+            for y in range(ny):
+                for x in range(nx):
+                    best = 2.0 * NEG
+                    bk = 0
+                    for k in range(k_n):
+                        s = msg[k, y, x] + bias[c, l, k]
+                        if s > best:
+                            best = s
+                            bk = k
+                    score[par, l, y, x] += best
+                    ik[c, l, y, x] = bk
+    root = np.empty((k_n, ny, nx), np.float32)
+    for k in range(k_n):
+        root[k] = score[0, k] + bias[0, 0, k]
+    return root, ix, iy, ik
+
+
+@nb.njit(cache=True)
+def backtrack(roots: NDArray[np.int64], parents: NDArray[np.int64], resp: NDArray[np.float32],
+              ix: NDArray[np.int32], iy: NDArray[np.int32], ik: NDArray[np.int32],
+              springs: NDArray[np.float32], anchors: NDArray[np.int32],
+              bias: NDArray[np.float32]):
+    """Follow the argmaxes from root cells to every part.
+
+    Parameters
+    ----------
+    roots : (N, 3) int (type, row, col) of the root.
+
+    Returns
+    -------
+    parts : (N, P, 3) int64 (type, row, col) per part.
+    local : (N, P) float32 each part's filter score + spring + bias (sums to the pose score).
+    """
+    n = roots.shape[0]
+    p_n = parents.shape[0]
+    out = np.empty((n, p_n, 3), np.int64)
+    local = np.empty((n, p_n), np.float32)
+    for j in range(n):
+        t, y, x = roots[j, 0], roots[j, 1], roots[j, 2]
+        out[j, 0, 0] = t
+        out[j, 0, 1] = y
+        out[j, 0, 2] = x
+        local[j, 0] = resp[0, t, y, x] + bias[0, 0, t]
+        for c in range(1, p_n):
+            par = parents[c]
+            lt, py, px = out[j, par, 0], out[j, par, 1], out[j, par, 2]
+            k = ik[c, lt, py, px]
+            cy = iy[c, k, py, px]
+            cx = ix[c, k, cy, px]
+            out[j, c, 0] = k
+            out[j, c, 1] = cy
+            out[j, c, 2] = cx
+            dx = cx - px - anchors[c, k, 0]
+            dy = cy - py - anchors[c, k, 1]
+            sp = springs[c, k]
+            local[j, c] = (resp[c, k, cy, cx] - (sp[0] * dx + sp[1] * dx * dx + sp[2] * dy
+                                                  + sp[3] * dy * dy) + bias[c, lt, k])
+    return out, local
+
+
+# --------------------------------------------------------------------------- one level
+
+
+@dataclass(frozen=True)
+class LevelResult:
+    """The DP of one level, kept for backtracking (and for training's feature extraction)."""
+
+    level: Level
+    resp: NDArray[np.float32]   # (P, K, ny, nx)
+    root: NDArray[np.float32]   # (K, ny, nx)
+    ix: NDArray[np.int32]
+    iy: NDArray[np.int32]
+    ik: NDArray[np.int32]
+
+
+def model_arrays(model: PartModel) -> tuple:
+    """The model's arrays in the dtypes the numba kernels take (computed once per model)."""
+    return (np.ascontiguousarray(model.filter_matrix()),
+            np.asarray(model.parents, np.int64),
+            np.ascontiguousarray(model.springs, np.float32),
+            np.ascontiguousarray(model.anchors, np.int32),
+            np.ascontiguousarray(model.bias, np.float32))
+
+
+def score_level(level: Level, model: PartModel, arrays: tuple | None = None
+                ) -> LevelResult | None:
+    """Filter responses (one GEMM) and the tree DP on one pyramid level; None if the level is
+    smaller than a filter."""
+    wmat, parents, springs, anchors, bias = arrays if arrays is not None else model_arrays(model)
+    fh, fw = model.filter_shape
+    h, w, _ = level.feat.shape
+    ny, nx = h - fh + 1, w - fw + 1
+    if ny < 1 or nx < 1:
+        return None
+    cols = im2col(level.feat, fh, fw)
+    resp = (wmat @ cols.T).reshape(model.n_parts, model.n_types, ny, nx)
+    root, ix, iy, ik = tree_dp(resp, parents, springs, anchors, bias)
+    return LevelResult(level, resp, root, ix, iy, ik)
+
+
+def best_roots(result: LevelResult, count: int, threshold: float = -np.inf,
+               min_dist: int = 1) -> NDArray[np.int64]:
+    """Up to `count` root cells (type, row, col) with the highest scores >= threshold, at least
+    `min_dist` cells apart (Chebyshev), best first."""
+    best = result.root.max(axis=0)
+    btype = result.root.argmax(axis=0)
+    if count == 1:
+        r, c = np.unravel_index(int(np.argmax(best)), best.shape)
+        if best[r, c] < threshold:
+            return np.zeros((0, 3), np.int64)
+        return np.array([[btype[r, c], r, c]], np.int64)
+    order = np.argsort(-best, axis=None, kind='stable')
+    flat = best.ravel()
+    picked: list[tuple[int, int, int]] = []
+    for idx in order:
+        if flat[idx] < threshold or len(picked) >= count:
+            break
+        r, c = divmod(int(idx), best.shape[1])
+        if all(max(abs(r - pr), abs(c - pc)) >= min_dist for _, pr, pc in picked):
+            picked.append((int(btype[r, c]), r, c))
+    return np.array(picked, np.int64).reshape(-1, 3)
+
+
+# --------------------------------------------------------------------------- the detector
+
+
+def _sigmoid(x: NDArray) -> NDArray:
+    return 1.0 / (1.0 + np.exp(-np.clip(x, -50, 50)))
+
+
+def _box_iou(a: NDArray, b: NDArray) -> float:
+    iw = min(a[2], b[2]) - max(a[0], b[0])
+    ih = min(a[3], b[3]) - max(a[1], b[1])
+    if iw <= 0 or ih <= 0:
+        return 0.0
+    inter = iw * ih
+    union = (a[2] - a[0]) * (a[3] - a[1]) + (b[2] - b[0]) * (b[3] - b[1]) - inter
+    return float(inter / union) if union > 0 else 0.0
+
+
+@dataclass(frozen=True)
+class SearchPlan:
+    """Where a frame is searched: the crop (full-image pixels) and the level scales."""
+
+    x0: int
+    y0: int
+    x1: int
+    y1: int
+    scales: tuple[float, ...]
+    depth_guided: bool
+
+
+class Detector:
+    """A part model ready to run (its arrays prepared once), with its search settings.
+
+    `Detector(model).detect(color, depth_m, mask=...)` is the call the ROS node makes per frame.
+    """
+
+    def __init__(self, model: PartModel, config: SearchConfig | None = None) -> None:
+        self.model = model
+        self.config = config or SearchConfig()
+        self._arrays = model_arrays(model)
+
+    # ---------------------------------------------------------------- planning
+    def plan(self, shape: tuple[int, int], depth_m: NDArray | None, *,
+             mask: NDArray[np.bool_] | None = None, box: tuple | None = None,
+             intrinsics: Intrinsics | None = None) -> SearchPlan | None:
+        """Choose the crop and the levels for a frame of `shape` = (H, W); None if there is
+        nothing to search (empty mask, frame too small)."""
+        h, w = shape
+        m, cfg = self.model, self.config
+        if mask is not None:
+            if mask.shape != (h, w):
+                raise ValueError(f'mask shape {mask.shape} does not match the image {(h, w)}')
+            rows = np.flatnonzero(mask.any(axis=1))
+            if rows.size == 0:
+                return None
+            cols = np.flatnonzero(mask.any(axis=0))
+            bx = (float(cols[0]), float(rows[0]), float(cols[-1] + 1), float(rows[-1] + 1))
+        elif box is not None:
+            bx = tuple(float(v) for v in box)
+            if len(bx) != 4 or not (bx[2] > bx[0] and bx[3] > bx[1]):
+                raise ValueError(f'box must be (x0, y0, x1, y1) with x1 > x0, y1 > y0, got {box}')
+        else:
+            bx = None
+
+        z = np.nan
+        if depth_m is not None:
+            d = np.asarray(depth_m)
+            if d.shape != (h, w):
+                raise ValueError(f'depth shape {d.shape} does not match the image {(h, w)}')
+            if mask is not None:
+                vals = d[mask]
+            elif bx is not None:
+                x0, y0, x1, y1 = (int(round(v)) for v in bx)
+                vals = d[max(y0, 0):max(y1, 0), max(x0, 0):max(x1, 0)].ravel()
+            else:
+                vals = np.zeros(0, np.float32)  # no person region: depth cannot give the scale
+            vals = vals[np.isfinite(vals) & (vals > 0)]
+            if vals.size:
+                z = float(np.median(vals))
+        if np.isfinite(z):
+            k = intrinsics or cad60_intrinsics(w, h)
+            s_pred = k.fx * m.scale_length_m / z
+            f0 = m.canonical_scale_px / s_pred
+            n = cfg.n_levels
+            scales = tuple(f0 * cfg.level_step ** (i - (n - 1) / 2) for i in range(n))
+            margin = cfg.margin * s_pred
+            guided = True
+        else:
+            lo, hi = m.scale_range_px
+            n = max(int(np.ceil(np.log2(hi / lo) * cfg.levels_per_octave)) + 1, 1)
+            scales = tuple(m.canonical_scale_px / (lo * (hi / lo) ** (i / max(n - 1, 1)))
+                           for i in range(n))
+            margin = cfg.margin * float(np.sqrt(lo * hi))
+            guided = False
+        if bx is None:
+            x0, y0, x1, y1 = 0, 0, w, h
+        else:
+            x0 = max(int(np.floor(bx[0] - margin)), 0)
+            y0 = max(int(np.floor(bx[1] - margin)), 0)
+            x1 = min(int(np.ceil(bx[2] + margin)), w)
+            y1 = min(int(np.ceil(bx[3] + margin)), h)
+        if x1 - x0 < 3 or y1 - y0 < 3:
+            return None
+        return SearchPlan(x0, y0, x1, y1, scales, guided)
+
+    def pyramid(self, color: NDArray, depth_m: NDArray | None, plan: SearchPlan, *,
+                mask: NDArray[np.bool_] | None = None) -> list[Level]:
+        """Padded HOG levels of the plan's crop (colour, + depth for an rgbd model)."""
+        m = self.model
+        sl = np.s_[plan.y0:plan.y1, plan.x0:plan.x1]
+        col = np.asarray(color)[sl]
+        if col.ndim == 2:
+            col = col[:, :, None]
+        dep = None
+        if m.channels == 'rgbd':
+            dcrop = (np.full(col.shape[:2], np.nan, np.float32) if depth_m is None
+                     else np.asarray(depth_m, np.float32)[sl])
+            if self.config.mask_input and mask is not None:
+                dcrop = np.where(mask[sl], dcrop, np.nan)
+            dep = depth_image(dcrop, m.depth_encoding, near_m=m.depth_range_m[0],
+                              far_m=m.depth_range_m[1])
+        if self.config.mask_input and mask is not None:
+            col = np.where(mask[sl][:, :, None], col, 0)
+        fh, fw = m.filter_shape
+        pad = (fh // 2 + 1, fw // 2 + 1)
+        return feature_pyramid(col, dep, plan.scales, sbin=m.sbin, pad=pad,
+                               origin=(plan.x0, plan.y0))
+
+    # ---------------------------------------------------------------- detection
+    def detect(self, color: NDArray, depth_m: NDArray | None = None, *,
+               mask: NDArray[np.bool_] | None = None, box: tuple | None = None,
+               intrinsics: Intrinsics | None = None, top_k: int = 1) -> list[Pose]:
+        """The best `top_k` poses in a frame.
+
+        Parameters
+        ----------
+        color : (H, W, 3) uint8 colour (channel order does not matter), or (H, W) grey.
+        depth_m : (H, W) float32 metres, NaN = no reading, registered to `color`; None for
+            colour only (then the whole trained scale range is searched).
+        mask : (H, W) bool person mask (from `core.foreground`): bounds the search and gives
+            the person's depth.
+        box : (x0, y0, x1, y1) pixels, used when no mask is given.
+        intrinsics : the colour camera; default CAD-60's at the image size.
+        top_k : poses returned at most (non-maximum suppressed by pose-box overlap).
+
+        Returns
+        -------
+        Poses, best first; empty when there is nothing to search (empty mask, a frame smaller
+        than a filter). Doubtful poses carry `flags` (see `Pose`).
+        """
+        color = np.asarray(color)
+        if color.ndim not in (2, 3) or color.shape[0] == 0 or color.shape[1] == 0:
+            raise ValueError(f'color must be (H, W, 3) or (H, W), got shape {color.shape}')
+        if top_k < 1:
+            raise ValueError(f'top_k must be >= 1, got {top_k}')
+        plan = self.plan(color.shape[:2], depth_m, mask=mask, box=box, intrinsics=intrinsics)
+        if plan is None:
+            return []
+        flags: tuple[str, ...] = ()
+        if self.model.channels == 'rgbd' and not plan.depth_guided:
+            dok = depth_m is not None and np.isfinite(np.asarray(depth_m, np.float32)).any()
+            if not dok:
+                flags = ('no_depth',)
+        levels = self.pyramid(color, depth_m, plan, mask=mask)
+        return self.poses_from_levels(levels, top_k=top_k, flags=flags)
+
+    def poses_from_levels(self, levels: list[Level], *, top_k: int = 1,
+                          threshold: float = -np.inf, flags: tuple[str, ...] = ()
+                          ) -> list[Pose]:
+        """Run every level and return the best poses over all of them."""
+        cands: list[Pose] = []
+        per_level = 1 if top_k == 1 else 4 * top_k
+        for level in levels:
+            res = score_level(level, self.model, self._arrays)
+            if res is None:
+                continue
+            roots = best_roots(res, per_level, threshold, min_dist=2)
+            cands.extend(self._poses(res, roots, flags))
+        cands.sort(key=lambda p: -p.score)
+        if top_k == 1:
+            return cands[:1]
+        kept: list[Pose] = []
+        boxes: list[NDArray] = []
+        for p in cands:
+            b = np.array([p.uv[:, 0].min(), p.uv[:, 1].min(), p.uv[:, 0].max(),
+                          p.uv[:, 1].max()])
+            if all(_box_iou(b, q) <= self.config.nms_overlap for q in boxes):
+                kept.append(p)
+                boxes.append(b)
+            if len(kept) >= top_k:
+                break
+        return kept
+
+    def _poses(self, res: LevelResult, roots: NDArray[np.int64], flags: tuple[str, ...]
+               ) -> list[Pose]:
+        if len(roots) == 0:
+            return []
+        _, parents, springs, anchors, bias = self._arrays
+        parts, local = backtrack(roots, parents, res.resp, res.ix, res.iy, res.ik, springs,
+                                 anchors, bias)
+        m = self.model
+        out = []
+        for j in range(len(roots)):
+            u, v = res.level.cell_to_pixel(parts[j, :, 1], parts[j, :, 2], m.filter_shape)
+            loc = local[j].astype(np.float64)
+            total = float(loc.sum())
+            if m.calibration is not None:
+                c = m.calibration.astype(np.float64)
+                conf = _sigmoid(c[:, 0] * loc + c[:, 1] * total + c[:, 2])
+            else:
+                conf = _sigmoid(loc)
+            f = flags + (('low_score',) if total < self.config.low_score else ())
+            out.append(Pose(m.part_names, np.stack([u, v], axis=1), loc, conf, total,
+                            res.level.scale, parts[j, :, 0].copy(), f))
+        return out
+
+
+def detect(color: NDArray, depth_m: NDArray | None, model: PartModel, *,
+           mask: NDArray[np.bool_] | None = None, box: tuple | None = None,
+           intrinsics: Intrinsics | None = None, top_k: int = 1,
+           config: SearchConfig | None = None) -> list[Pose]:
+    """The best poses of a frame (see `Detector.detect`; build a `Detector` once to skip the
+    per-call preparation of the model's arrays)."""
+    return Detector(model, config).detect(color, depth_m, mask=mask, box=box,
+                                          intrinsics=intrinsics, top_k=top_k)
