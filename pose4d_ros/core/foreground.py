@@ -43,6 +43,7 @@ from dataclasses import dataclass, field
 
 import cv2
 import numpy as np
+from numba import njit
 from numpy.typing import NDArray
 
 from pose4d_ros.core.camera import Intrinsics, depth_to_metres
@@ -69,11 +70,18 @@ class ForegroundConfig:
         It is also the largest region MSER reports.
     mser_max_variation : the paper's stability score: largest relative area change over
         +-delta levels for a region to be stable.
-    mser_min_diversity : OpenCV's pruning of nested regions of almost the same size (0 = keep
-        all).
+    connectivity : pixel neighbourhood of the regions, 4 or 8.
     person_min_height_m, person_max_height_m : height of a person region, metres (box height
         times median depth over fy).
     person_min_width_m, person_max_width_m : width, metres (box width times depth over fx).
+    person_min_area_m2, person_max_area_m2 : surface of a person region seen from the
+        camera, square metres (pixels times depth squared over fx fy).
+    person_max_fill : largest fraction of its box a person region fills (furniture and wall
+        pieces fill their boxes).
+    border_penalty : score taken from a region that touches the left or right image border.
+    merge_slack : factor on the upper person bounds for whole regions, before they are split
+        at depth gaps (a region may hold an occluder or furniture besides the person).
+    max_candidates : regions (best first) whose pixels are examined.
     floor_remove : fit and drop the floor plane before MSER.
     floor_rows_fraction : lower fraction of the image rows searched for the floor.
     floor_sample_step : pixel stride of the RANSAC sample grid.
@@ -87,8 +95,9 @@ class ForegroundConfig:
     occluder_gap_m : an empty depth gap wider than this inside the chosen region separates a
         nearer object (an occluder) from the person, metres; 0 disables the cut.
     fill_holes : fill holes of the mask that have no depth reading.
-    previous_bonus : with `previous`, score multiplier for a region whose box overlaps the
-        previous box (1 = no temporal preference).
+    stability_weight : a region's score is ``log(area) - stability_weight * variation``.
+    previous_bonus : with `previous`, score added to a region whose box overlaps the previous
+        box by more than 0.3 (intersection over union); 0 = no temporal preference.
     seed : RANSAC random seed (the result is a function of the input).
     """
 
@@ -98,11 +107,17 @@ class ForegroundConfig:
     mser_min_area_px: int = 60
     max_region_area_px: int = 30000
     mser_max_variation: float = 0.5
-    mser_min_diversity: float = 0.1
+    connectivity: int = 8
     person_min_height_m: float = 0.6
     person_max_height_m: float = 2.3
     person_min_width_m: float = 0.15
     person_max_width_m: float = 2.0
+    person_min_area_m2: float = 0.1
+    person_max_area_m2: float = 1.2
+    person_max_fill: float = 0.8
+    border_penalty: float = 1.0
+    merge_slack: float = 2.0
+    max_candidates: int = 6
     floor_remove: bool = True
     floor_rows_fraction: float = 0.5
     floor_sample_step: int = 4
@@ -115,7 +130,8 @@ class ForegroundConfig:
     floor_min_inliers: int = 40
     occluder_gap_m: float = 0.3
     fill_holes: bool = True
-    previous_bonus: float = 1.5
+    stability_weight: float = 30.0
+    previous_bonus: float = 0.5
     seed: int = 0
 
     def __post_init__(self) -> None:
@@ -131,10 +147,10 @@ class ForegroundConfig:
                              f'max_region_area_px={self.max_region_area_px}')
         if not self.mser_max_variation > 0:
             raise ValueError(f'mser_max_variation must be positive, got {self.mser_max_variation}')
-        if not 0.0 <= self.mser_min_diversity < 1.0:
-            raise ValueError(f'mser_min_diversity must be in [0, 1), got '
-                             f'{self.mser_min_diversity}')
+        if self.connectivity not in (4, 8):
+            raise ValueError(f'connectivity must be 4 or 8, got {self.connectivity}')
         for lo, hi in (('person_min_height_m', 'person_max_height_m'),
+                       ('person_min_area_m2', 'person_max_area_m2'),
                        ('person_min_width_m', 'person_max_width_m'),
                        ('floor_min_height_m', 'floor_max_height_m')):
             a, b = getattr(self, lo), getattr(self, hi)
@@ -143,7 +159,10 @@ class ForegroundConfig:
         if not 0.0 < self.floor_rows_fraction <= 1.0:
             raise ValueError(f'floor_rows_fraction must be in (0, 1], got '
                              f'{self.floor_rows_fraction}')
-        for name in ('floor_sample_step', 'floor_iterations', 'floor_min_inliers'):
+        if not self.merge_slack >= 1.0:
+            raise ValueError(f'merge_slack must be >= 1, got {self.merge_slack}')
+        for name in ('floor_sample_step', 'floor_iterations', 'floor_min_inliers',
+                     'max_candidates'):
             if getattr(self, name) < 1:
                 raise ValueError(f'{name} must be >= 1, got {getattr(self, name)}')
         for name in ('floor_inlier_m', 'floor_tolerance_m'):
@@ -154,8 +173,11 @@ class ForegroundConfig:
                              f'{self.floor_max_tilt_deg}')
         if not self.occluder_gap_m >= 0:
             raise ValueError(f'occluder_gap_m must be >= 0, got {self.occluder_gap_m}')
-        if not self.previous_bonus >= 1.0:
-            raise ValueError(f'previous_bonus must be >= 1, got {self.previous_bonus}')
+        if not 0.0 < self.person_max_fill <= 1.0:
+            raise ValueError(f'person_max_fill must be in (0, 1], got {self.person_max_fill}')
+        for name in ('stability_weight', 'previous_bonus', 'border_penalty'):
+            if not getattr(self, name) >= 0:
+                raise ValueError(f'{name} must be >= 0, got {getattr(self, name)}')
 
     @property
     def metres_per_level(self) -> float:
@@ -340,31 +362,6 @@ def depth_to_levels(depth_m: NDArray[np.floating], *,
     return np.where(valid, g, 0).astype(np.uint8)
 
 
-def _mser(config: ForegroundConfig, max_area: int) -> cv2.MSER:
-    mser = cv2.MSER_create(delta=config.mser_delta, min_area=config.mser_min_area_px,
-                           max_area=max_area, max_variation=config.mser_max_variation,
-                           min_diversity=config.mser_min_diversity)
-    mser.setPass2Only(True)  # bright regions only: near objects in our encoding
-    return mser
-
-
-def _split_occluder(z: NDArray[np.float32], gap_m: float) -> float:
-    """Depth above which the region's far cluster starts, or -inf when no gap.
-
-    z : (N,) depths of the region's pixels (finite). A gap is a run of empty histogram bins
-    at least `gap_m` wide; the far side of the farthest gap is kept.
-    """
-    if gap_m <= 0 or z.size < 2:
-        return -math.inf
-    zs = np.sort(z)
-    gaps = np.diff(zs)
-    big = np.flatnonzero(gaps > gap_m)
-    if big.size == 0:
-        return -math.inf
-    k = int(big[-1])
-    return float(zs[k] + zs[k + 1]) * 0.5
-
-
 def _fill_holes(mask: NDArray[np.bool_], fillable: NDArray[np.bool_],
                 box: tuple[int, int, int, int]) -> None:
     """Fill, in place, the holes of `mask` (inside `box`) made only of `fillable` pixels."""
@@ -401,6 +398,165 @@ def _overlap(a: tuple[int, int, int, int], b: tuple[int, int, int, int]) -> floa
         return 0.0
     inter = iw * ih
     return inter / float((a[2] - a[0]) * (a[3] - a[1]) + (b[2] - b[0]) * (b[3] - b[1]) - inter)
+
+
+# ------------------------------------------------------------------------------------------
+# Component tree of the upper level sets {g >= t} (union-find, Najman & Couprie 2006)
+# ------------------------------------------------------------------------------------------
+
+@njit(cache=True)
+def _find(parent: NDArray[np.int64], p: int) -> int:
+    while parent[p] != p:
+        parent[p] = parent[parent[p]]  # path halving
+        p = parent[p]
+    return p
+
+
+@njit(cache=True)
+def _component_tree(g: NDArray[np.uint8], conn8: bool) -> tuple:
+    """Every extremal region of `g` (components of ``{g >= t}``, t = 255..1) as tree nodes.
+
+    A node is recorded for each component at each level at which it gains pixels; its parent
+    is the node that contains it at the next lower level where anything changes. Nodes come
+    out in order of decreasing level, so a parent's index is larger than its children's.
+
+    Returns
+    -------
+    level, size, x0, y0, x1, y1 (box, x1/y1 exclusive), gsum (sum of the levels of its
+    pixels), seed (flat index of one of its pixels), parent (-1 for a top node); each (M,).
+    """
+    h, w = g.shape
+    n = h * w
+    flat = g.ravel()
+    counts = np.zeros(256, np.int64)
+    for i in range(n):
+        counts[flat[i]] += 1
+    start = np.zeros(256, np.int64)
+    pos = 0
+    for lv in range(255, 0, -1):
+        start[lv] = pos
+        pos += counts[lv]
+    m = pos
+    order = np.empty(m, np.int64)
+    fill = start.copy()
+    for i in range(n):
+        lv = flat[i]
+        if lv > 0:
+            order[fill[lv]] = i
+            fill[lv] += 1
+
+    parent = np.full(n, -1, np.int64)
+    size = np.zeros(n, np.int64)
+    bx0 = np.zeros(n, np.int32)
+    by0 = np.zeros(n, np.int32)
+    bx1 = np.zeros(n, np.int32)
+    by1 = np.zeros(n, np.int32)
+    gs = np.zeros(n, np.float64)
+    last = np.full(n, -1, np.int64)
+    stamp = np.zeros(n, np.int32)
+    newnode = np.zeros(n, np.int64)
+
+    n_level = np.empty(m, np.int32)
+    n_size = np.empty(m, np.int64)
+    n_x0 = np.empty(m, np.int32)
+    n_y0 = np.empty(m, np.int32)
+    n_x1 = np.empty(m, np.int32)
+    n_y1 = np.empty(m, np.int32)
+    n_gsum = np.empty(m, np.float64)
+    n_seed = np.empty(m, np.int64)
+    n_parent = np.full(m, -1, np.int64)
+    pend_node = np.empty(m, np.int64)
+    pend_root = np.empty(m, np.int64)
+    nn = 0
+    if conn8:
+        dys = np.array([-1, -1, -1, 0, 0, 1, 1, 1])
+        dxs = np.array([-1, 0, 1, -1, 1, -1, 0, 1])
+    else:
+        dys = np.array([-1, 0, 0, 1])
+        dxs = np.array([0, -1, 1, 0])
+    for lv in range(255, 0, -1):
+        s = start[lv]
+        e = s + counts[lv]
+        if s == e:
+            continue
+        npend = 0
+        for k in range(s, e):
+            p = order[k]
+            y = p // w
+            x = p - y * w
+            parent[p] = p
+            size[p] = 1
+            bx0[p] = x
+            by0[p] = y
+            bx1[p] = x + 1
+            by1[p] = y + 1
+            gs[p] = lv
+            last[p] = -1
+            for j in range(dys.shape[0]):
+                yy = y + dys[j]
+                xx = x + dxs[j]
+                if yy < 0 or yy >= h or xx < 0 or xx >= w:
+                    continue
+                q = yy * w + xx
+                if parent[q] < 0:
+                    continue
+                rp = _find(parent, p)
+                rq = _find(parent, q)
+                if rp == rq:
+                    continue
+                if size[rp] < size[rq]:
+                    rp, rq = rq, rp
+                parent[rq] = rp
+                size[rp] += size[rq]
+                bx0[rp] = min(bx0[rp], bx0[rq])
+                by0[rp] = min(by0[rp], by0[rq])
+                bx1[rp] = max(bx1[rp], bx1[rq])
+                by1[rp] = max(by1[rp], by1[rq])
+                gs[rp] += gs[rq]
+                if last[rq] >= 0:  # the loser's history hangs under the merged node
+                    pend_node[npend] = last[rq]
+                    pend_root[npend] = rp
+                    npend += 1
+                    last[rq] = -1
+        for k in range(s, e):
+            r = _find(parent, order[k])
+            if stamp[r] == lv:
+                continue
+            stamp[r] = lv
+            n_level[nn] = lv
+            n_size[nn] = size[r]
+            n_x0[nn] = bx0[r]
+            n_y0[nn] = by0[r]
+            n_x1[nn] = bx1[r]
+            n_y1[nn] = by1[r]
+            n_gsum[nn] = gs[r]
+            n_seed[nn] = r
+            if last[r] >= 0:
+                n_parent[last[r]] = nn
+            last[r] = nn
+            newnode[r] = nn
+            nn += 1
+        for j in range(npend):
+            n_parent[pend_node[j]] = newnode[_find(parent, pend_root[j])]
+    return (n_level[:nn], n_size[:nn], n_x0[:nn], n_y0[:nn], n_x1[:nn], n_y1[:nn],
+            n_gsum[:nn], n_seed[:nn], n_parent[:nn])
+
+
+@njit(cache=True)
+def _variation(level: NDArray[np.int32], size: NDArray[np.int64], parent: NDArray[np.int64],
+               delta: int, min_size: int) -> NDArray[np.float64]:
+    """(|R(t - delta)| - |R(t)|) / |R(t)| per node; NaN for nodes under `min_size` pixels."""
+    m = level.shape[0]
+    out = np.full(m, np.nan)
+    for i in range(m):
+        if size[i] < min_size:
+            continue
+        a = i
+        lo = level[i] - delta
+        while parent[a] >= 0 and level[parent[a]] >= lo:
+            a = parent[a]
+        out[i] = (size[a] - size[i]) / size[i]
+    return out
 
 
 def segment(depth_m: NDArray[np.floating], intrinsics: Intrinsics, *,
@@ -451,73 +607,150 @@ def segment(depth_m: NDArray[np.floating], intrinsics: Intrinsics, *,
                 drop = floor_height(depth, intrinsics, floor) < config.floor_tolerance_m
     g = depth_to_levels(depth, config=config, drop=drop)
 
-    max_area = min(config.max_region_area_px, h * w - 1)
-    if config.mser_min_area_px >= max_area:
-        return _not_found((h, w), REASON_TOO_SMALL, floor)
-    regions, boxes = _mser(config, max_area).detectRegions(g)
-    if len(regions) == 0:
+    tree = _component_tree(g, config.connectivity == 8)
+    level, size, x0, y0, x1, y1, gsum, seed, parent = tree
+    var = _variation(level, size, parent, config.mser_delta, config.mser_min_area_px)
+    with np.errstate(invalid='ignore'):
+        stable = (var <= config.mser_max_variation) & (size <= config.max_region_area_px)
+    cand = np.flatnonzero(stable)
+    if cand.size == 0:
         return _not_found((h, w), REASON_NO_REGION, floor)
 
-    near, mpl = config.depth_near_m, config.metres_per_level
+    # Stage 1, on the tree's statistics (box, mean depth): a region may still hold an occluder
+    # or a piece of furniture besides the person, so only the person's lower size bounds
+    # apply, and the upper ones with `merge_slack`.
+    z = config.depth_near_m + (255.0 - gsum[cand] / size[cand]) * config.metres_per_level
+    height_m = (y1[cand] - y0[cand]) * z / intrinsics.fy
+    width_m = (x1[cand] - x0[cand]) * z / intrinsics.fx
+    area_m2 = size[cand] * z * z / (intrinsics.fx * intrinsics.fy)
+    slack = config.merge_slack
+    ok = ((height_m >= config.person_min_height_m) & (width_m >= config.person_min_width_m)
+          & (area_m2 >= config.person_min_area_m2)
+          & (height_m <= slack * config.person_max_height_m)
+          & (width_m <= slack * config.person_max_width_m)
+          & (area_m2 <= slack * config.person_max_area_m2))
+    cand = cand[ok]
+    if cand.size == 0:
+        return _not_found((h, w), REASON_NO_PERSON, floor)
     prev_box = previous.box if previous is not None and previous.found else None
-    best, best_score = -1, 0.0
-    for i, (pts, (bx, by, bw, bh)) in enumerate(zip(regions, boxes, strict=True)):
-        area = len(pts)
-        levels = g[pts[:, 1], pts[:, 0]]
-        z = near + (255.0 - float(np.median(levels))) * mpl
-        height_m = bh * z / intrinsics.fy
-        width_m = bw * z / intrinsics.fx
-        if not (config.person_min_height_m <= height_m <= config.person_max_height_m
-                and config.person_min_width_m <= width_m <= config.person_max_width_m):
+    score = _score(size[cand], var[cand], x0[cand], x1[cand], w, config)
+    picked: list[int] = []
+    for k in np.argsort(-score, kind='stable'):
+        i = int(cand[k])
+        # nested regions of one chain are often the same pixels at several levels
+        if any(_overlap(_node_box(tree, i), _node_box(tree, j)) > 0.9
+               and min(size[i], size[j]) > 0.9 * max(size[i], size[j]) for j in picked):
             continue
-        score = float(area)
-        if prev_box is not None and _overlap(prev_box, (bx, by, bx + bw, by + bh)) > 0.3:
-            score *= config.previous_bonus
-        if score > best_score:
-            best, best_score = i, score
-    if best < 0:
-        return _not_found((h, w), REASON_NO_PERSON, floor)
+        picked.append(i)
+        if len(picked) == config.max_candidates:
+            break
 
-    pts = regions[best]
-    level = int(g[pts[:, 1], pts[:, 0]].min())
-    mask = np.zeros((h, w), dtype=bool)
-    mask[pts[:, 1], pts[:, 0]] = True
-    zr = depth[pts[:, 1], pts[:, 0]]
-    cut = _split_occluder(zr, config.occluder_gap_m)
-    if cut > -math.inf:
-        near_px = zr < cut
-        mask[pts[near_px, 1], pts[near_px, 0]] = False
-        zr = zr[~near_px]
-    box = _box_of(mask)
-    if box is None:  # cannot happen: the far cluster is never empty
+    # Stage 2, on the pixels of the best few regions: split each at empty depth gaps (an
+    # occluder in front, furniture behind), apply all person rules to every part, keep the best.
+    best: tuple[float, int, int, int, NDArray[np.bool_]] | None = None
+    for i in picked:
+        bx = _node_box(tree, i)
+        crop = _region_crop(g, int(level[i]), int(seed[i]), bx, config.connectivity)
+        gl = g[bx[1]:bx[3], bx[0]:bx[2]]
+        hist = np.bincount(gl[crop], minlength=256)
+        for lo, hi in _depth_parts(hist, config.occluder_gap_m / config.metres_per_level):
+            part = crop & (gl >= lo) & (gl <= hi)
+            sc = _part_score(part, hist[lo:hi + 1], lo, bx, float(var[i]), intrinsics, w, h,
+                             config, prev_box)
+            if sc is not None and (best is None or sc > best[0]):
+                best = (sc, i, lo, hi, part)
+    if best is None:
         return _not_found((h, w), REASON_NO_PERSON, floor)
+    _, i, lo, hi, part = best
+    bx = _node_box(tree, i)
+    mask = np.zeros((h, w), dtype=bool)
+    mask[bx[1]:bx[3], bx[0]:bx[2]] = part
+    box = _box_of(mask)
+    assert box is not None  # a part has pixels
     if config.fill_holes:
         _fill_holes(mask, ~valid, box)
-    stability = _variation(g, mask, level, config.mser_delta)
+    zr = depth[mask]
+    zr = zr[np.isfinite(zr)]
     return ForegroundResult(mask=mask, box=box, depth_m=float(np.median(zr)), found=True,
-                            reason=REASON_OK, stability=stability, level=level, floor=floor)
+                            reason=REASON_OK, stability=float(var[i]), level=int(lo),
+                            floor=floor)
 
 
-def _variation(g: NDArray[np.uint8], mask: NDArray[np.bool_], level: int, delta: int) -> float:
-    """MSER area variation (|R(t - delta)| - |R(t + delta)|) / |R(t)| of the region in `mask`.
+def _node_box(tree: tuple, i: int) -> tuple[int, int, int, int]:
+    return int(tree[2][i]), int(tree[3][i]), int(tree[4][i]), int(tree[5][i])
 
-    R(l) is the connected component of ``{g >= l}`` that contains the region's nearest pixel;
-    only pixels inside the region's box grown by half its size are counted (enough for a
-    ranking; the exact value needs the whole image).
+
+def _score(size: NDArray, var: NDArray, x0: NDArray, x1: NDArray, width: int,
+           config: ForegroundConfig) -> NDArray[np.float64]:
+    """``log(area) - stability_weight * variation - border_penalty * touches_side``.
+
+    Stable beats large: an object standing free is stable over many levels (variation ~ 0),
+    a slanted wall grows steadily; among equally stable nested regions the largest is the
+    whole person rather than a part of it. A region cut by the left or right image border is
+    more often furniture or a wall than a person (the camera is aimed at the person).
     """
-    area = np.count_nonzero(mask)
-    if area == 0:
-        return math.nan
-    seed = np.unravel_index(int(np.argmax(np.where(mask, g, 0))), g.shape)
-    sizes = []
-    for lv in (level - delta, level + delta):
-        if lv <= 0:
-            sizes.append(np.count_nonzero(g > 0))
-            continue
-        n, lab = cv2.connectedComponents((g >= min(lv, 255)).astype(np.uint8), connectivity=8)
-        k = lab[seed]
-        sizes.append(int(np.count_nonzero(lab == k)) if k > 0 else 0)
-    return (sizes[0] - sizes[1]) / float(area)
+    side = (np.asarray(x0) == 0) | (np.asarray(x1) == width)
+    return (np.log(np.asarray(size, dtype=np.float64)) - config.stability_weight * var
+            - config.border_penalty * side)
+
+
+def _depth_parts(hist: NDArray[np.int64], gap_levels: float) -> list[tuple[int, int]]:
+    """Level ranges [lo, hi] of a region's histogram separated by more than `gap_levels`
+    empty levels (all of it when `gap_levels` is 0)."""
+    levels = np.flatnonzero(hist)
+    if levels.size == 0:
+        return []
+    if gap_levels <= 0:
+        return [(int(levels[0]), int(levels[-1]))]
+    cuts = np.flatnonzero(np.diff(levels) > gap_levels)
+    starts = np.r_[levels[0], levels[cuts + 1]]
+    ends = np.r_[levels[cuts], levels[-1]]
+    return [(int(a), int(b)) for a, b in zip(starts, ends, strict=True)]
+
+
+def _part_score(part: NDArray[np.bool_], hist: NDArray[np.int64], lo: int,
+                origin: tuple[int, int, int, int], var: float, intrinsics: Intrinsics,
+                width: int, height: int, config: ForegroundConfig,
+                prev_box: tuple[int, int, int, int] | None) -> float | None:
+    """Score of one depth part of a region, None when it breaks a person rule."""
+    n = int(hist.sum())
+    if n < config.mser_min_area_px:
+        return None
+    # median level -> depth; level l is depth near + (255 - l) * metres_per_level
+    med = lo + int(np.searchsorted(np.cumsum(hist), (n + 1) // 2))
+    z = config.depth_near_m + (255.0 - med) * config.metres_per_level
+    rows = np.flatnonzero(part.any(axis=1))
+    cols = np.flatnonzero(part.any(axis=0))
+    bh, bw = rows[-1] - rows[0] + 1, cols[-1] - cols[0] + 1
+    height_m, width_m = bh * z / intrinsics.fy, bw * z / intrinsics.fx
+    area_m2 = n * z * z / (intrinsics.fx * intrinsics.fy)
+    if not (config.person_min_height_m <= height_m <= config.person_max_height_m
+            and config.person_min_width_m <= width_m <= config.person_max_width_m
+            and config.person_min_area_m2 <= area_m2 <= config.person_max_area_m2
+            and n <= config.person_max_fill * bh * bw):
+        return None
+    bx0, by0 = origin[0] + int(cols[0]), origin[1] + int(rows[0])
+    box = (bx0, by0, bx0 + int(bw), by0 + int(bh))
+    score = float(_score(np.array([n]), np.array([var]), np.array([box[0]]),
+                         np.array([box[2]]), width, config)[0])
+    if prev_box is not None and _overlap(prev_box, box) > 0.3:
+        score += config.previous_bonus
+    return score
+
+
+def _region_crop(g: NDArray[np.uint8], level: int, seed: int, box: tuple[int, int, int, int],
+                 connectivity: int) -> NDArray[np.bool_]:
+    """The connected component of ``{g >= level}`` holding flat pixel `seed`, as a bool
+    array over `box` (x0, y0, x1, y1; the component's bounding box)."""
+    w = g.shape[1]
+    x0, y0, x1, y1 = box
+    crop = np.ascontiguousarray(g[y0:y1, x0:x1])
+    ff = np.zeros((y1 - y0 + 2, x1 - x0 + 2), np.uint8)
+    sy, sx = divmod(seed, w)
+    flags = connectivity | cv2.FLOODFILL_FIXED_RANGE | cv2.FLOODFILL_MASK_ONLY | (1 << 8)
+    cv2.floodFill(crop, ff, (sx - x0, sy - y0), 0, loDiff=int(g[sy, sx]) - level, upDiff=255,
+                  flags=flags)
+    return ff[1:-1, 1:-1] > 0
 
 
 def apply_mask(color: NDArray[np.uint8], depth_m: NDArray[np.floating],
