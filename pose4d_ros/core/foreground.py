@@ -39,6 +39,7 @@ tuning. The tuning script is kept with the project notes (``foreground_tune.py``
 from __future__ import annotations
 
 import math
+import threading
 from dataclasses import dataclass, field
 
 import cv2
@@ -82,6 +83,11 @@ class ForegroundConfig:
     merge_slack : factor on the upper person bounds for whole regions, before they are split
         at depth gaps (a region may hold an occluder or furniture besides the person).
     max_candidates : regions (best first) whose pixels are examined.
+    person_min_top_m, person_max_top_m : height above the floor of a person part's top rows
+        (head, or hands raised), metres; only with a floor.
+    person_max_bottom_m : largest height above the floor of its bottom rows (feet, or the top
+        of an occluder hiding them), metres; only with a floor.
+    edge_rows : rows at the top and bottom of a part whose median height is its top/bottom.
     floor_remove : fit and drop the floor plane before MSER.
     floor_rows_fraction : lower fraction of the image rows searched for the floor.
     floor_sample_step : pixel stride of the RANSAC sample grid.
@@ -94,6 +100,8 @@ class ForegroundConfig:
     floor_min_inliers : fewest RANSAC inliers for a floor to be accepted.
     occluder_gap_m : an empty depth gap wider than this inside the chosen region separates a
         nearer object (an occluder) from the person, metres; 0 disables the cut.
+    close_px : size of the closing (ellipse, pixels) whose no-reading pixels join the mask;
+        0 or 1 = none.
     fill_holes : fill holes of the mask that have no depth reading.
     stability_weight : a region's score is ``log(area) - stability_weight * variation``.
     previous_bonus : with `previous`, score added to a region whose box overlaps the previous
@@ -117,6 +125,10 @@ class ForegroundConfig:
     person_max_fill: float = 0.8
     border_penalty: float = 1.0
     merge_slack: float = 2.0
+    person_min_top_m: float = 0.9
+    person_max_top_m: float = 2.5
+    person_max_bottom_m: float = 1.0
+    edge_rows: int = 3
     max_candidates: int = 6
     floor_remove: bool = True
     floor_rows_fraction: float = 0.5
@@ -129,6 +141,7 @@ class ForegroundConfig:
     floor_max_height_m: float = 3.0
     floor_min_inliers: int = 40
     occluder_gap_m: float = 0.3
+    close_px: int = 5
     fill_holes: bool = True
     stability_weight: float = 30.0
     previous_bonus: float = 0.5
@@ -151,6 +164,7 @@ class ForegroundConfig:
             raise ValueError(f'connectivity must be 4 or 8, got {self.connectivity}')
         for lo, hi in (('person_min_height_m', 'person_max_height_m'),
                        ('person_min_area_m2', 'person_max_area_m2'),
+                       ('person_min_top_m', 'person_max_top_m'),
                        ('person_min_width_m', 'person_max_width_m'),
                        ('floor_min_height_m', 'floor_max_height_m')):
             a, b = getattr(self, lo), getattr(self, hi)
@@ -159,10 +173,12 @@ class ForegroundConfig:
         if not 0.0 < self.floor_rows_fraction <= 1.0:
             raise ValueError(f'floor_rows_fraction must be in (0, 1], got '
                              f'{self.floor_rows_fraction}')
+        if not self.person_max_bottom_m >= 0:
+            raise ValueError(f'person_max_bottom_m must be >= 0, got {self.person_max_bottom_m}')
         if not self.merge_slack >= 1.0:
             raise ValueError(f'merge_slack must be >= 1, got {self.merge_slack}')
         for name in ('floor_sample_step', 'floor_iterations', 'floor_min_inliers',
-                     'max_candidates'):
+                     'max_candidates', 'edge_rows'):
             if getattr(self, name) < 1:
                 raise ValueError(f'{name} must be >= 1, got {getattr(self, name)}')
         for name in ('floor_inlier_m', 'floor_tolerance_m'):
@@ -171,6 +187,8 @@ class ForegroundConfig:
         if not 0.0 < self.floor_max_tilt_deg < 90.0:
             raise ValueError(f'floor_max_tilt_deg must be in (0, 90), got '
                              f'{self.floor_max_tilt_deg}')
+        if not 0 <= self.close_px <= 31:
+            raise ValueError(f'close_px must be in [0, 31], got {self.close_px}')
         if not self.occluder_gap_m >= 0:
             raise ValueError(f'occluder_gap_m must be >= 0, got {self.occluder_gap_m}')
         if not 0.0 < self.person_max_fill <= 1.0:
@@ -362,6 +380,25 @@ def depth_to_levels(depth_m: NDArray[np.floating], *,
     return np.where(valid, g, 0).astype(np.uint8)
 
 
+def _complete(mask: NDArray[np.bool_], no_reading: NDArray[np.bool_],
+              box: tuple[int, int, int, int], config: ForegroundConfig) -> None:
+    """Give the mask (in place) the no-reading pixels that belong to the person: those a
+    morphological closing of `close_px` adds (Kinect drops readings in a ragged band along
+    depth edges) and the holes of the mask made of them (dropouts on the clothes)."""
+    if config.close_px > 1:
+        h, w = mask.shape
+        r = config.close_px
+        x0, y0, x1, y1 = max(box[0] - r, 0), max(box[1] - r, 0), min(box[2] + r, w), \
+            min(box[3] + r, h)
+        crop = mask[y0:y1, x0:x1]
+        kernel = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (r, r))
+        closed = cv2.morphologyEx(crop.view(np.uint8), cv2.MORPH_CLOSE, kernel,
+                                  borderType=cv2.BORDER_CONSTANT, borderValue=0)
+        crop |= closed.view(bool) & no_reading[y0:y1, x0:x1]
+    if config.fill_holes:
+        _fill_holes(mask, no_reading, box)
+
+
 def _fill_holes(mask: NDArray[np.bool_], fillable: NDArray[np.bool_],
                 box: tuple[int, int, int, int]) -> None:
     """Fill, in place, the holes of `mask` (inside `box`) made only of `fillable` pixels."""
@@ -405,7 +442,7 @@ def _overlap(a: tuple[int, int, int, int], b: tuple[int, int, int, int]) -> floa
 # ------------------------------------------------------------------------------------------
 
 @njit(cache=True)
-def _find(parent: NDArray[np.int64], p: int) -> int:
+def _find(parent: NDArray[np.int32], p: int) -> int:
     while parent[p] != p:
         parent[p] = parent[parent[p]]  # path halving
         p = parent[p]
@@ -413,67 +450,57 @@ def _find(parent: NDArray[np.int64], p: int) -> int:
 
 
 @njit(cache=True)
-def _component_tree(g: NDArray[np.uint8], conn8: bool) -> tuple:
+def _component_tree(g: NDArray[np.uint8], conn8: bool, pix: NDArray[np.int32],
+                    nodes: NDArray[np.int32], pend: NDArray[np.int32]) -> tuple:
     """Every extremal region of `g` (components of ``{g >= t}``, t = 255..1) as tree nodes.
 
     A node is recorded for each component at each level at which it gains pixels; its parent
-    is the node that contains it at the next lower level where anything changes. Nodes come
-    out in order of decreasing level, so a parent's index is larger than its children's.
+    is the node that holds it at the next lower level at which that component changes. Nodes
+    come out in order of decreasing level, so a parent's index is larger than its children's.
+    Pixels at level 0 (no reading, floor) belong to no region.
+
+    `pix` (10, (H + 2) (W + 2)), `nodes` (10, H W) and `pend` (H W,) int32 are workspaces
+    (`_workspace`); the returned arrays are views into `nodes`.
 
     Returns
     -------
     level, size, x0, y0, x1, y1 (box, x1/y1 exclusive), gsum (sum of the levels of its
-    pixels), seed (flat index of one of its pixels), parent (-1 for a top node); each (M,).
+    pixels), seed (flat index into `g` of one of its pixels), parent (-1 for a top node);
+    each (M,) int32.
     """
     h, w = g.shape
-    n = h * w
-    flat = g.ravel()
+    # a border of level-0 pixels spares the bounds checks
+    wp = w + 2
     counts = np.zeros(256, np.int64)
-    for i in range(n):
-        counts[flat[i]] += 1
+    for y in range(h):
+        for x in range(w):
+            counts[g[y, x]] += 1
     start = np.zeros(256, np.int64)
     pos = 0
     for lv in range(255, 0, -1):
         start[lv] = pos
         pos += counts[lv]
     m = pos
-    order = np.empty(m, np.int64)
+    order = np.empty(m, np.int32)
     fill = start.copy()
-    for i in range(n):
-        lv = flat[i]
-        if lv > 0:
-            order[fill[lv]] = i
-            fill[lv] += 1
+    for y in range(h):
+        for x in range(w):
+            lv = g[y, x]
+            if lv > 0:
+                order[fill[lv]] = (y + 1) * wp + x + 1
+                fill[lv] += 1
 
-    parent = np.full(n, -1, np.int64)
-    size = np.zeros(n, np.int64)
-    bx0 = np.zeros(n, np.int32)
-    by0 = np.zeros(n, np.int32)
-    bx1 = np.zeros(n, np.int32)
-    by1 = np.zeros(n, np.int32)
-    gs = np.zeros(n, np.float64)
-    last = np.full(n, -1, np.int64)
-    stamp = np.zeros(n, np.int32)
-    newnode = np.zeros(n, np.int64)
-
-    n_level = np.empty(m, np.int32)
-    n_size = np.empty(m, np.int64)
-    n_x0 = np.empty(m, np.int32)
-    n_y0 = np.empty(m, np.int32)
-    n_x1 = np.empty(m, np.int32)
-    n_y1 = np.empty(m, np.int32)
-    n_gsum = np.empty(m, np.float64)
-    n_seed = np.empty(m, np.int64)
-    n_parent = np.full(m, -1, np.int64)
-    pend_node = np.empty(m, np.int64)
-    pend_root = np.empty(m, np.int64)
-    nn = 0
+    # workspace rows, reused between calls (fresh pages cost more than the whole tree)
+    parent, size, bx0, by0, bx1, by1, gs, last, stamp, newnode = pix
+    parent[:] = -1
+    stamp[:] = 0
+    n_level, n_size, n_x0, n_y0, n_x1, n_y1, n_gsum, n_seed, n_parent, pend_node = nodes
+    pend_root = pend
     if conn8:
-        dys = np.array([-1, -1, -1, 0, 0, 1, 1, 1])
-        dxs = np.array([-1, 0, 1, -1, 1, -1, 0, 1])
+        offsets = np.array([-wp - 1, -wp, -wp + 1, -1, 1, wp - 1, wp, wp + 1])
     else:
-        dys = np.array([-1, 0, 0, 1])
-        dxs = np.array([0, -1, 1, 0])
+        offsets = np.array([-wp, -1, 1, wp])
+    nn = 0
     for lv in range(255, 0, -1):
         s = start[lv]
         e = s + counts[lv]
@@ -482,8 +509,8 @@ def _component_tree(g: NDArray[np.uint8], conn8: bool) -> tuple:
         npend = 0
         for k in range(s, e):
             p = order[k]
-            y = p // w
-            x = p - y * w
+            y = p // wp - 1
+            x = p - (y + 1) * wp - 1
             parent[p] = p
             size[p] = 1
             bx0[p] = x
@@ -492,17 +519,14 @@ def _component_tree(g: NDArray[np.uint8], conn8: bool) -> tuple:
             by1[p] = y + 1
             gs[p] = lv
             last[p] = -1
-            for j in range(dys.shape[0]):
-                yy = y + dys[j]
-                xx = x + dxs[j]
-                if yy < 0 or yy >= h or xx < 0 or xx >= w:
-                    continue
-                q = yy * w + xx
+            newnode[p] = -1
+            rp = p
+            for off in offsets:
+                q = p + off
                 if parent[q] < 0:
                     continue
-                rp = _find(parent, p)
                 rq = _find(parent, q)
-                if rp == rq:
+                if rq == rp:
                     continue
                 if size[rp] < size[rq]:
                     rp, rq = rq, rp
@@ -530,7 +554,9 @@ def _component_tree(g: NDArray[np.uint8], conn8: bool) -> tuple:
             n_x1[nn] = bx1[r]
             n_y1[nn] = by1[r]
             n_gsum[nn] = gs[r]
-            n_seed[nn] = r
+            ry = r // wp - 1
+            n_seed[nn] = ry * w + (r - (ry + 1) * wp - 1)
+            n_parent[nn] = -1
             if last[r] >= 0:
                 n_parent[last[r]] = nn
             last[r] = nn
@@ -542,8 +568,22 @@ def _component_tree(g: NDArray[np.uint8], conn8: bool) -> tuple:
             n_gsum[:nn], n_seed[:nn], n_parent[:nn])
 
 
+_LOCAL = threading.local()
+
+
+def _tree(g: NDArray[np.uint8], conn8: bool) -> tuple:
+    """`_component_tree` with this thread's workspace for the image size."""
+    h, w = g.shape
+    ws = getattr(_LOCAL, 'workspace', None)
+    if ws is None or ws[0] != (h, w):
+        ws = ((h, w), np.empty((10, (h + 2) * (w + 2)), np.int32),
+              np.empty((10, h * w), np.int32), np.empty(h * w, np.int32))
+        _LOCAL.workspace = ws
+    return _component_tree(g, conn8, ws[1], ws[2], ws[3])
+
+
 @njit(cache=True)
-def _variation(level: NDArray[np.int32], size: NDArray[np.int64], parent: NDArray[np.int64],
+def _variation(level: NDArray[np.int32], size: NDArray[np.int32], parent: NDArray[np.int32],
                delta: int, min_size: int) -> NDArray[np.float64]:
     """(|R(t - delta)| - |R(t)|) / |R(t)| per node; NaN for nodes under `min_size` pixels."""
     m = level.shape[0]
@@ -597,24 +637,83 @@ def segment(depth_m: NDArray[np.floating], intrinsics: Intrinsics, *,
     if not valid.any():
         return _not_found((h, w), REASON_NO_DEPTH)
 
+    floor, parts, reason = _examine(depth, intrinsics, config, previous)
+    if not parts:
+        return _not_found((h, w), reason, floor)
+    prev_box = previous.box if previous is not None and previous.found else None
+    scores = [part_score(pt, config, prev_box) for pt in parts]
+    ok = [k for k, pt in enumerate(parts) if person_rules(pt, config)]
+    if not ok:
+        return _not_found((h, w), REASON_NO_PERSON, floor)
+    best = parts[max(ok, key=lambda k: scores[k])]
+    mask = np.zeros((h, w), dtype=bool)
+    x0, y0 = best.origin
+    mask[y0:y0 + best.crop.shape[0], x0:x0 + best.crop.shape[1]] = best.crop
+    _complete(mask, ~valid, best.box, config)
+    zr = depth[mask]
+    zr = zr[np.isfinite(zr)]
+    return ForegroundResult(mask=mask, box=best.box, depth_m=float(np.median(zr)), found=True,
+                            reason=REASON_OK, stability=best.variation, level=best.lo,
+                            floor=floor)
+
+
+@dataclass(frozen=True)
+class Part:
+    """A depth part of a stable region: a candidate person (internal; for tuning).
+
+    crop : (h, w) bool pixels over the part's region box, whose top-left pixel is `origin`.
+    box : (x0, y0, x1, y1) of the part, x1/y1 exclusive. lo, hi : its 8-bit level range.
+    n : pixels; z : median depth, m; height_m, width_m : box size at depth z; area_m2 :
+    surface seen from the camera; fill : n over box area; variation : the region's MSER
+    variation; side : touches the left or right image border; top_m, bottom_m : height
+    above the floor of its top and bottom rows (NaN without a floor).
+    """
+
+    crop: NDArray[np.bool_] = field(repr=False)
+    origin: tuple[int, int]
+    box: tuple[int, int, int, int]
+    lo: int
+    hi: int
+    n: int
+    z: float
+    height_m: float
+    width_m: float
+    area_m2: float
+    fill: float
+    variation: float
+    side: bool
+    top_m: float
+    bottom_m: float
+
+
+def _examine(depth: NDArray[np.float32], intrinsics: Intrinsics, config: ForegroundConfig,
+             previous: ForegroundResult | None
+             ) -> tuple[NDArray[np.float64] | None, list[Part], str]:
+    """Floor, stable regions and their depth parts (the candidates `segment` chooses from).
+
+    Returns the floor plane (or None), the parts, and the reason when there are none.
+    """
+    h, w = depth.shape
     floor = None
     drop = None
+    above = None
     if config.floor_remove:
         floor = fit_floor(depth, intrinsics, config=config,
                           previous=None if previous is None else previous.floor)
         if floor is not None:
+            above = floor_height(depth, intrinsics, floor)
             with np.errstate(invalid='ignore'):
-                drop = floor_height(depth, intrinsics, floor) < config.floor_tolerance_m
+                drop = above < config.floor_tolerance_m
     g = depth_to_levels(depth, config=config, drop=drop)
 
-    tree = _component_tree(g, config.connectivity == 8)
+    tree = _tree(g, config.connectivity == 8)
     level, size, x0, y0, x1, y1, gsum, seed, parent = tree
     var = _variation(level, size, parent, config.mser_delta, config.mser_min_area_px)
     with np.errstate(invalid='ignore'):
         stable = (var <= config.mser_max_variation) & (size <= config.max_region_area_px)
     cand = np.flatnonzero(stable)
     if cand.size == 0:
-        return _not_found((h, w), REASON_NO_REGION, floor)
+        return floor, [], REASON_NO_REGION
 
     # Stage 1, on the tree's statistics (box, mean depth): a region may still hold an occluder
     # or a piece of furniture besides the person, so only the person's lower size bounds
@@ -631,9 +730,10 @@ def segment(depth_m: NDArray[np.floating], intrinsics: Intrinsics, *,
           & (area_m2 <= slack * config.person_max_area_m2))
     cand = cand[ok]
     if cand.size == 0:
-        return _not_found((h, w), REASON_NO_PERSON, floor)
-    prev_box = previous.box if previous is not None and previous.found else None
-    score = _score(size[cand], var[cand], x0[cand], x1[cand], w, config)
+        return floor, [], REASON_NO_PERSON
+    side = (x0[cand] == 0) | (x1[cand] == w)
+    score = (np.log(size[cand].astype(np.float64)) - config.stability_weight * var[cand]
+             - config.border_penalty * side)
     picked: list[int] = []
     for k in np.argsort(-score, kind='stable'):
         i = int(cand[k])
@@ -646,52 +746,89 @@ def segment(depth_m: NDArray[np.floating], intrinsics: Intrinsics, *,
             break
 
     # Stage 2, on the pixels of the best few regions: split each at empty depth gaps (an
-    # occluder in front, furniture behind), apply all person rules to every part, keep the best.
-    best: tuple[float, int, int, int, NDArray[np.bool_]] | None = None
+    # occluder in front, furniture behind); every part is a candidate.
+    parts = []
+    gap_levels = config.occluder_gap_m / config.metres_per_level
     for i in picked:
         bx = _node_box(tree, i)
         crop = _region_crop(g, int(level[i]), int(seed[i]), bx, config.connectivity)
         gl = g[bx[1]:bx[3], bx[0]:bx[2]]
+        hl = None if above is None else above[bx[1]:bx[3], bx[0]:bx[2]]
         hist = np.bincount(gl[crop], minlength=256)
-        for lo, hi in _depth_parts(hist, config.occluder_gap_m / config.metres_per_level):
-            part = crop & (gl >= lo) & (gl <= hi)
-            sc = _part_score(part, hist[lo:hi + 1], lo, bx, float(var[i]), intrinsics, w, h,
-                             config, prev_box)
-            if sc is not None and (best is None or sc > best[0]):
-                best = (sc, i, lo, hi, part)
-    if best is None:
-        return _not_found((h, w), REASON_NO_PERSON, floor)
-    _, i, lo, hi, part = best
-    bx = _node_box(tree, i)
-    mask = np.zeros((h, w), dtype=bool)
-    mask[bx[1]:bx[3], bx[0]:bx[2]] = part
-    box = _box_of(mask)
-    assert box is not None  # a part has pixels
-    if config.fill_holes:
-        _fill_holes(mask, ~valid, box)
-    zr = depth[mask]
-    zr = zr[np.isfinite(zr)]
-    return ForegroundResult(mask=mask, box=box, depth_m=float(np.median(zr)), found=True,
-                            reason=REASON_OK, stability=float(var[i]), level=int(lo),
-                            floor=floor)
+        for lo, hi in _depth_parts(hist, gap_levels):
+            part = crop & (gl >= lo) & (gl <= hi) if (lo, hi) != (level[i], 255) else crop
+            pt = _describe(part, hist[lo:hi + 1], lo, hi, bx, float(var[i]), hl, intrinsics,
+                           w, config)
+            if pt is not None:
+                parts.append(pt)
+    return floor, parts, REASON_NO_PERSON
 
 
-def _node_box(tree: tuple, i: int) -> tuple[int, int, int, int]:
-    return int(tree[2][i]), int(tree[3][i]), int(tree[4][i]), int(tree[5][i])
+def _describe(part: NDArray[np.bool_], hist: NDArray[np.int64], lo: int, hi: int,
+              origin: tuple[int, int, int, int], var: float, above: NDArray[np.float32] | None,
+              intrinsics: Intrinsics, width: int, config: ForegroundConfig) -> Part | None:
+    """Measure one depth part; None when it is too small to be anything."""
+    n = int(hist.sum())
+    if n < config.mser_min_area_px:
+        return None
+    # median level -> depth; level l is at depth near + (255 - l) * metres_per_level
+    med = lo + int(np.searchsorted(np.cumsum(hist), (n + 1) // 2))
+    z = config.depth_near_m + (255.0 - med) * config.metres_per_level
+    rows = np.flatnonzero(part.any(axis=1))
+    cols = np.flatnonzero(part.any(axis=0))
+    r0, r1, c0, c1 = int(rows[0]), int(rows[-1]) + 1, int(cols[0]), int(cols[-1]) + 1
+    bh, bw = r1 - r0, c1 - c0
+    box = (origin[0] + c0, origin[1] + r0, origin[0] + c1, origin[1] + r1)
+    top = bottom = math.nan
+    if above is not None:
+        k = config.edge_rows
+        t = above[r0:r0 + k][part[r0:r0 + k]]
+        b = above[max(r1 - k, 0):r1][part[max(r1 - k, 0):r1]]
+        t, b = t[np.isfinite(t)], b[np.isfinite(b)]
+        top = float(np.median(t)) if t.size else math.nan
+        bottom = float(np.median(b)) if b.size else math.nan
+    return Part(crop=part, origin=(origin[0], origin[1]), box=box, lo=lo, hi=hi, n=n, z=z,
+                height_m=bh * z / intrinsics.fy, width_m=bw * z / intrinsics.fx,
+                area_m2=n * z * z / (intrinsics.fx * intrinsics.fy), fill=n / (bh * bw),
+                variation=var, side=box[0] == 0 or box[2] == width, top_m=top,
+                bottom_m=bottom)
 
 
-def _score(size: NDArray, var: NDArray, x0: NDArray, x1: NDArray, width: int,
-           config: ForegroundConfig) -> NDArray[np.float64]:
-    """``log(area) - stability_weight * variation - border_penalty * touches_side``.
+def person_rules(part: Part, config: ForegroundConfig) -> bool:
+    """Whether a part passes the person-size rules of `config` (tops and bottoms only when
+    the floor is known)."""
+    c = config
+    if not (c.person_min_height_m <= part.height_m <= c.person_max_height_m
+            and c.person_min_width_m <= part.width_m <= c.person_max_width_m
+            and c.person_min_area_m2 <= part.area_m2 <= c.person_max_area_m2
+            and part.fill <= c.person_max_fill):
+        return False
+    if math.isfinite(part.top_m) and not c.person_min_top_m <= part.top_m <= c.person_max_top_m:
+        return False
+    if math.isfinite(part.bottom_m) and part.bottom_m > c.person_max_bottom_m:
+        return False
+    return True
+
+
+def part_score(part: Part, config: ForegroundConfig,
+               prev_box: tuple[int, int, int, int] | None = None) -> float:
+    """``log(area) - stability_weight * variation - border_penalty * touches_side``
+    (+ `previous_bonus` when the part's box overlaps `prev_box`).
 
     Stable beats large: an object standing free is stable over many levels (variation ~ 0),
     a slanted wall grows steadily; among equally stable nested regions the largest is the
     whole person rather than a part of it. A region cut by the left or right image border is
     more often furniture or a wall than a person (the camera is aimed at the person).
     """
-    side = (np.asarray(x0) == 0) | (np.asarray(x1) == width)
-    return (np.log(np.asarray(size, dtype=np.float64)) - config.stability_weight * var
-            - config.border_penalty * side)
+    score = (math.log(part.n) - config.stability_weight * part.variation
+             - config.border_penalty * part.side)
+    if prev_box is not None and _overlap(prev_box, part.box) > 0.3:
+        score += config.previous_bonus
+    return score
+
+
+def _node_box(tree: tuple, i: int) -> tuple[int, int, int, int]:
+    return int(tree[2][i]), int(tree[3][i]), int(tree[4][i]), int(tree[5][i])
 
 
 def _depth_parts(hist: NDArray[np.int64], gap_levels: float) -> list[tuple[int, int]]:
@@ -706,36 +843,6 @@ def _depth_parts(hist: NDArray[np.int64], gap_levels: float) -> list[tuple[int, 
     starts = np.r_[levels[0], levels[cuts + 1]]
     ends = np.r_[levels[cuts], levels[-1]]
     return [(int(a), int(b)) for a, b in zip(starts, ends, strict=True)]
-
-
-def _part_score(part: NDArray[np.bool_], hist: NDArray[np.int64], lo: int,
-                origin: tuple[int, int, int, int], var: float, intrinsics: Intrinsics,
-                width: int, height: int, config: ForegroundConfig,
-                prev_box: tuple[int, int, int, int] | None) -> float | None:
-    """Score of one depth part of a region, None when it breaks a person rule."""
-    n = int(hist.sum())
-    if n < config.mser_min_area_px:
-        return None
-    # median level -> depth; level l is depth near + (255 - l) * metres_per_level
-    med = lo + int(np.searchsorted(np.cumsum(hist), (n + 1) // 2))
-    z = config.depth_near_m + (255.0 - med) * config.metres_per_level
-    rows = np.flatnonzero(part.any(axis=1))
-    cols = np.flatnonzero(part.any(axis=0))
-    bh, bw = rows[-1] - rows[0] + 1, cols[-1] - cols[0] + 1
-    height_m, width_m = bh * z / intrinsics.fy, bw * z / intrinsics.fx
-    area_m2 = n * z * z / (intrinsics.fx * intrinsics.fy)
-    if not (config.person_min_height_m <= height_m <= config.person_max_height_m
-            and config.person_min_width_m <= width_m <= config.person_max_width_m
-            and config.person_min_area_m2 <= area_m2 <= config.person_max_area_m2
-            and n <= config.person_max_fill * bh * bw):
-        return None
-    bx0, by0 = origin[0] + int(cols[0]), origin[1] + int(rows[0])
-    box = (bx0, by0, bx0 + int(bw), by0 + int(bh))
-    score = float(_score(np.array([n]), np.array([var]), np.array([box[0]]),
-                         np.array([box[2]]), width, config)[0])
-    if prev_box is not None and _overlap(prev_box, box) > 0.3:
-        score += config.previous_bonus
-    return score
 
 
 def _region_crop(g: NDArray[np.uint8], level: int, seed: int, box: tuple[int, int, int, int],
