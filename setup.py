@@ -15,6 +15,7 @@ EXECUTABLES = {
     'pose4d': 'pose4d_ros.cli.main:main',
     'replay': 'pose4d_ros.nodes.replay:main',
     'recorder': 'pose4d_ros.nodes.recorder:main',
+    'foreground': 'pose4d_ros.nodes.foreground:main',
     'tracker': 'pose4d_ros.nodes.tracker:main',
     'ik': 'pose4d_ros.nodes.ik:main',
 }

@@ -1,0 +1,166 @@
+"""`foreground`: the person's mask from the depth image (floor removal + MSER), applied.
+
+Colour, depth and camera_info are paired by stamp (exact, or nearest within
+`foreground.slop_s`), never "the latest depth". When the stage is slower than the camera only
+the newest frame is processed (drops are counted).
+
+Subscriptions
+    camera/color/image_raw (sensor_msgs/Image, rgb8/bgr8/mono8)
+    camera/depth/image_raw (sensor_msgs/Image, 16UC1 mm or 32FC1 m, registered to colour)
+    camera/color/camera_info (sensor_msgs/CameraInfo)
+Publications (all with the colour image's header)
+    pose4d/foreground/mask (mono8, 255 = person)
+    pose4d/foreground/color (rgb8, 0 outside the person)
+    pose4d/foreground/depth (the input's encoding; 0 / NaN outside the person)
+    pose4d/foreground/points (sensor_msgs/PointCloud2 of the person, if foreground.publish_cloud)
+    /diagnostics
+Parameters (config/foreground.yaml)
+    foreground.max_region_area_px, foreground.mser_delta, foreground.mser_max_variation,
+    foreground.depth_near_m, foreground.depth_far_m, foreground.floor_remove,
+    foreground.temporal, foreground.slop_s, foreground.publish_cloud, foreground.cloud_step
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import replace
+from typing import Any
+
+import numpy as np
+from rclpy.node import Node
+from sensor_msgs.msg import CameraInfo, Image, PointCloud2
+
+from pose4d_ros.core.camera import backproject, cad60_intrinsics, depth_to_millimetres
+from pose4d_ros.core.foreground import ForegroundConfig, ForegroundResult, apply_mask, segment
+from pose4d_ros.core.pipeline import warm_up_frame
+from pose4d_ros.core.sync import StampSync
+from pose4d_ros.nodes import qos
+from pose4d_ros.nodes.common import LatestOnly, StageMonitor, run
+from pose4d_ros.nodes.convert import (
+    array_to_image,
+    cloud_to_msg,
+    color_from_msg,
+    depth_from_msg,
+    intrinsics_from_msg,
+    stamp_to_ns,
+)
+from pose4d_ros.nodes.params import Param, declare
+
+_F = ForegroundConfig()
+PARAMS = (
+    Param('foreground.max_region_area_px', _F.max_region_area_px, 'The background area '
+          'threshold: stable regions larger than this are background, pixels.',
+          range=(100, 10_000_000)),
+    Param('foreground.mser_delta', _F.mser_delta, 'MSER stability step, 8-bit depth levels.',
+          range=(1, 64)),
+    Param('foreground.mser_max_variation', _F.mser_max_variation, "MSER stability score: "
+          'largest relative area change over +-delta levels.', range=(0.01, 10.0)),
+    Param('foreground.depth_near_m', _F.depth_near_m, 'Nearest depth mapped to 8 bits, '
+          'metres.', range=(0.0, 10.0)),
+    Param('foreground.depth_far_m', _F.depth_far_m, 'Farthest depth mapped to 8 bits, metres.',
+          range=(0.1, 20.0)),
+    Param('foreground.floor_remove', _F.floor_remove, 'Fit the floor plane (RANSAC) and drop '
+          'it before MSER.'),
+    Param('foreground.temporal', True, "Prefer regions overlapping the previous frame's "
+          'person and reuse its floor plane.'),
+    Param('foreground.slop_s', 0.0, 'Largest stamp difference between colour and depth, '
+          'seconds (0 = the same stamp).', range=(0.0, 1.0)),
+    Param('foreground.publish_cloud', False, "Publish the person's pixels as a PointCloud2 "
+          '(pose4d/foreground/points).'),
+    Param('foreground.cloud_step', 2, 'Pixel stride of the point cloud.', range=(1, 16)),
+)
+
+
+def foreground_config(p: dict[str, Any]) -> ForegroundConfig:
+    """The foreground configuration from the parameters (also used by the pipeline node)."""
+    return replace(ForegroundConfig(), max_region_area_px=p['foreground.max_region_area_px'],
+                   mser_delta=p['foreground.mser_delta'],
+                   mser_max_variation=p['foreground.mser_max_variation'],
+                   depth_near_m=p['foreground.depth_near_m'],
+                   depth_far_m=p['foreground.depth_far_m'],
+                   floor_remove=p['foreground.floor_remove'])
+
+
+class ForegroundNode(Node):
+    """Masks the person in each RGB-D frame; see the module docstring."""
+
+    def __init__(self) -> None:
+        super().__init__('foreground')
+        p = declare(self, PARAMS)
+        self.config = foreground_config(p)
+        self.temporal = p['foreground.temporal']
+        self.publish_cloud = p['foreground.publish_cloud']
+        self.cloud_step = p['foreground.cloud_step']
+        self.previous: ForegroundResult | None = None
+        # compile the kernels before subscribing: the first camera frame must not wait for it
+        _, depth, _ = warm_up_frame(cad60_intrinsics())
+        segment(depth, cad60_intrinsics(), config=self.config,
+                previous=segment(depth, cad60_intrinsics(), config=self.config))
+        self.monitor = StageMonitor(self, 'foreground')
+        self.latest = LatestOnly(self, self.process, self.monitor)
+        self.sync = StampSync(3, slop_ns=int(p['foreground.slop_s'] * 1e9))
+        self.pub_mask = self.create_publisher(Image, 'pose4d/foreground/mask', qos.OUTPUT_QOS)
+        self.pub_color = self.create_publisher(Image, 'pose4d/foreground/color',
+                                               qos.OUTPUT_QOS)
+        self.pub_depth = self.create_publisher(Image, 'pose4d/foreground/depth',
+                                               qos.OUTPUT_QOS)
+        self.pub_cloud = (self.create_publisher(PointCloud2, 'pose4d/foreground/points',
+                                                qos.OUTPUT_QOS) if self.publish_cloud else None)
+        self.create_subscription(Image, 'camera/color/image_raw',
+                                 lambda m: self.on_msg(0, m), qos.SENSOR_QOS)
+        self.create_subscription(Image, 'camera/depth/image_raw',
+                                 lambda m: self.on_msg(1, m), qos.SENSOR_QOS)
+        self.create_subscription(CameraInfo, 'camera/color/camera_info',
+                                 lambda m: self.on_msg(2, m), qos.SENSOR_QOS)
+        self.get_logger().info(
+            f'masking {self.resolve_topic_name("camera/color/image_raw")} + '
+            f'{self.resolve_topic_name("camera/depth/image_raw")} -> '
+            f'{self.resolve_topic_name("pose4d/foreground")} (background area > '
+            f'{self.config.max_region_area_px} px, floor removal {self.config.floor_remove})')
+
+    def on_msg(self, stream: int, msg: Any) -> None:
+        before = self.sync.dropped[0]
+        for _, items in self.sync.push(stream, stamp_to_ns(msg.header.stamp), msg):
+            self.latest.submit(items)
+        self.monitor.dropped(self.sync.dropped[0] - before)
+
+    def process(self, items: Any) -> None:
+        color_msg, depth_msg, info_msg = items
+        t0 = time.perf_counter()
+        stamp = stamp_to_ns(color_msg.header.stamp)
+        try:
+            color = color_from_msg(color_msg)
+            depth = depth_from_msg(depth_msg)
+            intrinsics = intrinsics_from_msg(info_msg)
+            if color.shape[:2] != depth.shape:
+                raise ValueError(f'colour is {color.shape[1]}x{color.shape[0]} but depth is '
+                                 f'{depth.shape[1]}x{depth.shape[0]} (not registered?)')
+            result = segment(depth, intrinsics, config=self.config,
+                             previous=self.previous if self.temporal else None)
+        except ValueError as exc:
+            self.monitor.bad_input(f'frame at {stamp} ns refused: {exc}')
+            return
+        self.previous = result if result.found else None
+        if not result.found:
+            self.get_logger().debug(f'frame at {stamp} ns: no person ({result.reason})')
+        color_m, depth_m = apply_mask(color, depth, result.mask)
+        header = color_msg.header
+        if depth_msg.encoding == '32FC1':
+            depth_out = array_to_image(depth_m, '32FC1', header)
+        else:
+            depth_out = array_to_image(depth_to_millimetres(depth_m), '16UC1', header)
+        self.pub_mask.publish(array_to_image(result.mask.astype(np.uint8) * 255, 'mono8',
+                                             header))
+        self.pub_color.publish(array_to_image(color_m, 'rgb8', header))
+        self.pub_depth.publish(depth_out)
+        if self.pub_cloud is not None:
+            rows, cols = np.nonzero(result.mask[::self.cloud_step, ::self.cloud_step])
+            rows, cols = rows * self.cloud_step, cols * self.cloud_step
+            xyz = backproject(np.stack([cols, rows], axis=1), depth_m[rows, cols], intrinsics)
+            ok = np.isfinite(xyz).all(axis=1)
+            self.pub_cloud.publish(cloud_to_msg(xyz[ok], color[rows[ok], cols[ok]], header))
+        self.monitor.frame(stamp, time.perf_counter() - t0)
+
+
+def main(args: list[str] | None = None) -> int:
+    return run(ForegroundNode, args)

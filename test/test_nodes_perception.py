@@ -1,0 +1,83 @@
+"""`foreground` (and `detector`) executables over Fast DDS on rendered RGB-D frames."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from harness import start
+
+from pose4d_ros.core.camera import cad60_intrinsics
+
+INTR = cad60_intrinsics()
+
+
+@pytest.fixture(scope='module')
+def frames(request):
+    """Three rendered frames of a person in a room (real UTKinect motion when available)."""
+    from conftest import SHARED_DATA
+
+    from pose4d_ros.datasets import synth, utkinect
+
+    rng = np.random.default_rng(3)
+    body = synth.random_body(rng)
+    scene = synth.random_scene(rng, INTR, occluder_prob=0.0)
+    takes = utkinect.list_takes(SHARED_DATA / 'utkinect') if SHARED_DATA.is_dir() else []
+    if takes:
+        _, joints = utkinect.resample(utkinect.read_take(takes[-1]))
+        poses = [utkinect.to_optical(joints[k]) for k in (100, 101, 102)]
+    else:  # a standing pose from the renderer's own neutral skeleton
+        pytest.skip('needs ../shared/data/utkinect for a real pose')
+    out = []
+    for k, pose in enumerate(poses):
+        pose = synth.retarget(pose, body)
+        r = synth.render(pose, body, scene, INTR, rng=np.random.default_rng(k))
+        out.append(r)
+    return out
+
+
+def _publish_frame(ros, pubs, r, header):
+    from pose4d_ros.nodes.convert import array_to_image, intrinsics_to_msg
+
+    color, depth, info = pubs
+    color.publish(array_to_image(r.rgb, 'rgb8', header))
+    depth.publish(array_to_image(r.depth_mm, '16UC1', header))
+    info.publish(intrinsics_to_msg(INTR, header))
+
+
+def test_foreground_node_masks_the_person(ros, frames, tmp_path):
+    from sensor_msgs.msg import CameraInfo, Image
+    from std_msgs.msg import Header
+
+    from pose4d_ros.nodes import qos
+    from pose4d_ros.nodes.convert import depth_from_msg, image_to_array, ns_to_stamp
+
+    node = start('foreground', {}, log_dir=tmp_path)
+    try:
+        pubs = (ros.node.create_publisher(Image, 'camera/color/image_raw', qos.OUTPUT_QOS),
+                ros.node.create_publisher(Image, 'camera/depth/image_raw', qos.OUTPUT_QOS),
+                ros.node.create_publisher(CameraInfo, 'camera/color/camera_info',
+                                          qos.OUTPUT_QOS))
+        masks = ros.collect(Image, 'pose4d/foreground/mask', qos.OUTPUT_QOS)
+        colors = ros.collect(Image, 'pose4d/foreground/color', qos.OUTPUT_QOS)
+        depths = ros.collect(Image, 'pose4d/foreground/depth', qos.OUTPUT_QOS)
+        for pub in pubs:
+            ros.wait_for_subscribers(pub)
+        for topic in ('mask', 'color', 'depth'):
+            ros.wait_for_publishers(f'pose4d/foreground/{topic}')
+        headers = [Header(stamp=ns_to_stamp(10**18 + k * 33_333_334), frame_id='cam')
+                   for k in range(len(frames))]
+        for r, header in zip(frames, headers, strict=True):
+            _publish_frame(ros, pubs, r, header)
+            n = len(headers[:headers.index(header) + 1])
+            ros.spin_until(lambda n=n: len(depths) == n, 15, f'masked frame {n}')
+    finally:
+        assert node.stop() == 0, node.output()
+    assert [m.header for m in masks] == headers == [m.header for m in colors]
+    for r, mask_msg, color_msg, depth_msg in zip(frames, masks, colors, depths, strict=True):
+        mask = image_to_array(mask_msg) > 127
+        iou = (mask & r.mask).sum() / max((mask | r.mask).sum(), 1)
+        assert iou > 0.7, iou
+        color = image_to_array(color_msg)
+        assert (color[~mask] == 0).all()
+        depth = depth_from_msg(depth_msg)
+        assert depth_msg.encoding == '16UC1' and np.isnan(depth[~mask]).all()
