@@ -332,9 +332,11 @@ def fit_floor(depth_m: NDArray[np.floating], intrinsics: Intrinsics, *,
         inl = np.abs(pts @ plane[:3] + plane[3]) < tol
         if np.count_nonzero(inl) < 3:
             break
+        # weighted total least squares, weights 1 / sigma^2 with sigma ~ z^2
         q = pts[inl]
-        c = q.mean(axis=0)
-        _, _, vt = np.linalg.svd(q - c, full_matrices=False)
+        wt = 1.0 / np.maximum(q[:, 2], 1.0) ** 4
+        c = (wt @ q) / wt.sum()
+        _, _, vt = np.linalg.svd((q - c) * np.sqrt(wt)[:, None], full_matrices=False)
         n = vt[2] * (-1.0 if vt[2][1] > 0 else 1.0)
         if -n[1] < cos_tilt:
             break
