@@ -90,6 +90,8 @@ class ForegroundConfig:
         (head, or hands raised), metres; only with a floor.
     person_max_bottom_m : largest height above the floor of its bottom rows (feet, or the top
         of an occluder hiding them), metres; only with a floor.
+    person_max_extent_m : largest depth extent of a person part (5th to 95th percentile of
+        its depths), metres; deeper regions are also split in two at Otsu's threshold.
     edge_rows : rows at the top and bottom of a part whose median height is its top/bottom.
     floor_remove : fit and drop the floor plane before MSER.
     floor_rows_fraction : lower fraction of the image rows searched for the floor.
@@ -132,6 +134,7 @@ class ForegroundConfig:
     person_min_top_m: float = 0.9
     person_max_top_m: float = 2.5
     person_max_bottom_m: float = 1.0
+    person_max_extent_m: float = 1.0
     edge_rows: int = 3
     max_candidates: int = 6
     floor_remove: bool = True
@@ -179,6 +182,9 @@ class ForegroundConfig:
         if not 0.0 < self.floor_rows_fraction <= 1.0:
             raise ValueError(f'floor_rows_fraction must be in (0, 1], got '
                              f'{self.floor_rows_fraction}')
+        if not self.person_max_extent_m > 0:
+            raise ValueError(f'person_max_extent_m must be positive, got '
+                             f'{self.person_max_extent_m}')
         if not self.person_max_bottom_m >= 0:
             raise ValueError(f'person_max_bottom_m must be >= 0, got {self.person_max_bottom_m}')
         if not self.merge_slack >= 1.0:
@@ -674,7 +680,8 @@ class Part:
     n : pixels; z : median depth, m; height_m, width_m : box size at depth z; area_m2 :
     surface seen from the camera; fill : n over box area; variation : the region's MSER
     variation; side : touches the left or right image border; top_m, bottom_m : height
-    above the floor of its top and bottom rows (NaN without a floor).
+    above the floor of its top and bottom rows (NaN without a floor); extent_m : depth
+    between its 5th and 95th percentiles.
     """
 
     crop: NDArray[np.bool_] = field(repr=False)
@@ -692,6 +699,7 @@ class Part:
     side: bool
     top_m: float
     bottom_m: float
+    extent_m: float
 
 
 def _examine(depth: NDArray[np.float32], intrinsics: Intrinsics, config: ForegroundConfig,
@@ -765,6 +773,7 @@ def _examine(depth: NDArray[np.float32], intrinsics: Intrinsics, config: Foregro
     # depth gaps (an occluder in front, furniture behind); every part is a candidate.
     parts = []
     gap_levels = config.occluder_gap_m / config.metres_per_level
+    extent_levels = config.person_max_extent_m / config.metres_per_level
     ws = gs.shape[1]
     for k in picked:
         i = int(order[k])
@@ -773,12 +782,21 @@ def _examine(depth: NDArray[np.float32], intrinsics: Intrinsics, config: Foregro
         gl = g[bx[1]:bx[3], bx[0]:bx[2]]
         hl = None if above is None else above[bx[1]:bx[3], bx[0]:bx[2]]
         hist = np.bincount(gl[crop], minlength=256)
+        present = np.flatnonzero(hist)
         for lo, hi in _depth_parts(hist, gap_levels):
-            part = crop & (gl >= lo) & (gl <= hi) if (lo, hi) != (level[i], 255) else crop
-            pt = _describe(part, hist[lo:hi + 1], lo, hi, bx, float(var[i]), hl, intrinsics,
-                           w, config)
-            if pt is not None:
-                parts.append(pt)
+            ranges = [(lo, hi)]
+            if _extent_levels(hist[lo:hi + 1]) > extent_levels:
+                # too deep for one person, but no empty gap: an occluder whose top surface
+                # recedes towards the person (a table); split at Otsu's threshold
+                cut = lo + _otsu(hist[lo:hi + 1])
+                ranges += [(lo, cut), (cut + 1, hi)]
+            for a, b in ranges:
+                whole = a <= present[0] and b >= present[-1]
+                part = crop if whole else crop & (gl >= a) & (gl <= b)
+                pt = _describe(part, hist[a:b + 1], a, b, bx, float(var[i]), hl, intrinsics,
+                               w, config)
+                if pt is not None:
+                    parts.append(pt)
     return floor, parts, REASON_NO_PERSON
 
 
@@ -809,7 +827,7 @@ def _describe(part: NDArray[np.bool_], hist: NDArray[np.int64], lo: int, hi: int
                 height_m=bh * z / intrinsics.fy, width_m=bw * z / intrinsics.fx,
                 area_m2=n * z * z / (intrinsics.fx * intrinsics.fy), fill=n / (bh * bw),
                 variation=var, side=box[0] == 0 or box[2] == width, top_m=top,
-                bottom_m=bottom)
+                bottom_m=bottom, extent_m=_extent_levels(hist) * config.metres_per_level)
 
 
 def person_rules(part: Part, config: ForegroundConfig) -> bool:
@@ -819,7 +837,7 @@ def person_rules(part: Part, config: ForegroundConfig) -> bool:
     if not (c.person_min_height_m <= part.height_m <= c.person_max_height_m
             and c.person_min_width_m <= part.width_m <= c.person_max_width_m
             and c.person_min_area_m2 <= part.area_m2 <= c.person_max_area_m2
-            and part.fill <= c.person_max_fill):
+            and part.fill <= c.person_max_fill and part.extent_m <= c.person_max_extent_m):
         return False
     if math.isfinite(part.top_m) and not c.person_min_top_m <= part.top_m <= c.person_max_top_m:
         return False
@@ -843,6 +861,26 @@ def part_score(part: Part, config: ForegroundConfig,
     if prev_box is not None and _overlap(prev_box, part.box) > 0.3:
         score += config.previous_bonus
     return score
+
+
+def _extent_levels(hist: NDArray[np.int64]) -> int:
+    """Levels between the 5th and 95th percentiles of a histogram."""
+    cum = np.cumsum(hist)
+    n = cum[-1]
+    return int(np.searchsorted(cum, 0.95 * n) - np.searchsorted(cum, 0.05 * n))
+
+
+def _otsu(hist: NDArray[np.int64]) -> int:
+    """Otsu's threshold of a histogram: the last bin of the lower class."""
+    p = hist.astype(np.float64)
+    k = np.arange(p.size)
+    w0 = np.cumsum(p)[:-1]
+    w1 = p.sum() - w0
+    m0 = np.cumsum(p * k)[:-1]
+    m1 = (p * k).sum() - m0
+    with np.errstate(invalid='ignore', divide='ignore'):
+        between = w0 * w1 * (m0 / w0 - m1 / w1) ** 2
+    return int(np.nanargmax(between)) if np.isfinite(between).any() else p.size // 2
 
 
 def _depth_parts(hist: NDArray[np.int64], gap_levels: float) -> list[tuple[int, int]]:
