@@ -337,7 +337,7 @@ class IkConfig:
     (`surface_offset_m`, `depth_scale_m`, `occluded_weight`, `unknown_cost`, `prior_weight`,
     `length_scales`, `scale_weight`) tuned on real Kinect motion of UTKinect subjects s01-s06
     (`core.motion_eval.fit_swivel_prior`, `tune_ik_depth`; depth from capsules splatted on the
-    recorded skeletons).
+    recorded skeletons): what ``pose4d track-eval --tune --seed 0`` finds, rounded.
 
     Attributes
     ----------
@@ -378,16 +378,16 @@ class IkConfig:
     surface_offset_m: tuple[float, float] = (0.03, 0.05)
     depth_scale_m: float = 0.03
     free_space_weight: float = 1.0
-    occluded_weight: float = 0.6
-    unknown_cost: float = 0.8
+    occluded_weight: float = 0.3
+    unknown_cost: float = 0.5
     min_valid_fraction: float = 0.3
     ambiguity_margin: float = 0.05
     prior_weight: float = 0.15
     length_scales: tuple[float, ...] = (0.8, 0.85, 0.9, 0.95, 1.0, 1.05, 1.1, 1.15)
     scale_weight: float = 0.1
     prior_shrink: tuple[float, float] = (1.0, 1.0)
-    arm_prior: tuple[float, float, float] = (0.54, -0.80, -0.25)
-    leg_prior: tuple[float, float, float] = (0.23, -0.22, 0.95)
+    arm_prior: tuple[float, float, float] = (0.50, -0.82, -0.29)
+    leg_prior: tuple[float, float, float] = (0.27, -0.22, 0.94)
     prior_angle_std_rad: float = 0.6
     confidence_scale_m: float = 0.1
     reach_tolerance: float = 0.05
