@@ -47,7 +47,6 @@ class SearchConfig:
     level_step : scale ratio between neighbouring levels (depth-guided search).
     levels_per_octave : pyramid density of the depth-free search.
     margin : search-box margin around the foreground box, in person scales (fx * L / z).
-    mask_input : blank colour (0) and depth (no reading) outside the mask before features.
     low_score : poses scoring below this are flagged 'low_score' (0 = the SVM's boundary).
     nms_overlap : top-k suppression: pose boxes overlapping more than this (IoU) are dropped.
     """
@@ -56,7 +55,6 @@ class SearchConfig:
     level_step: float = 2.0 ** 0.2
     levels_per_octave: int = 5
     margin: float = 0.6
-    mask_input: bool = False
     low_score: float = 0.0
     nms_overlap: float = 0.5
 
@@ -397,12 +395,12 @@ class Detector:
         if m.channels == 'rgbd':
             dcrop = (np.full(col.shape[:2], np.nan, np.float32) if depth_m is None
                      else np.asarray(depth_m, np.float32)[sl])
-            if self.config.mask_input and mask is not None:
-                dcrop = np.where(mask[sl], dcrop, np.nan)
+            if m.masked_input and mask is not None:
+                dcrop = np.where(mask[sl], dcrop, np.float32(np.nan))
             dep = depth_image(dcrop, m.depth_encoding, near_m=m.depth_range_m[0],
                               far_m=m.depth_range_m[1])
-        if self.config.mask_input and mask is not None:
-            col = np.where(mask[sl][:, :, None], col, 0)
+        if m.masked_input and mask is not None:
+            col = np.where(mask[sl][:, :, None], col, np.zeros((), col.dtype))
         fh, fw = m.filter_shape
         pad = (fh // 2 + 1, fw // 2 + 1)
         return feature_pyramid(col, dep, plan.scales, sbin=m.sbin, pad=pad,

@@ -66,6 +66,9 @@ class PartModel:
     depth_range_m : (near, far) metres for the depth encoding.
     calibration : (P, 3) float32 logistic coefficients: confidence of part i =
         sigmoid(c0 * local_score + c1 * pose_score + c2).
+    masked_input : trained on frames whose colour and depth were blanked outside the person's
+        foreground mask (as the foreground stage publishes them); the detector then blanks its
+        input outside the mask it is given, so raw and pre-masked frames give the same answer.
     metadata : free-form strings (data, command, seed, time, git commit, ...).
     """
 
@@ -83,6 +86,7 @@ class PartModel:
     depth_encoding: str = ''
     depth_range_m: tuple[float, float] = (0.5, 4.5)
     calibration: NDArray[np.float32] | None = None
+    masked_input: bool = False
     metadata: Mapping[str, str] = field(default_factory=dict)
 
     def __post_init__(self) -> None:
@@ -159,7 +163,8 @@ def save_model(model: PartModel, path: str | Path) -> None:
         'channels': model.channels, 'sbin': model.sbin,
         'canonical_scale_px': model.canonical_scale_px, 'scale_length_m': model.scale_length_m,
         'scale_range_px': list(model.scale_range_px), 'depth_encoding': model.depth_encoding,
-        'depth_range_m': list(model.depth_range_m), 'metadata': dict(model.metadata),
+        'depth_range_m': list(model.depth_range_m), 'masked_input': model.masked_input,
+        'metadata': dict(model.metadata),
     }
     arrays = {name: getattr(model, name) for name in _ARRAYS}
     if model.calibration is not None:
@@ -208,6 +213,7 @@ def load_model(path: str | Path) -> PartModel:
             depth_range_m=tuple(float(x) for x in header['depth_range_m']),
             calibration=(contents['calibration'].astype(np.float32)
                          if 'calibration' in contents else None),
+            masked_input=bool(header.get('masked_input', False)),
             metadata={str(k): str(v) for k, v in header.get('metadata', {}).items()},
         )
     except (KeyError, TypeError, ValueError) as exc:

@@ -1,0 +1,75 @@
+"""Shared pieces of the part-model verbs (`train`, `eval`, `bench`): loading sources, progress
+bars, machine and thread facts, training metadata."""
+
+from __future__ import annotations
+
+import os
+import platform
+import subprocess
+import sys
+from collections.abc import Iterable
+from pathlib import Path
+
+import numpy as np
+
+from pose4d_ros.datasets.sources import Sample, open_source, parse_range
+
+
+def progress(iterable: Iterable, desc: str, total: int | None = None) -> Iterable:
+    """A tqdm bar on stderr (quiet when stderr is not a terminal and POSE4D_PROGRESS=0)."""
+    from tqdm import tqdm
+
+    disable = os.environ.get('POSE4D_PROGRESS', '1') == '0'
+    return tqdm(iterable, desc=desc, total=total, leave=False, disable=disable,
+                dynamic_ncols=True)
+
+
+def log(message: str) -> None:
+    print(message, file=sys.stderr, flush=True)
+
+
+def load_samples(sources: list[str], *, frame_range: str | None, stride: int,
+                 max_frames: int | None, seed: int) -> list[Sample]:
+    """All samples of the sources (an LSPET source uses `frame_range`); `max_frames` keeps an
+    evenly spread subset (deterministic)."""
+    rng_ = parse_range(frame_range)
+    samples: list[Sample] = []
+    for src in sources:
+        it = open_source(src, frame_range=rng_, stride=stride)
+        samples.extend(progress(it, f'reading {Path(src).name}'))
+    if max_frames is not None and len(samples) > max_frames:
+        idx = np.unique(np.linspace(0, len(samples) - 1, max_frames).round().astype(int))
+        samples = [samples[i] for i in idx]
+    if not samples:
+        raise ValueError(f'no labelled frames in {", ".join(sources)}')
+    return samples
+
+
+def git_commit() -> str:
+    try:
+        root = Path(__file__).resolve().parents[2]
+        out = subprocess.run(['git', '-C', str(root), 'rev-parse', '--short', 'HEAD'],
+                             capture_output=True, text=True, timeout=5)
+        return out.stdout.strip() if out.returncode == 0 else ''
+    except (OSError, subprocess.SubprocessError):
+        return ''
+
+
+def machine() -> dict[str, str | int]:
+    """Cores, CPU model and the thread settings that matter for timing."""
+    import numba
+
+    from pose4d_ros.core.dpm.threads import blas_threads
+
+    cpu = platform.processor() or ''
+    try:
+        for line in Path('/proc/cpuinfo').read_text().splitlines():
+            if line.startswith('model name'):
+                cpu = line.split(':', 1)[1].strip()
+                break
+    except OSError:
+        pass
+    return {'cores': os.cpu_count() or 0, 'cpu': cpu, 'python': platform.python_version(),
+            'numba_threads': int(numba.get_num_threads()),
+            'blas_threads': ', '.join(f'{k}={v}' for k, v in blas_threads().items()) or 'n/a',
+            'load_average': ' '.join(f'{x:.2f}' for x in os.getloadavg())}

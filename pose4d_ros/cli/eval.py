@@ -1,0 +1,229 @@
+"""`pose4d eval`: run the perception core over a labelled set and print the paper's table.
+
+    pose4d eval SOURCE --json FILE [--model M ...] [--range A-B]
+
+SOURCE is a CAD-60 directory (real or synthetic) or an LSPET root (with --range). Each row is a
+variant of the core run over every frame:
+
+- `rgbd`: the 4D-DPM as the live pipeline runs it: the foreground stage (`core.foreground`)
+  finds the person's mask on the depth image, and the RGB-D part model searches the levels that
+  the person's depth gives, inside the mask's box (a model trained on masked frames also sees
+  the frame blanked outside the mask).
+- `rgb`: the Yang & Ramanan baseline: the RGB-only part model over the whole colour image and
+  the whole trained scale range, no depth at all.
+
+Default models: the shipped `rgbd_10` and `rgb_10` for a CAD-60 set, `lspet_rgb_14` for LSPET;
+`--model` (repeatable) replaces them, each model giving the row of its channels. More rows
+(tracker, IK) plug in as more `Variant`s: `run_variant` yields predictions, `score` scores them.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import tempfile
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+from numpy.typing import NDArray
+
+from pose4d_ros.cli._dpm import load_samples, log, progress
+from pose4d_ros.core.camera import cad60_intrinsics
+from pose4d_ros.core.dpm.infer import Detector
+from pose4d_ros.core.dpm.model import PartModel, load_model
+from pose4d_ros.core.dpm.threads import set_blas_threads
+from pose4d_ros.core.dpm.train import part_joints
+from pose4d_ros.core.metrics import score_groups
+from pose4d_ros.core.skeleton import JOINT_GROUPS
+from pose4d_ros.datasets.sources import Sample, source_kind
+
+TABLE_METRICS = (('pck', 'PCK@0.1 (%)'), ('pck@0.2', 'PCK@0.2 (%)'), ('apk', 'APK (%)'),
+                 ('error_px', 'error (px)'))
+
+
+@dataclass
+class Predictions:
+    """A variant's output over a set of frames.
+
+    Attributes
+    ----------
+    names : J predicted joint names.
+    uv : (F, J, 2) float64 pixels, NaN = not predicted.
+    scores : (F, J) float64 confidences (for APK).
+    found : (F,) bool, a pose was returned for the frame.
+    """
+
+    names: tuple[str, ...]
+    uv: NDArray[np.float64]
+    scores: NDArray[np.float64]
+    found: NDArray[np.bool_]
+
+
+# A variant turns one frame into (uv (J, 2), scores (J,)) or None when it returns nothing.
+FrameFn = Callable[[Sample], tuple[NDArray, NDArray] | None]
+
+
+@dataclass
+class Variant:
+    """One row of the table: a name, the joint names it predicts, and its per-frame call."""
+
+    name: str
+    names: tuple[str, ...]
+    run: FrameFn
+
+
+def detector_variant(name: str, model: PartModel, *, use_depth: bool) -> Variant:
+    """The part detector as a variant: with depth, the foreground stage's mask bounds the
+    search and gives the scale (the live pipeline); without, the whole image (Yang &
+    Ramanan)."""
+    det = Detector(model)
+    if use_depth:
+        from pose4d_ros.core.foreground import segment
+
+    def run(s: Sample) -> tuple[NDArray, NDArray] | None:
+        if use_depth and s.depth_m is not None:
+            h, w = s.depth_m.shape
+            intr = s.intrinsics or cad60_intrinsics(w, h)
+            fg = segment(s.depth_m, intr)
+            if fg.found:
+                poses = det.detect(s.color, s.depth_m, mask=fg.mask, intrinsics=intr)
+            else:  # no person found: search the whole frame rather than give up
+                poses = det.detect(s.color, s.depth_m, intrinsics=intr)
+        else:
+            poses = det.detect(s.color, None)
+        if not poses:
+            return None
+        return poses[0].uv, poses[0].confidence
+
+    return Variant(name, model.part_names, run)
+
+
+def run_variant(variant: Variant, samples: Sequence[Sample]) -> Predictions:
+    """Run a variant over the frames."""
+    j = len(variant.names)
+    uv = np.full((len(samples), j, 2), np.nan)
+    sc = np.full((len(samples), j), np.nan)
+    found = np.zeros(len(samples), bool)
+    for i, s in enumerate(progress(samples, variant.name)):
+        out = variant.run(s)
+        if out is not None:
+            uv[i], sc[i] = out
+            found[i] = True
+    return Predictions(variant.names, uv, sc, found)
+
+
+def ground_truth(samples: Sequence[Sample], names: Sequence[str]
+                 ) -> tuple[NDArray[np.float64], NDArray[np.bool_]]:
+    """(F, J, 2) ground-truth pixels and (F, J) visibility of the named joints (aliases
+    'wrist' -> CAD-60 'hand', 'ankle' -> 'foot'); joints outside the image are not visible."""
+    gt = np.full((len(samples), len(names), 2), np.nan)
+    vis = np.zeros((len(samples), len(names)), bool)
+    for i, s in enumerate(samples):
+        uv, v = part_joints(s, names)
+        h, w = s.color.shape[:2]
+        with np.errstate(invalid='ignore'):
+            inside = (uv[:, 0] >= 0) & (uv[:, 0] <= w - 1) & (uv[:, 1] >= 0) & (
+                uv[:, 1] <= h - 1)
+        gt[i] = uv
+        vis[i] = v & inside
+    return gt, vis
+
+
+def score(pred: Predictions, samples: Sequence[Sample]) -> dict[str, dict[str, float]]:
+    """The paper's table row (`core.metrics.score_groups`) of a variant's predictions."""
+    gt, vis = ground_truth(samples, pred.names)
+    scores = np.where(np.isfinite(pred.scores), pred.scores, -np.inf)
+    return score_groups(pred.uv, scores, gt, vis, pred.names)
+
+
+def format_table(rows: dict[str, dict[str, dict[str, float]]], frames: int) -> str:
+    """The rows as text: one block per metric, groups as columns."""
+    groups = [g for g in JOINT_GROUPS if any(g in r['pck'] for r in rows.values())]
+    cols = groups + ['average']
+    lines = [f'{frames} frames']
+    for key, title in TABLE_METRICS:
+        lines.append('')
+        lines.append(f'{title:<14}' + ''.join(f'{c:>10}' for c in cols))
+        for name, row in rows.items():
+            vals = row[key]
+            lines.append(f'{name:<14}' + ''.join(
+                f'{vals[c]:>10.1f}' if c in vals and np.isfinite(vals[c]) else f'{"-":>10}'
+                for c in cols))
+    return '\n'.join(lines)
+
+
+def write_json(path: Path, obj: dict) -> None:
+    """Write JSON to a temporary name and rename it when complete."""
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(prefix=path.name + '.', suffix='.tmp', dir=path.parent)
+    try:
+        with os.fdopen(fd, 'w') as fh:
+            json.dump(obj, fh, indent=2, sort_keys=False)
+            fh.write('\n')
+        os.replace(tmp, path)
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise
+
+
+def _clean(table: dict[str, dict[str, float]]) -> dict[str, dict[str, float | None]]:
+    return {k: {g: (round(float(v), 3) if np.isfinite(v) else None) for g, v in row.items()}
+            for k, row in table.items()}
+
+
+def default_models(kind: str) -> list[str]:
+    return ['lspet_rgb_14'] if kind == 'lspet' else ['rgbd_10', 'rgb_10']
+
+
+def resolve_model(name: str) -> Path:
+    """A shipped model name ('rgbd_10') or a path to a .npz."""
+    p = Path(name)
+    if p.suffix == '.npz' or p.exists():
+        return p
+    return Path(__file__).resolve().parents[1] / 'models' / f'{name}.npz'
+
+
+def add_parser(subparsers: argparse._SubParsersAction) -> None:
+    p = subparsers.add_parser(
+        'eval', help="run the core over a labelled set and print the paper's table",
+        description=__doc__.split('\n\n')[0],
+        formatter_class=argparse.ArgumentDefaultsHelpFormatter)
+    p.add_argument('source', metavar='SOURCE', help='CAD-60 directory or LSPET root')
+    p.add_argument('--json', required=True, type=Path, help='write the table here (JSON)')
+    p.add_argument('--model', action='append', default=None,
+                   help='model (.npz or shipped name); repeat for several rows; default: '
+                        'rgbd_10 + rgb_10 (CAD-60), lspet_rgb_14 (LSPET)')
+    p.add_argument('--range', dest='frame_range', metavar='A-B',
+                   help='LSPET image numbers (inclusive), e.g. 2501-3000')
+    p.add_argument('--stride', type=int, default=1, help='every n-th frame of a CAD-60 video')
+    p.add_argument('--max-frames', type=int, default=None)
+    p.add_argument('--blas-threads', type=int, default=1)
+    p.set_defaults(func=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    set_blas_threads(args.blas_threads)
+    kind = source_kind(args.source)
+    models = [load_model(resolve_model(m)) for m in (args.model or default_models(kind))]
+    samples = load_samples([args.source], frame_range=args.frame_range, stride=args.stride,
+                           max_frames=args.max_frames, seed=0)
+    has_depth = any(s.depth_m is not None for s in samples)
+    rows: dict[str, dict[str, dict[str, float]]] = {}
+    for m in models:
+        use_depth = m.channels == 'rgbd'
+        if use_depth and not has_depth:
+            raise ValueError(f'{args.source}: no depth images for the rgbd model')
+        name = m.channels
+        while name in rows:
+            name += "'"
+        pred = run_variant(detector_variant(name, m, use_depth=use_depth), samples)
+        if not pred.found.all():
+            log(f'{name}: no pose in {int((~pred.found).sum())} of {len(samples)} frames')
+        rows[name] = score(pred, samples)
+    print(format_table(rows, len(samples)))
+    out = {'frames': len(samples), 'rows': {k: _clean(v) for k, v in rows.items()}}
+    write_json(args.json, out)
+    return 0

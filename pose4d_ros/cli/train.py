@@ -1,0 +1,214 @@
+"""`pose4d train`: train a part model (RGB-D 4D-DPM, or RGB-only = Yang & Ramanan's baseline).
+
+    pose4d train SOURCE... --out MODEL.npz [--parts 10|14] [--channels rgbd|rgb] [--types K]
+                 [--seed N] [--range A-B]
+
+SOURCE is a CAD-60 directory (real or synthetic: a root of dataN/ directories, or one dataN/)
+or an LSPET root (with --range, e.g. 1-2500). Negatives (for hard-negative mining) are the
+background of the training frames: the strips of each frame away from the person, and for sets
+with person masks (synthetic) the room itself, assembled from the frames where the person is
+elsewhere. See `core.dpm.train` for the method.
+"""
+
+from __future__ import annotations
+
+import argparse
+import shlex
+import sys
+import time
+from collections import defaultdict
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+
+from pose4d_ros.cli._dpm import git_commit, load_samples, log, machine, progress
+from pose4d_ros.core.dpm.model import save_model
+from pose4d_ros.core.dpm.threads import set_blas_threads
+from pose4d_ros.core.dpm.train import (
+    Negative,
+    TrainConfig,
+    background_crops,
+    part_joints,
+    person_scale,
+    train,
+)
+from pose4d_ros.datasets.sources import Sample
+
+
+def add_parser(subparsers: argparse._SubParsersAction) -> None:
+    p = subparsers.add_parser(
+        'train', help='train a part model (RGB-D or RGB-only)',
+        description=__doc__.split('\n\n')[0],
+        formatter_class=argparse.ArgumentDefaultsHelpFormatter)
+    p.add_argument('sources', nargs='+', metavar='SOURCE',
+                   help='CAD-60 directory or LSPET root')
+    p.add_argument('--out', required=True, type=Path, help='model file to write (.npz)')
+    p.add_argument('--parts', choices=('10', '14'), default='10', help='part tree')
+    p.add_argument('--channels', choices=('rgbd', 'rgb'), default='rgbd',
+                   help='rgbd: colour + depth filter per type; rgb: colour only')
+    p.add_argument('--types', type=int, default=6, help='mixture types per part (K)')
+    p.add_argument('--seed', type=int, default=0)
+    p.add_argument('--range', dest='frame_range', metavar='A-B',
+                   help='LSPET image numbers (inclusive), e.g. 1-2500')
+    p.add_argument('--stride', type=int, default=1, help='every n-th frame of a CAD-60 video')
+    p.add_argument('--max-frames', type=int, default=None,
+                   help='train on at most this many frames (evenly spread)')
+    p.add_argument('--sbin', type=int, default=4, help='HOG cell size, pixels')
+    p.add_argument('--filter-cells', type=int, default=5, help='filter size, cells')
+    p.add_argument('--scale-px', type=float, default=32.0,
+                   help='person scale (about a torso) at the model level, pixels')
+    p.add_argument('--depth-encoding', choices=('float', 'u8'), default='float',
+                   help='depth HOG on float metres or on 8-bit scaled depth')
+    p.add_argument('--masked', action='store_true',
+                   help='train on frames blanked outside the foreground mask (core.foreground '
+                        'run on each frame, as the live pipeline does)')
+    p.add_argument('--rounds', type=int, default=4, help='mining rounds')
+    p.add_argument('--svm-c', type=float, default=1e-5, help='SVM C of eq. (5)')
+    p.add_argument('--no-background', action='store_true',
+                   help='no background negatives (only wrong poses of the labelled frames)')
+    p.add_argument('--negatives-per-image', type=int, default=6)
+    p.add_argument('--poses-per-frame', type=int, default=2,
+                   help='wrong poses mined per labelled frame and round')
+    p.add_argument('--cache-limit', type=int, default=20000, help='constraint cache size')
+    p.add_argument('--max-negative-images', type=int, default=1500)
+    p.add_argument('--no-flip', action='store_true', help='no mirrored positives')
+    p.add_argument('--blas-threads', type=int, default=1,
+                   help='OpenBLAS threads (1: the measured best on 2 shared cores)')
+    p.set_defaults(func=run)
+
+
+def room_backgrounds(samples: list[Sample], *, dilate_px: int = 5) -> list[Negative]:
+    """The room behind the person, per video of a masked (synthetic) set: every pixel from the
+    latest frame in which the (dilated) person mask leaves it free; pixels the person never
+    leaves are cut off by keeping the widest free band of columns on either side."""
+    import cv2
+
+    by_video: dict[str, list[Sample]] = defaultdict(list)
+    for s in samples:
+        if s.mask is not None and s.depth_m is not None:
+            by_video[str(s.extra.get('video', s.key))].append(s)
+    kernel = np.ones((2 * dilate_px + 1, 2 * dilate_px + 1), np.uint8)
+    out = []
+    for vid, ss in by_video.items():
+        h, w = ss[0].color.shape[:2]
+        col = np.zeros((h, w, 3), np.uint8)
+        dep = np.full((h, w), np.nan, np.float32)
+        free = np.zeros((h, w), bool)
+        for s in ss:
+            busy = cv2.dilate(s.mask.astype(np.uint8), kernel) > 0
+            ok = ~busy
+            col[ok] = s.color[ok]
+            dep[ok] = s.depth_m[ok]
+            free |= ok
+        if free.all():
+            out.append(Negative(col, dep, f'{vid} (room)'))
+            continue
+        cols_free = free.all(axis=0)
+        # widest run of fully free columns
+        best, start, run0 = (0, 0), None, 0
+        for x in range(w + 1):
+            if x < w and cols_free[x]:
+                if start is None:
+                    start = x
+            elif start is not None:
+                if x - start > best[1] - best[0]:
+                    best = (start, x)
+                start = None
+        run0 = best[1] - best[0]
+        if run0 >= w // 4:
+            x0, x1 = best
+            out.append(Negative(np.ascontiguousarray(col[:, x0:x1]),
+                                np.ascontiguousarray(dep[:, x0:x1]), f'{vid} (room)'))
+    return out
+
+
+def with_foreground_masks(samples: list[Sample]) -> list[Sample]:
+    """The samples with `mask` replaced by the foreground stage's mask (`core.foreground`),
+    so that a masked model trains on what it will see; a frame where the foreground finds no
+    person keeps its own mask (the renderer's), or none."""
+    from pose4d_ros.core.camera import cad60_intrinsics
+    from pose4d_ros.core.foreground import segment
+
+    out = []
+    missed = 0
+    for s in progress(samples, 'foreground'):
+        if s.depth_m is None:
+            out.append(s)
+            continue
+        h, w = s.depth_m.shape
+        res = segment(s.depth_m, s.intrinsics or cad60_intrinsics(w, h))
+        if res.found:
+            out.append(replace(s, mask=res.mask))
+        else:
+            missed += 1
+            out.append(s)
+    if missed:
+        log(f'foreground found no person in {missed} of {len(samples)} frames '
+            '(their own masks are used)')
+    return out
+
+
+def build_negatives(samples: list[Sample], cfg: TrainConfig, max_images: int, seed: int
+                    ) -> list[Negative]:
+    """Background images for mining: room plates (masked sets) + strips beside the person."""
+    negs = room_backgrounds(samples)
+    strips: list[Negative] = []
+    for s in samples:
+        uv, _ = part_joints(s, cfg.tree.names)
+        sc = person_scale(s, cfg.tree.names, cfg, uv)
+        if np.isfinite(sc):
+            strips.extend(background_crops(s, sc))
+    rng = np.random.default_rng(seed)
+    room = max(max_images - len(negs), 0)
+    if len(strips) > room:
+        strips = [strips[i] for i in np.sort(rng.choice(len(strips), room, replace=False))]
+    if cfg.channels == 'rgb':
+        negs = [Negative(n.color, None, n.key) for n in negs]
+        strips = [Negative(n.color, None, n.key) for n in strips]
+    return negs + strips
+
+
+def run(args: argparse.Namespace) -> int:
+    t0 = time.time()
+    set_blas_threads(args.blas_threads)
+    cfg = TrainConfig(parts=args.parts, channels=args.channels, n_types=args.types,
+                      sbin=args.sbin, filter_cells=args.filter_cells,
+                      canonical_scale_px=args.scale_px, depth_encoding=args.depth_encoding,
+                      masked_input=args.masked, flip=not args.no_flip, svm_c=args.svm_c,
+                      mining_rounds=args.rounds, background_negatives=not args.no_background,
+                      negatives_per_image=args.negatives_per_image,
+                      structural_per_positive=args.poses_per_frame,
+                      cache_limit=args.cache_limit, seed=args.seed)
+    if args.out.suffix != '.npz':
+        raise ValueError(f'{args.out}: the model file must end in .npz')
+    samples = load_samples(args.sources, frame_range=args.frame_range, stride=args.stride,
+                           max_frames=args.max_frames, seed=args.seed)
+    if cfg.channels == 'rgbd' and not any(s.depth_m is not None for s in samples):
+        raise ValueError(f'{", ".join(args.sources)}: no depth images; use --channels rgb')
+    if cfg.masked_input:
+        samples = with_foreground_masks(samples)
+    negatives = (build_negatives(samples, cfg, args.max_negative_images, args.seed)
+                 if cfg.background_negatives else [])
+    log(f'{len(samples)} frames, {len(negatives)} background images')
+    m = machine()
+    meta = {
+        'data': ' '.join(str(Path(s).resolve()) for s in args.sources)
+                + (f' range {args.frame_range}' if args.frame_range else ''),
+        'command': 'pose4d train ' + ' '.join(shlex.quote(a) for a in sys.argv[2:])
+                   if len(sys.argv) > 1 and sys.argv[1] == 'train' else '',
+        'seed': str(args.seed), 'git_commit': git_commit(),
+        'trained_at': time.strftime('%Y-%m-%dT%H:%M:%S%z'),
+        'machine': f"{m['cores']} cores, {m['cpu']}",
+    }
+    model, report = train(samples, negatives, cfg, progress=progress, log=log, metadata=meta)
+    elapsed = time.time() - t0
+    meta = dict(model.metadata)
+    meta['wall_seconds'] = f'{elapsed:.1f}'
+    model = replace(model, metadata=meta)
+    save_model(model, args.out)
+    size = args.out.stat().st_size
+    print(f'wrote {args.out} ({size / 1e6:.2f} MB): {model.n_parts} parts x {model.n_types} '
+          f'types, {model.channels}, {report.n_positives} positives, '
+          f'{len(negatives)} background images, {elapsed / 60:.1f} min')
+    return 0
