@@ -13,12 +13,15 @@ offline evaluation and a live run of the graph give the same answers on the same
 - `IkStage`: Denavit-Hartenberg inverse kinematics (`core.kinematics`, eqs. 17-24) completing
   elbows and knees from shoulders/hips and wrists/ankles in 3-D, the swivel chosen by the depth
   image; output the 14-joint skeleton (`skeleton.SKELETON_14`).
+- `FramePipeline`: all of them on one frame, foreground first (`core.foreground`: floor removal
+  and MSER on depth); what the `pipeline` node and `pose4d eval`/`demo` run.
 """
 
 from __future__ import annotations
 
 import math
 from collections.abc import Mapping
+from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import NDArray
@@ -27,6 +30,7 @@ from pose4d_ros.core import joints as cj
 from pose4d_ros.core.camera import Intrinsics, backproject, project, robust_depth
 from pose4d_ros.core.dpm.infer import Detector, SearchConfig
 from pose4d_ros.core.dpm.model import PartModel
+from pose4d_ros.core.foreground import ForegroundConfig, ForegroundResult, apply_mask, segment
 from pose4d_ros.core.joints import JointSet
 from pose4d_ros.core.kinematics import IkConfig, IkFlag, LimbLengths, infer_middle_joints
 from pose4d_ros.core.skeleton import LIMBS, PARTS_10, SKELETON_14, PartTree
@@ -253,6 +257,64 @@ class IkStage:
         score = float(np.mean(conf[live])) if live.any() else math.nan
         return JointSet(SKELETON_14, uv, xyz, confidence=conf, source=src, covariance=cov,
                         score=score, track_id=tracked.track_id)
+
+
+@dataclass(frozen=True)
+class FrameResult:
+    """Everything one frame produced, stage by stage."""
+
+    foreground: ForegroundResult
+    color_masked: NDArray[np.uint8]
+    depth_masked: NDArray[np.float32]
+    parts: JointSet
+    tracked: JointSet
+    skeleton: JointSet
+
+
+class FramePipeline:
+    """Foreground, detector, tracker and IK on one RGB-D frame, in that order.
+
+    Parameters
+    ----------
+    detector : the detector stage (holds the part model).
+    foreground : the foreground configuration.
+    tracker, ik : the tracking and completion stages (defaults if None).
+    temporal : pass the previous frame's foreground to the next (its floor and its box).
+    """
+
+    def __init__(self, detector: DetectorStage, *, foreground: ForegroundConfig | None = None,
+                 tracker: TrackerStage | None = None, ik: IkStage | None = None,
+                 temporal: bool = True) -> None:
+        self.detector = detector
+        self.foreground_config = foreground or ForegroundConfig()
+        self.tracker = tracker or TrackerStage()
+        self.ik = ik or IkStage()
+        self.temporal = temporal
+        self.previous: ForegroundResult | None = None
+
+    def step(self, color: NDArray[np.uint8], depth_m: NDArray[np.floating],
+             intrinsics: Intrinsics, stamp_s: float) -> FrameResult:
+        """Run every stage on one frame (depth: float32 metres, NaN = no reading)."""
+        color, depth_m = np.asarray(color), np.asarray(depth_m, np.float32)
+        if color.shape[:2] != depth_m.shape:
+            raise ValueError(f'colour is {color.shape[1]}x{color.shape[0]} but depth is '
+                             f'{depth_m.shape[1]}x{depth_m.shape[0]}')
+        fg = segment(depth_m, intrinsics, config=self.foreground_config,
+                     previous=self.previous if self.temporal else None)
+        self.previous = fg if fg.found else None
+        color_m, depth_mm = apply_mask(color, depth_m, fg.mask)
+        # the detector sees what the detector node receives: the masked frame and the mask
+        parts = self.detector.step(color_m, depth_mm, intrinsics, mask=fg.mask)
+        tracked = self.tracker.step(parts, stamp_s, intrinsics)
+        skeleton = self.ik.step(tracked, depth_mm, intrinsics)
+        return FrameResult(fg, color_m, depth_mm, parts, tracked, skeleton)
+
+    def warm_up(self, intrinsics: Intrinsics) -> None:
+        """Compile the kernels on a synthetic frame, then forget it (`warm_up_frame`)."""
+        color, depth, _ = warm_up_frame(intrinsics)
+        self.step(color, depth, intrinsics, 0.0)
+        self.previous = None
+        self.tracker.reset()
 
 
 def limb_bones() -> list[tuple[int, int]]:

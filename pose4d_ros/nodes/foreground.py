@@ -29,6 +29,7 @@ from typing import Any
 import numpy as np
 from rclpy.node import Node
 from sensor_msgs.msg import CameraInfo, Image, PointCloud2
+from std_msgs.msg import Header
 
 from pose4d_ros.core.camera import backproject, cad60_intrinsics, depth_to_millimetres
 from pose4d_ros.core.foreground import ForegroundConfig, ForegroundResult, apply_mask, segment
@@ -79,6 +80,15 @@ def foreground_config(p: dict[str, Any]) -> ForegroundConfig:
                    depth_near_m=p['foreground.depth_near_m'],
                    depth_far_m=p['foreground.depth_far_m'],
                    floor_remove=p['foreground.floor_remove'])
+
+
+def foreground_messages(mask: np.ndarray, color_m: np.ndarray, depth_m: np.ndarray,
+                        encoding: str, header: Header) -> tuple[Image, Image, Image]:
+    """Mask (mono8), masked colour (rgb8) and masked depth (in the input's `encoding`)."""
+    depth = (array_to_image(depth_m, '32FC1', header) if encoding == '32FC1'
+             else array_to_image(depth_to_millimetres(depth_m), '16UC1', header))
+    return (array_to_image(mask.astype(np.uint8) * 255, 'mono8', header),
+            array_to_image(color_m, 'rgb8', header), depth)
 
 
 class ForegroundNode(Node):
@@ -145,14 +155,10 @@ class ForegroundNode(Node):
             self.get_logger().debug(f'frame at {stamp} ns: no person ({result.reason})')
         color_m, depth_m = apply_mask(color, depth, result.mask)
         header = color_msg.header
-        if depth_msg.encoding == '32FC1':
-            depth_out = array_to_image(depth_m, '32FC1', header)
-        else:
-            depth_out = array_to_image(depth_to_millimetres(depth_m), '16UC1', header)
-        self.pub_mask.publish(array_to_image(result.mask.astype(np.uint8) * 255, 'mono8',
-                                             header))
-        self.pub_color.publish(array_to_image(color_m, 'rgb8', header))
-        self.pub_depth.publish(depth_out)
+        for pub, msg in zip((self.pub_mask, self.pub_color, self.pub_depth),
+                            foreground_messages(result.mask, color_m, depth_m,
+                                                depth_msg.encoding, header), strict=True):
+            pub.publish(msg)
         if self.pub_cloud is not None:
             rows, cols = np.nonzero(result.mask[::self.cloud_step, ::self.cloud_step])
             rows, cols = rows * self.cloud_step, cols * self.cloud_step
