@@ -16,8 +16,10 @@ EXECUTABLES = {
     'replay': 'pose4d_ros.nodes.replay:main',
     'recorder': 'pose4d_ros.nodes.recorder:main',
     'foreground': 'pose4d_ros.nodes.foreground:main',
+    'detector': 'pose4d_ros.nodes.detector:main',
     'tracker': 'pose4d_ros.nodes.tracker:main',
     'ik': 'pose4d_ros.nodes.ik:main',
+    'pipeline': 'pose4d_ros.nodes.pipeline:main',
 }
 
 setup(

@@ -1,68 +1,269 @@
-"""`pose4d demo`: the main job, run by `make demo`.
+"""`pose4d demo`: the main job (`make demo`).
 
-This version of the project has the message package, the bag tools and the `replay`/`recorder`
-nodes, but not yet the perception and tracking stages. So the demo does what exists, for real:
-it starts the installed `recorder` executable, publishes a few `pose4d_msgs/JointArray`
-messages through Fast DDS, stops the recorder with SIGINT and reads the bag back.
+Replays the bundled sample bag (synthetic RGB-D person, held-out real motion) at 1x through the
+node graph, each stage its own process started exactly as `ros2 run` starts it (no launch
+files): replay -> foreground -> detector -> tracker -> ik, and a recorder. Then it scores the
+recorded /pose4d/skeleton against the bag's ground truth, runs the same core offline over the
+same bag (what `pose4d eval` does) for comparison, and writes out/overlay.png and
+out/results.json.
 """
 
 from __future__ import annotations
 
 import argparse
+import json
 import os
-import shutil
 import signal
 import subprocess
 import sys
 import time
 from pathlib import Path
+from typing import Any
+
+import cv2
+import numpy as np
+
+from pose4d_ros.core.draw import draw_skeleton, legend
+from pose4d_ros.core.metrics import score_joint_sets
+from pose4d_ros.core.pipeline import limb_bones
+from pose4d_ros.core.skeleton import SKELETON_14
+from pose4d_ros.datasets import bag, cad60_bag
+
+STAGES = ('foreground', 'detector', 'tracker', 'ik')
+RECORDED = ('pose4d/skeleton', 'pose4d/parts', 'pose4d/parts/tracked')
+# topic -> subscribers that must be connected before the bag plays
+CONNECTIONS = {
+    'camera/color/image_raw': 1, 'camera/depth/image_raw': 1,
+    'pose4d/foreground/color': 1, 'pose4d/foreground/depth': 2, 'pose4d/foreground/mask': 1,
+    'pose4d/parts': 2, 'pose4d/parts/tracked': 2, 'pose4d/skeleton': 2,
+}
+
+
+def default_bag() -> Path:
+    """The bundled sample bag: installed share/pose4d_ros/bags/sample, else the checkout's."""
+    for prefix in [*os.environ.get('AMENT_PREFIX_PATH', '').split(os.pathsep), sys.prefix]:
+        path = Path(prefix) / 'share' / 'pose4d_ros' / 'bags' / 'sample'
+        if prefix and (path / 'metadata.yaml').is_file():
+            return path
+    return Path(__file__).resolve().parents[2] / 'bags' / 'sample'
 
 
 def add_parser(subparsers: argparse._SubParsersAction) -> None:
-    p = subparsers.add_parser('demo', help='run the main job (see README)',
-                              description=__doc__.split('\n\n')[0])
-    p.add_argument('--out', type=Path, default=Path('out'), help='output directory (out/)')
+    p = subparsers.add_parser('demo', help='replay the sample bag through the node graph and '
+                              'score the skeleton', description=__doc__.split('\n\n')[1])
+    p.add_argument('--bag', type=Path, default=None, help='bag to replay (default: the '
+                   'bundled sample, with ground truth on cad60/skeleton)')
+    p.add_argument('--out', type=Path, default=Path('out'), help='output directory')
+    p.add_argument('--rate', type=float, default=1.0, help='replay speed (1 = real time)')
+    p.add_argument('--model', default='rgbd_10', help='detector model (shipped name or .npz)')
+    p.add_argument('--timeout', type=float, default=60.0,
+                   help='seconds to wait for the graph to connect and to drain')
     p.set_defaults(func=run)
+
+
+class _Graph:
+    """The node processes of one demo run."""
+
+    def __init__(self, out: Path) -> None:
+        self.out = out
+        self.procs: dict[str, subprocess.Popen] = {}
+        self.logs: dict[str, Path] = {}
+
+    def start(self, exe: str, params: dict[str, Any]) -> None:
+        cmd = [str(Path(sys.prefix) / 'lib' / 'pose4d_ros' / exe), '--ros-args']
+        for key, value in params.items():
+            if isinstance(value, list):
+                value = '[' + ','.join(value) + ']'
+            elif isinstance(value, bool):
+                value = str(value).lower()
+            cmd += ['-p', f'{key}:={value}']
+        self.logs[exe] = self.out / 'logs' / f'{exe}.log'
+        self.logs[exe].parent.mkdir(parents=True, exist_ok=True)
+        log = self.logs[exe].open('w')
+        self.procs[exe] = subprocess.Popen(cmd, stdout=log, stderr=subprocess.STDOUT,
+                                           env=dict(os.environ))
+
+    def check_alive(self) -> None:
+        for exe, proc in self.procs.items():
+            if exe != 'replay' and proc.poll() is not None:
+                raise OSError(f'{exe} exited with status {proc.returncode}; see '
+                              f'{self.logs[exe]}:\n{self.tail(exe)}')
+
+    def tail(self, exe: str, lines: int = 8) -> str:
+        return '\n'.join(self.logs[exe].read_text().splitlines()[-lines:])
+
+    def stop(self) -> dict[str, int]:
+        """SIGINT every process (the recorder last, so it closes its bag after the graph)."""
+        codes = {}
+        order = [e for e in self.procs if e != 'recorder'] + ['recorder']
+        for exe in order:
+            proc = self.procs.get(exe)
+            if proc is None:
+                continue
+            if proc.poll() is None:
+                proc.send_signal(signal.SIGINT)
+            try:
+                codes[exe] = proc.wait(15)
+            except subprocess.TimeoutExpired:
+                proc.kill()
+                codes[exe] = proc.wait(5)
+        return codes
 
 
 def run(args: argparse.Namespace) -> int:
     import rclpy
-    from pose4d_msgs.msg import Joint, JointArray
+    from pose4d_msgs.msg import JointArray
+    from sensor_msgs.msg import CameraInfo
 
-    from pose4d_ros.datasets import bag
-    from pose4d_ros.nodes.convert import ns_to_stamp
+    from pose4d_ros.nodes import qos
+    from pose4d_ros.nodes.convert import stamp_to_ns
 
+    bag_path = args.bag or default_bag()
+    infos = bag.topics(bag_path)
+    if cad60_bag.SKELETON_TOPIC not in infos:
+        raise ValueError(f'{bag_path}: no ground truth on {cad60_bag.SKELETON_TOPIC}')
+    frames = infos[cad60_bag.COLOR_TOPIC].count
     args.out.mkdir(parents=True, exist_ok=True)
-    out = args.out / 'demo_skeleton_bag'
-    shutil.rmtree(out, ignore_errors=True)
-    recorder = subprocess.Popen(
-        [str(Path(sys.prefix) / 'lib' / 'pose4d_ros' / 'recorder'), '--ros-args',
-         '-p', f'recorder.output:={out}', '-p', 'recorder.topics:=[pose4d/skeleton]'],
-        env=dict(os.environ))
+    recorded = args.out / 'demo_run'
+    if recorded.exists():
+        import shutil
+
+        shutil.rmtree(recorded)
+    graph = _Graph(args.out)
     rclpy.init()
     node = rclpy.create_node('pose4d_demo')
-    pub = node.create_publisher(JointArray, 'pose4d/skeleton', 10)
+    # Latency from a frame's entry (its camera_info, published with the images) to its
+    # skeleton, both seen by this process on one clock. Replayed stamps are the recording's,
+    # so now - stamp would not measure the graph.
+    received: dict[int, float] = {}
+    entered: dict[int, float] = {}
+    node.create_subscription(
+        JointArray, 'pose4d/skeleton',
+        lambda m: received.setdefault(stamp_to_ns(m.header.stamp), time.monotonic()),
+        qos.OUTPUT_QOS)
+    node.create_subscription(
+        CameraInfo, 'camera/color/camera_info',
+        lambda m: entered.setdefault(stamp_to_ns(m.header.stamp), time.monotonic()),
+        qos.SENSOR_QOS)
+    codes: dict[str, int] = {}
     try:
-        deadline = time.monotonic() + 15
-        while pub.get_subscription_count() == 0:
+        print(f'pose4d demo: {bag_path} ({frames} frames) -> {", ".join(STAGES)}')
+        graph.start('recorder', {'recorder.output': str(recorded),
+                                 'recorder.topics': list(RECORDED)})
+        for exe in STAGES:
+            graph.start(exe, {'detector.model': args.model} if exe == 'detector' else {})
+        deadline = time.monotonic() + args.timeout
+        while True:
+            graph.check_alive()
+            lacking = {t: n for t, n in CONNECTIONS.items() if node.count_subscribers(t) < n}
+            if not lacking:
+                break
             if time.monotonic() > deadline:
-                raise OSError('the recorder did not subscribe within 15 s')
+                raise OSError(f'the graph did not connect within {args.timeout} s: too few '
+                              f'subscribers on {", ".join(lacking)}')
+            rclpy.spin_once(node, timeout_sec=0.1)
+        t_play = time.monotonic()
+        graph.start('replay', {'replay.bag': str(bag_path), 'replay.rate': args.rate,
+                               'replay.topics': ['camera/*'],
+                               'replay.wait_for_subscribers': 1})
+        replay = graph.procs['replay']
+        while replay.poll() is None:
+            graph.check_alive()
             rclpy.spin_once(node, timeout_sec=0.05)
-        for k in range(30):
-            msg = JointArray(track_id=1, score=1.0)
-            msg.header.stamp = ns_to_stamp(k * 33_333_333)
-            msg.header.frame_id = 'demo'
-            msg.joints = [Joint(name='head', u=160.0, v=40.0 + k, source=Joint.DETECTED)]
-            pub.publish(msg)
-            rclpy.spin_once(node, timeout_sec=1 / 30)
-        pub.wait_for_all_acked()
+        if replay.returncode != 0:
+            raise OSError(f'replay failed ({replay.returncode}):\n{graph.tail("replay")}')
+        # drain: until every frame is out, or nothing has come for 3 s
+        while len(received) < frames:
+            last = max(received.values(), default=t_play)
+            if time.monotonic() - max(last, t_play) > 3.0:
+                break
+            rclpy.spin_once(node, timeout_sec=0.05)
     finally:
         node.destroy_node()
         rclpy.try_shutdown()
-        recorder.send_signal(signal.SIGINT)
-        recorder.wait(15)
-    count = sum(1 for _ in bag.read_messages(out))
-    print(f'pose4d demo: published 30 JointArray messages on pose4d/skeleton; the recorder '
-          f'executable wrote {count} of them to {out} (exit status {recorder.returncode}).')
-    print('The perception and tracking stages are not part of this version yet.')
-    return 0 if count == 30 and recorder.returncode == 0 else 1
+        codes = graph.stop()
+    bad = {exe: code for exe, code in codes.items() if code != 0}
+    if bad:
+        raise OSError('processes did not exit cleanly: ' + ', '.join(
+            f'{exe} ({code}, see {graph.logs[exe]})' for exe, code in bad.items()))
+    latency = np.array([(received[s] - entered[s]) * 1e3 for s in received if s in entered])
+    return report(bag_path, recorded, args, frames, latency)
+
+
+def _by_stamp(path: Path, topic: str) -> dict[int, tuple[int, Any]]:
+    """{header stamp: (bag receive time ns, message)} of one topic."""
+    out = {}
+    for m in bag.read_messages(path, [topic]):
+        msg = bag.deserialize(m)
+        out.setdefault(bag.stamp_ns(msg), (m.timestamp_ns, msg))
+    return out
+
+
+def report(bag_path: Path, recorded: Path, args: argparse.Namespace, frames: int,
+           latency: np.ndarray) -> int:
+    from pose4d_ros.cli._pipeline_eval import evaluate_bag
+
+    truth = _by_stamp(bag_path, cad60_bag.SKELETON_TOPIC)
+    stamps = sorted(truth)
+    skeletons = _by_stamp(recorded, '/pose4d/skeleton')
+    truths = [bag.joint_set(truth[s][1]) for s in stamps]
+    graph_pred = [bag.joint_set(skeletons[s][1]) if s in skeletons else None for s in stamps]
+    table = score_joint_sets(graph_pred, truths, SKELETON_14)
+    offline = evaluate_bag(bag_path, model=args.model)
+    results = {
+        'bag': str(bag_path), 'frames_in': frames, 'skeletons_out': len(skeletons),
+        'frames_lost': frames - len(skeletons),
+        'latency_ms': ({'p50': float(np.percentile(latency, 50)),
+                        'p95': float(np.percentile(latency, 95)), 'n': int(latency.size)}
+                       if latency.size else None),
+        'graph': table, 'offline': offline['rows'],
+    }
+    print_table({'graph (live, rgbd+kf+ik)': table,
+                 **{f'offline {k}': v for k, v in offline['rows'].items()}})
+    print(f'\nframes in {frames}, skeletons out {len(skeletons)}, lost '
+          f'{frames - len(skeletons)}')
+    if latency.size:
+        print(f'latency colour frame -> /pose4d/skeleton: p50 {results["latency_ms"]["p50"]:.1f}'
+              f' ms, p95 {results["latency_ms"]["p95"]:.1f} ms (n = {latency.size})')
+    overlay = overlay_picture(bag_path, stamps, skeletons, truths)
+    cv2.imwrite(str(args.out / 'overlay.png'), overlay[:, :, ::-1])
+    tmp = args.out / '.results.json.tmp'
+    tmp.write_text(json.dumps(results, indent=1))
+    tmp.replace(args.out / 'results.json')
+    print(f'wrote {args.out / "overlay.png"} and {args.out / "results.json"}')
+    return 0 if len(skeletons) else 1
+
+
+def print_table(rows: dict[str, dict[str, dict[str, float]]]) -> None:
+    groups = ['head', 'shoulder', 'elbow', 'wrist', 'hip', 'knee', 'ankle', 'average']
+    for metric in ('pck', 'pck@0.2', 'apk', 'error_px'):
+        print(f'\n{metric:<26}' + ''.join(f'{g:>9}' for g in groups))
+        for name, table in rows.items():
+            vals = table.get(metric, {})
+            print(f'{name:<26}' + ''.join(
+                f'{vals[g]:9.1f}' if g in vals and np.isfinite(vals[g]) else f'{"-":>9}'
+                for g in groups))
+
+
+def overlay_picture(bag_path: Path, stamps: list[int], skeletons: dict, truths: list,
+                    n: int = 4) -> np.ndarray:
+    """n frames spread over the bag, skeletons drawn by joint source, ground truth crossed."""
+    picks = [stamps[int(i)] for i in np.linspace(0, len(stamps) - 1, n)]
+    images = {}
+    for m in bag.read_messages(bag_path, [cad60_bag.COLOR_TOPIC]):
+        msg = bag.deserialize(m)
+        s = bag.stamp_ns(msg)
+        if s in picks:
+            images[s] = msg.data.reshape(msg.height, msg.width, 3)
+    tiles = []
+    bones = limb_bones()
+    for s in picks:
+        truth = truths[stamps.index(s)]
+        if s in skeletons:
+            tile = draw_skeleton(images[s], bag.joint_set(skeletons[s][1]), bones,
+                                 truth_uv=truth.uv)
+        else:
+            tile = cv2.resize(images[s], None, fx=2, fy=2, interpolation=cv2.INTER_NEAREST)
+        tiles.append(tile)
+    row = np.hstack(tiles)
+    return np.vstack([row, legend(row.shape[1])])

@@ -18,7 +18,7 @@ asked otherwise.
 
 from __future__ import annotations
 
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -26,9 +26,10 @@ from typing import Any
 import numpy as np
 
 from pose4d_ros.core import joints as cj
-from pose4d_ros.core.camera import Intrinsics, cad60_intrinsics
+from pose4d_ros.core.camera import Intrinsics, cad60_intrinsics, depth_to_metres
 from pose4d_ros.core.skeleton import CAD60_JOINTS
 from pose4d_ros.datasets import bag, cad60
+from pose4d_ros.datasets.image_codec import decode
 
 COLOR_TOPIC = '/camera/color/image_raw'
 DEPTH_TOPIC = '/camera/depth/image_raw'
@@ -161,3 +162,76 @@ def _ground_truth(types: dict, header: Any, uv: np.ndarray, xyz: np.ndarray,
         for j, name in enumerate(CAD60_JOINTS)]
     return types['pose4d_msgs/msg/JointArray'](header=header, track_id=1, score=1.0,
                                                joints=joints)
+
+
+@dataclass(frozen=True)
+class BagFrame:
+    """One RGB-D frame of a bag with its ground truth (what `read_frames` yields).
+
+    Attributes
+    ----------
+    stamp_ns : header stamp of the colour image.
+    color : (H, W, 3) uint8 RGB.
+    depth_m : (H, W) float32 metres, NaN = no reading.
+    intrinsics : from the frame's camera_info.
+    truth : the ground-truth joints (`/cad60/skeleton`), or None if the bag has none.
+    mask : (H, W) bool ground-truth person mask (`/cad60/mask`), or None.
+    """
+
+    stamp_ns: int
+    color: np.ndarray
+    depth_m: np.ndarray
+    intrinsics: Intrinsics
+    truth: cj.JointSet | None
+    mask: np.ndarray | None
+
+
+def read_frames(path: str | Path, *, color_topic: str = COLOR_TOPIC,
+                depth_topic: str = DEPTH_TOPIC, info_topic: str = INFO_TOPIC
+                ) -> Iterator[BagFrame]:
+    """The RGB-D frames of a bag in stamp order: colour, depth and camera_info of the same
+    header stamp, with the ground truth and mask of that stamp when the bag has them.
+
+    Raises ValueError naming the bag and topic when a needed topic is missing; frames whose
+    colour has no depth or camera_info of the same stamp are skipped.
+    """
+    infos = bag.topics(path)
+    for topic in (color_topic, depth_topic, info_topic):
+        if topic not in infos:
+            raise ValueError(f'{path}: no {topic} topic (has {", ".join(sorted(infos))})')
+    topics = [color_topic, depth_topic, info_topic]
+    topics += [t for t in (SKELETON_TOPIC, MASK_TOPIC) if t in infos]
+    pending: dict[int, dict[str, Any]] = {}
+    for m in bag.read_messages(path, topics):
+        msg = bag.deserialize(m)
+        stamp = bag.stamp_ns(msg)
+        pending.setdefault(stamp, {})[m.topic] = msg
+        ready = [s for s, got in pending.items()
+                 if s < stamp and all(t in got for t in (color_topic, depth_topic, info_topic))]
+        for s in sorted(ready):
+            yield _frame(s, pending.pop(s), color_topic, depth_topic, info_topic)
+        for s in [s for s in pending if s < stamp - 10**9]:  # incomplete and old: skip
+            del pending[s]
+    for s in sorted(pending):
+        got = pending[s]
+        if all(t in got for t in (color_topic, depth_topic, info_topic)):
+            yield _frame(s, got, color_topic, depth_topic, info_topic)
+
+
+def _frame(stamp: int, got: dict[str, Any], color_topic: str, depth_topic: str,
+           info_topic: str) -> BagFrame:
+    color = _pixels(got[color_topic])
+    if got[color_topic].encoding == 'bgr8':
+        color = color[:, :, ::-1]
+    depth = depth_to_metres(_pixels(got[depth_topic]))
+    k = got[info_topic].k
+    info = got[info_topic]
+    intr = Intrinsics(float(k[0]), float(k[4]), float(k[2]), float(k[5]), int(info.width),
+                      int(info.height))
+    truth = bag.joint_set(got[SKELETON_TOPIC]) if SKELETON_TOPIC in got else None
+    mask = _pixels(got[MASK_TOPIC]) > 127 if MASK_TOPIC in got else None
+    return BagFrame(stamp, np.ascontiguousarray(color), depth, intr, truth, mask)
+
+
+def _pixels(msg: Any) -> np.ndarray:
+    return decode(msg.data, msg.height, msg.width, msg.step, msg.encoding, msg.is_bigendian)

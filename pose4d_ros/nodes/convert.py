@@ -25,13 +25,7 @@ from visualization_msgs.msg import Marker, MarkerArray
 
 from pose4d_ros.core.camera import Intrinsics, depth_to_metres
 from pose4d_ros.core.joints import DETECTED, INFERRED, MISSING, TRACKED, JointSet
-
-# encoding -> (dtype, channels)
-_ENCODINGS: dict[str, tuple[str, int]] = {
-    'rgb8': ('u1', 3), 'bgr8': ('u1', 3), 'rgba8': ('u1', 4), 'bgra8': ('u1', 4),
-    'mono8': ('u1', 1), '8UC1': ('u1', 1), '8UC3': ('u1', 3),
-    'mono16': ('u2', 1), '16UC1': ('u2', 1), '32FC1': ('f4', 1),
-}
+from pose4d_ros.datasets.image_codec import ENCODINGS, decode
 
 
 def stamp_to_ns(stamp: Time) -> int:
@@ -47,26 +41,7 @@ def image_to_array(msg: Image) -> NDArray:
 
     Raises ValueError naming the encoding or size that is wrong.
     """
-    if msg.encoding not in _ENCODINGS:
-        raise ValueError(f'unsupported image encoding {msg.encoding!r} '
-                         f'(supported: {", ".join(_ENCODINGS)})')
-    kind, channels = _ENCODINGS[msg.encoding]
-    dtype = np.dtype(kind).newbyteorder('>' if msg.is_bigendian else '<')
-    h, w, step = int(msg.height), int(msg.width), int(msg.step)
-    row = w * channels * dtype.itemsize
-    if h == 0 or w == 0:
-        raise ValueError(f'empty image ({w}x{h})')
-    if step < row:
-        raise ValueError(f'image step {step} is smaller than a row ({row} bytes, {w}x{channels} '
-                         f'{msg.encoding})')
-    buf = np.frombuffer(msg.data, dtype=np.uint8)
-    if buf.size < step * h:
-        raise ValueError(f'image data has {buf.size} bytes, expected {step * h} '
-                         f'({h} rows of {step})')
-    rows = buf[: step * h].reshape(h, step)[:, :row]
-    out = np.ascontiguousarray(rows).view(dtype).reshape((h, w, channels) if channels > 1
-                                                         else (h, w))
-    return out.astype(dtype.newbyteorder('='), copy=False) if not dtype.isnative else out
+    return decode(msg.data, msg.height, msg.width, msg.step, msg.encoding, msg.is_bigendian)
 
 
 def color_from_msg(msg: Image) -> NDArray[np.uint8]:
@@ -96,9 +71,9 @@ def depth_from_msg(msg: Image) -> NDArray[np.float32]:
 
 def array_to_image(img: NDArray, encoding: str, header: Header) -> Image:
     """An Image message holding `img` (a copy), rows packed (step = width x pixel size)."""
-    if encoding not in _ENCODINGS:
+    if encoding not in ENCODINGS:
         raise ValueError(f'unsupported image encoding {encoding!r}')
-    kind, channels = _ENCODINGS[encoding]
+    kind, channels = ENCODINGS[encoding]
     img = np.ascontiguousarray(img, dtype=np.dtype(kind))
     if img.ndim != (3 if channels > 1 else 2) or (channels > 1 and img.shape[2] != channels):
         raise ValueError(f'array of shape {img.shape} does not fit encoding {encoding}')

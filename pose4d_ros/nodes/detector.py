@@ -1,0 +1,143 @@
+"""`detector`: 4D deformable part model (HOG on colour and depth) on the masked frame.
+
+Finds the person's parts (the paper's reduced 10-part model by default) with the trained
+mixture-of-parts model, searching only the foreground's box at the 1-3 scales its depth allows,
+and lifts each part to 3-D with a robust depth look-up. Inputs are paired by stamp; when the
+detector is slower than the camera, only the newest frame is processed (drops are counted).
+
+Subscriptions
+    pose4d/foreground/color (sensor_msgs/Image, rgb8/bgr8)
+    pose4d/foreground/depth (sensor_msgs/Image, 16UC1 mm or 32FC1 m)
+    pose4d/foreground/mask (sensor_msgs/Image, mono8, 255 = person)
+    camera/color/camera_info (sensor_msgs/CameraInfo; the latest)
+Publications
+    pose4d/parts (pose4d_msgs/JointArray: parts DETECTED or MISSING, input header), /diagnostics
+Parameters (config/detector.yaml)
+    detector.model, detector.n_levels, detector.margin, detector.depth_radius_px,
+    detector.min_confidence
+"""
+
+from __future__ import annotations
+
+import time
+from pathlib import Path
+from typing import Any
+
+from pose4d_msgs.msg import JointArray
+from rclpy.node import Node
+from sensor_msgs.msg import CameraInfo, Image
+
+from pose4d_ros.core.camera import Intrinsics, cad60_intrinsics
+from pose4d_ros.core.dpm.infer import SearchConfig
+from pose4d_ros.core.dpm.model import load_model
+from pose4d_ros.core.pipeline import DetectorStage
+from pose4d_ros.core.sync import StampSync
+from pose4d_ros.models import model_path
+from pose4d_ros.nodes import qos
+from pose4d_ros.nodes.common import LatestOnly, StageMonitor, run
+from pose4d_ros.nodes.convert import (
+    color_from_msg,
+    depth_from_msg,
+    image_to_array,
+    intrinsics_from_msg,
+    joints_to_msg,
+    stamp_to_ns,
+)
+from pose4d_ros.nodes.params import Param, ParameterError, declare
+
+_S = SearchConfig()
+
+
+def _model_exists(value: str) -> str | None:
+    try:
+        model_path(value)
+    except FileNotFoundError as exc:
+        return str(exc)
+    return None
+
+
+PARAMS = (
+    Param('detector.model', 'rgbd_10', 'Part model: the name of a shipped model (rgbd_10, '
+          'rgb_10, ...) or the path of a .npz.', check=_model_exists),
+    Param('detector.n_levels', _S.n_levels, 'Pyramid levels searched around the scale the '
+          "person's depth predicts.", range=(1, 9)),
+    Param('detector.margin', _S.margin, 'Search margin around the foreground box, in person '
+          'scales.', range=(0.0, 5.0)),
+    Param('detector.depth_radius_px', 3, 'Half-size of the window of the robust depth look-up '
+          "that lifts a part to 3-D, pixels.", range=(0, 20)),
+    Param('detector.min_confidence', 0.0, 'Parts less confident than this are MISSING.',
+          range=(0.0, 1.0)),
+)
+
+
+def detector_stage(p: dict[str, Any]) -> DetectorStage:
+    """The detector stage configured by the parameters (also used by the pipeline node)."""
+    path = model_path(p['detector.model'])
+    try:
+        model = load_model(path)
+    except (OSError, ValueError) as exc:
+        raise ParameterError(f'parameter detector.model: {exc}') from None
+    search = SearchConfig(n_levels=p['detector.n_levels'], margin=p['detector.margin'])
+    return DetectorStage(model, search=search, depth_radius_px=p['detector.depth_radius_px'],
+                         min_confidence=p['detector.min_confidence'])
+
+
+class DetectorNode(Node):
+    """Detects the person's parts; see the module docstring."""
+
+    def __init__(self) -> None:
+        super().__init__('detector')
+        p = declare(self, PARAMS)
+        self.stage = detector_stage(p)
+        self.stage.warm_up(cad60_intrinsics())  # compile before the first camera frame
+        self.intrinsics: Intrinsics | None = None
+        self.monitor = StageMonitor(self, 'detector')
+        self.latest = LatestOnly(self, self.process, self.monitor)
+        self.sync = StampSync(3)
+        self.pub = self.create_publisher(JointArray, 'pose4d/parts', qos.OUTPUT_QOS)
+        for k, topic in enumerate(('pose4d/foreground/color', 'pose4d/foreground/depth',
+                                   'pose4d/foreground/mask')):
+            self.create_subscription(Image, topic, lambda m, k=k: self.on_image(k, m),
+                                     qos.SENSOR_QOS)
+        self.create_subscription(CameraInfo, 'camera/color/camera_info', self.on_info,
+                                 qos.SENSOR_QOS)
+        self.get_logger().info(
+            f'detecting {len(self.stage.names)} parts with {Path(str(p["detector.model"])).name}'
+            f' ({self.stage.model.channels}) in {self.resolve_topic_name("pose4d/foreground")}'
+            f' -> {self.resolve_topic_name("pose4d/parts")}')
+
+    def on_info(self, msg: CameraInfo) -> None:
+        try:
+            self.intrinsics = intrinsics_from_msg(msg)
+        except ValueError as exc:
+            self.monitor.bad_input(f'camera_info refused: {exc}')
+
+    def on_image(self, stream: int, msg: Image) -> None:
+        before = self.sync.dropped[0]
+        for _, items in self.sync.push(stream, stamp_to_ns(msg.header.stamp), msg):
+            self.latest.submit(items)
+        self.monitor.dropped(self.sync.dropped[0] - before)
+
+    def process(self, items: Any) -> None:
+        color_msg, depth_msg, mask_msg = items
+        t0 = time.perf_counter()
+        stamp = stamp_to_ns(color_msg.header.stamp)
+        try:
+            color = color_from_msg(color_msg)
+            depth = depth_from_msg(depth_msg)
+            mask = image_to_array(mask_msg) > 127
+            if not color.shape[:2] == depth.shape == mask.shape:
+                raise ValueError(f'colour {color.shape[:2]}, depth {depth.shape} and mask '
+                                 f'{mask.shape} differ in size')
+            parts = self.stage.step(color, depth, self.intrinsics, mask=mask)
+        except ValueError as exc:
+            self.monitor.bad_input(f'frame at {stamp} ns refused: {exc}')
+            return
+        if self.stage.last_flags:
+            self.get_logger().debug(f'frame at {stamp} ns: {", ".join(self.stage.last_flags)}')
+        self.pub.publish(joints_to_msg(parts, color_msg.header))
+        self.monitor.frame(stamp, time.perf_counter() - t0)
+
+
+def main(args: list[str] | None = None) -> int:
+    return run(DetectorNode, args)

@@ -1,0 +1,120 @@
+"""`pipeline`: every stage in one process, one executor, for the lowest latency.
+
+The same stages as the `foreground`, `detector`, `tracker` and `ik` nodes (the same core
+objects, the same parameters), called one after the other in one callback per frame, without
+the serialisation and transport of images between processes. Colour, depth and camera_info are
+paired by stamp; when the pipeline is slower than the camera only the newest frame is
+processed (drops are counted).
+
+Subscriptions
+    camera/color/image_raw, camera/depth/image_raw (sensor_msgs/Image),
+    camera/color/camera_info (sensor_msgs/CameraInfo)
+Publications (all with the colour image's header)
+    pose4d/skeleton (pose4d_msgs/JointArray, 14 joints), pose4d/skeleton/markers,
+    pose4d/parts, pose4d/parts/tracked (JointArray, 10 parts),
+    pose4d/foreground/{mask,color,depth} (if pipeline.publish_foreground), /diagnostics
+Parameters (config/pipeline.yaml)
+    those of the foreground, detector, tracker and ik nodes, and pipeline.publish_foreground
+"""
+
+from __future__ import annotations
+
+import time
+from typing import Any
+
+from pose4d_msgs.msg import JointArray
+from rclpy.node import Node
+from sensor_msgs.msg import CameraInfo, Image
+from visualization_msgs.msg import MarkerArray
+
+from pose4d_ros.core.camera import cad60_intrinsics
+from pose4d_ros.core.pipeline import FramePipeline, limb_bones
+from pose4d_ros.core.sync import StampSync
+from pose4d_ros.nodes import detector, foreground, ik, qos, tracker
+from pose4d_ros.nodes.common import LatestOnly, StageMonitor, run
+from pose4d_ros.nodes.convert import (
+    color_from_msg,
+    depth_from_msg,
+    intrinsics_from_msg,
+    joints_to_msg,
+    skeleton_markers,
+    stamp_to_ns,
+)
+from pose4d_ros.nodes.params import Param, declare
+
+PARAMS = (
+    *foreground.PARAMS, *detector.PARAMS, *tracker.PARAMS, *ik.PARAMS,
+    Param('pipeline.publish_foreground', True, 'Also publish the foreground mask and the '
+          'masked colour and depth images.'),
+)
+
+
+class PipelineNode(Node):
+    """All stages on each RGB-D frame; see the module docstring."""
+
+    def __init__(self) -> None:
+        super().__init__('pipeline')
+        p = declare(self, PARAMS)
+        self.pipeline = FramePipeline(
+            detector.detector_stage(p), foreground=foreground.foreground_config(p),
+            tracker=tracker.tracker_stage(p), ik=ik.ik_stage(p),
+            temporal=p['foreground.temporal'])
+        self.pipeline.warm_up(cad60_intrinsics())  # compile before the first camera frame
+        self.publish_foreground = p['pipeline.publish_foreground']
+        self.marker_lifetime_s = p['ik.marker_lifetime_s']
+        self.bones = limb_bones()
+        self.monitor = StageMonitor(self, 'pipeline')
+        self.latest = LatestOnly(self, self.process, self.monitor)
+        self.sync = StampSync(3, slop_ns=int(p['foreground.slop_s'] * 1e9))
+        pub = self.create_publisher
+        self.pubs = {
+            'skeleton': pub(JointArray, 'pose4d/skeleton', qos.OUTPUT_QOS),
+            'markers': pub(MarkerArray, 'pose4d/skeleton/markers', qos.OUTPUT_QOS),
+            'parts': pub(JointArray, 'pose4d/parts', qos.OUTPUT_QOS),
+            'tracked': pub(JointArray, 'pose4d/parts/tracked', qos.OUTPUT_QOS),
+        }
+        if self.publish_foreground:
+            for name in ('mask', 'color', 'depth'):
+                self.pubs[name] = pub(Image, f'pose4d/foreground/{name}', qos.OUTPUT_QOS)
+        for k, (kind, topic) in enumerate(((Image, 'camera/color/image_raw'),
+                                           (Image, 'camera/depth/image_raw'),
+                                           (CameraInfo, 'camera/color/camera_info'))):
+            self.create_subscription(kind, topic, lambda m, k=k: self.on_msg(k, m),
+                                     qos.SENSOR_QOS)
+        self.get_logger().info(
+            f'pipeline on {self.resolve_topic_name("camera/color/image_raw")} -> '
+            f'{self.resolve_topic_name("pose4d/skeleton")} (model {p["detector.model"]}, '
+            f'tracker {p["tracker.kind"]}, IK depth {p["ik.use_depth"]})')
+
+    def on_msg(self, stream: int, msg: Any) -> None:
+        before = self.sync.dropped[0]
+        for _, items in self.sync.push(stream, stamp_to_ns(msg.header.stamp), msg):
+            self.latest.submit(items)
+        self.monitor.dropped(self.sync.dropped[0] - before)
+
+    def process(self, items: Any) -> None:
+        color_msg, depth_msg, info_msg = items
+        t0 = time.perf_counter()
+        stamp = stamp_to_ns(color_msg.header.stamp)
+        try:
+            out = self.pipeline.step(color_from_msg(color_msg), depth_from_msg(depth_msg),
+                                     intrinsics_from_msg(info_msg), stamp * 1e-9)
+        except ValueError as exc:
+            self.monitor.bad_input(f'frame at {stamp} ns refused: {exc}')
+            return
+        header = color_msg.header
+        self.pubs['skeleton'].publish(joints_to_msg(out.skeleton, header))
+        self.pubs['markers'].publish(skeleton_markers(out.skeleton, self.bones, header,
+                                                      lifetime_s=self.marker_lifetime_s))
+        self.pubs['parts'].publish(joints_to_msg(out.parts, header))
+        self.pubs['tracked'].publish(joints_to_msg(out.tracked, header))
+        if self.publish_foreground:
+            msgs = foreground.foreground_messages(out.foreground.mask, out.color_masked,
+                                                  out.depth_masked, depth_msg.encoding, header)
+            for name, msg in zip(('mask', 'color', 'depth'), msgs, strict=True):
+                self.pubs[name].publish(msg)
+        self.monitor.frame(stamp, time.perf_counter() - t0)
+
+
+def main(args: list[str] | None = None) -> int:
+    return run(PipelineNode, args)
