@@ -13,10 +13,12 @@ from __future__ import annotations
 import argparse
 import json
 import os
+import shutil
 import signal
 import subprocess
 import sys
 import time
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -24,6 +26,7 @@ import cv2
 import numpy as np
 
 from pose4d_ros.core.draw import draw_skeleton, legend
+from pose4d_ros.core.joints import JointSet
 from pose4d_ros.core.metrics import score_joint_sets
 from pose4d_ros.core.pipeline import limb_bones
 from pose4d_ros.core.skeleton import SKELETON_14
@@ -32,6 +35,8 @@ from pose4d_ros.datasets import bag, cad60_bag
 STAGES = ('foreground', 'detector', 'tracker', 'ik')
 RECORDED = ('pose4d/skeleton', 'pose4d/parts', 'pose4d/parts/tracked')
 # topic -> subscribers that must be connected before the bag plays
+PIPELINE_CONNECTIONS = {
+    'camera/color/image_raw': 1, 'camera/depth/image_raw': 1, 'pose4d/skeleton': 2}
 CONNECTIONS = {
     'camera/color/image_raw': 1, 'camera/depth/image_raw': 1,
     'pose4d/foreground/color': 1, 'pose4d/foreground/depth': 2, 'pose4d/foreground/mask': 1,
@@ -110,7 +115,40 @@ class _Graph:
         return codes
 
 
-def run(args: argparse.Namespace) -> int:
+@dataclass(frozen=True)
+class GraphRun:
+    """What one replay of a bag through the node graph gave.
+
+    Attributes
+    ----------
+    recorded : the bag the recorder wrote (skeleton, parts, tracked parts).
+    frames : colour frames in the replayed bag.
+    entered : {stamp: monotonic s} when each frame's camera_info reached this process.
+    left : {stamp: monotonic s} when each frame's skeleton reached this process.
+    logs : {executable: log file}.
+    """
+
+    recorded: Path
+    frames: int
+    entered: dict[int, float]
+    left: dict[int, float]
+    logs: dict[str, Path]
+
+    def latency_ms(self) -> np.ndarray:
+        """Colour frame in -> skeleton out, per frame that came out (both seen here, on one
+        clock: replayed stamps are the recording's, so now - stamp would not measure it)."""
+        return np.array([(self.left[s] - self.entered[s]) * 1e3 for s in self.left
+                         if s in self.entered])
+
+    def input_rate_hz(self) -> float:
+        t = np.sort(np.fromiter(self.entered.values(), float))
+        return (len(t) - 1) / (t[-1] - t[0]) if len(t) > 1 and t[-1] > t[0] else float('nan')
+
+
+def run_graph(bag_path: Path, out: Path, *, rate: float = 1.0, model: str = 'rgbd_10',
+              timeout: float = 60.0, pipeline: bool = False) -> GraphRun:
+    """Replay `bag_path` through the graph, each node its own process as `ros2 run` starts
+    it (or the single `pipeline` process), with a recorder; stop everything cleanly."""
     import rclpy
     from pose4d_msgs.msg import JointArray
     from sensor_msgs.msg import CameraInfo
@@ -118,52 +156,44 @@ def run(args: argparse.Namespace) -> int:
     from pose4d_ros.nodes import qos
     from pose4d_ros.nodes.convert import stamp_to_ns
 
-    bag_path = args.bag or default_bag()
-    infos = bag.topics(bag_path)
-    if cad60_bag.SKELETON_TOPIC not in infos:
-        raise ValueError(f'{bag_path}: no ground truth on {cad60_bag.SKELETON_TOPIC}')
-    frames = infos[cad60_bag.COLOR_TOPIC].count
-    args.out.mkdir(parents=True, exist_ok=True)
-    recorded = args.out / 'demo_run'
+    frames = bag.topics(bag_path)[cad60_bag.COLOR_TOPIC].count
+    out.mkdir(parents=True, exist_ok=True)
+    recorded = out / ('pipeline_run' if pipeline else 'graph_run')
     if recorded.exists():
-        import shutil
-
         shutil.rmtree(recorded)
-    graph = _Graph(args.out)
+    graph = _Graph(out)
     rclpy.init()
     node = rclpy.create_node('pose4d_demo')
-    # Latency from a frame's entry (its camera_info, published with the images) to its
-    # skeleton, both seen by this process on one clock. Replayed stamps are the recording's,
-    # so now - stamp would not measure the graph.
-    received: dict[int, float] = {}
+    left: dict[int, float] = {}
     entered: dict[int, float] = {}
     node.create_subscription(
         JointArray, 'pose4d/skeleton',
-        lambda m: received.setdefault(stamp_to_ns(m.header.stamp), time.monotonic()),
+        lambda m: left.setdefault(stamp_to_ns(m.header.stamp), time.monotonic()),
         qos.OUTPUT_QOS)
     node.create_subscription(
         CameraInfo, 'camera/color/camera_info',
         lambda m: entered.setdefault(stamp_to_ns(m.header.stamp), time.monotonic()),
         qos.SENSOR_QOS)
-    codes: dict[str, int] = {}
+    stages = ('pipeline',) if pipeline else STAGES
+    connections = PIPELINE_CONNECTIONS if pipeline else CONNECTIONS
     try:
-        print(f'pose4d demo: {bag_path} ({frames} frames) -> {", ".join(STAGES)}')
         graph.start('recorder', {'recorder.output': str(recorded),
                                  'recorder.topics': list(RECORDED)})
-        for exe in STAGES:
-            graph.start(exe, {'detector.model': args.model} if exe == 'detector' else {})
-        deadline = time.monotonic() + args.timeout
+        for exe in stages:
+            graph.start(exe, {'detector.model': model} if exe in ('detector', 'pipeline')
+                        else {})
+        deadline = time.monotonic() + timeout
         while True:
             graph.check_alive()
-            lacking = {t: n for t, n in CONNECTIONS.items() if node.count_subscribers(t) < n}
+            lacking = {t: n for t, n in connections.items() if node.count_subscribers(t) < n}
             if not lacking:
                 break
             if time.monotonic() > deadline:
-                raise OSError(f'the graph did not connect within {args.timeout} s: too few '
+                raise OSError(f'the graph did not connect within {timeout} s: too few '
                               f'subscribers on {", ".join(lacking)}')
             rclpy.spin_once(node, timeout_sec=0.1)
         t_play = time.monotonic()
-        graph.start('replay', {'replay.bag': str(bag_path), 'replay.rate': args.rate,
+        graph.start('replay', {'replay.bag': str(bag_path), 'replay.rate': rate,
                                'replay.topics': ['camera/*'],
                                'replay.wait_for_subscribers': 1})
         replay = graph.procs['replay']
@@ -173,9 +203,8 @@ def run(args: argparse.Namespace) -> int:
         if replay.returncode != 0:
             raise OSError(f'replay failed ({replay.returncode}):\n{graph.tail("replay")}')
         # drain: until every frame is out, or nothing has come for 3 s
-        while len(received) < frames:
-            last = max(received.values(), default=t_play)
-            if time.monotonic() - max(last, t_play) > 3.0:
+        while len(left) < frames:
+            if time.monotonic() - max(max(left.values(), default=t_play), t_play) > 3.0:
                 break
             rclpy.spin_once(node, timeout_sec=0.05)
     finally:
@@ -186,8 +215,18 @@ def run(args: argparse.Namespace) -> int:
     if bad:
         raise OSError('processes did not exit cleanly: ' + ', '.join(
             f'{exe} ({code}, see {graph.logs[exe]})' for exe, code in bad.items()))
-    latency = np.array([(received[s] - entered[s]) * 1e3 for s in received if s in entered])
-    return report(bag_path, recorded, args, frames, latency)
+    return GraphRun(recorded, frames, entered, left, dict(graph.logs))
+
+
+def run(args: argparse.Namespace) -> int:
+    bag_path = args.bag or default_bag()
+    if cad60_bag.SKELETON_TOPIC not in bag.topics(bag_path):
+        raise ValueError(f'{bag_path}: no ground truth on {cad60_bag.SKELETON_TOPIC}')
+    print(f'pose4d demo: replaying {bag_path} at {args.rate}x through '
+          f'{" -> ".join(STAGES)} (one process each)')
+    result = run_graph(bag_path, args.out, rate=args.rate, model=args.model,
+                       timeout=args.timeout)
+    return report(bag_path, result, args)
 
 
 def _by_stamp(path: Path, topic: str) -> dict[int, tuple[int, Any]]:
@@ -199,19 +238,20 @@ def _by_stamp(path: Path, topic: str) -> dict[int, tuple[int, Any]]:
     return out
 
 
-def report(bag_path: Path, recorded: Path, args: argparse.Namespace, frames: int,
-           latency: np.ndarray) -> int:
+def report(bag_path: Path, result: GraphRun, args: argparse.Namespace) -> int:
     from pose4d_ros.cli._pipeline_eval import evaluate_bag
 
     truth = _by_stamp(bag_path, cad60_bag.SKELETON_TOPIC)
     stamps = sorted(truth)
-    skeletons = _by_stamp(recorded, '/pose4d/skeleton')
+    skeletons = _by_stamp(result.recorded, '/pose4d/skeleton')
+    frames, latency = result.frames, result.latency_ms()
     truths = [bag.joint_set(truth[s][1]) for s in stamps]
     graph_pred = [bag.joint_set(skeletons[s][1]) if s in skeletons else None for s in stamps]
     table = score_joint_sets(graph_pred, truths, SKELETON_14)
     offline = evaluate_bag(bag_path, model=args.model)
     results = {
-        'bag': str(bag_path), 'frames_in': frames, 'skeletons_out': len(skeletons),
+        'bag': str(bag_path), 'rate': args.rate, 'input_rate_hz': result.input_rate_hz(),
+        'frames_in': frames, 'skeletons_out': len(skeletons),
         'frames_lost': frames - len(skeletons),
         'latency_ms': ({'p50': float(np.percentile(latency, 50)),
                         'p95': float(np.percentile(latency, 95)), 'n': int(latency.size)}
@@ -220,8 +260,8 @@ def report(bag_path: Path, recorded: Path, args: argparse.Namespace, frames: int
     }
     print_table({'graph (live, rgbd+kf+ik)': table,
                  **{f'offline {k}': v for k, v in offline['rows'].items()}})
-    print(f'\nframes in {frames}, skeletons out {len(skeletons)}, lost '
-          f'{frames - len(skeletons)}')
+    print(f'\nframes in {frames} (replayed at {result.input_rate_hz():.1f} Hz), skeletons out '
+          f'{len(skeletons)}, lost {frames - len(skeletons)}')
     if latency.size:
         print(f'latency colour frame -> /pose4d/skeleton: p50 {results["latency_ms"]["p50"]:.1f}'
               f' ms, p95 {results["latency_ms"]["p95"]:.1f} ms (n = {latency.size})')
@@ -259,11 +299,8 @@ def overlay_picture(bag_path: Path, stamps: list[int], skeletons: dict, truths: 
     bones = limb_bones()
     for s in picks:
         truth = truths[stamps.index(s)]
-        if s in skeletons:
-            tile = draw_skeleton(images[s], bag.joint_set(skeletons[s][1]), bones,
-                                 truth_uv=truth.uv)
-        else:
-            tile = cv2.resize(images[s], None, fx=2, fy=2, interpolation=cv2.INTER_NEAREST)
-        tiles.append(tile)
+        shown = bag.joint_set(skeletons[s][1]) if s in skeletons else \
+            JointSet.missing(SKELETON_14)
+        tiles.append(draw_skeleton(images[s], shown, bones, truth_uv=truth.uv))
     row = np.hstack(tiles)
     return np.vstack([row, legend(row.shape[1])])
