@@ -51,9 +51,10 @@ $(VENV)/.stamp-msgs: $(VENV)/.stamp-env $(MSG_SOURCES)
 	touch $@
 
 # 3. pose4d_ros itself, with its executables where `ros2 run` looks (<prefix>/lib/pose4d_ros)
-$(VENV)/.stamp-pkg: $(VENV)/.stamp-msgs $(PKG_SOURCES) tools/install_executables.py
+$(VENV)/.stamp-pkg: $(VENV)/.stamp-msgs $(PKG_SOURCES) tools/install_executables.py tools/warm_up.py
 	$(PY) -m pip install --quiet --no-deps --no-build-isolation .
 	$(PY) tools/install_executables.py
+	$(PY) tools/warm_up.py
 	rm -rf build/lib build/bdist.* *.egg-info
 	touch $@
 

@@ -1,0 +1,28 @@
+"""Compile pose4d_ros's numba kernels once after installing, so nodes start fast.
+
+numba caches compiled kernels next to the installed modules (`cache=True`); a fresh install has
+none, and the first node to run a kernel would spend seconds compiling it. `make setup` runs
+this after each install. Uses the shipped default model when there is one.
+"""
+
+import sys
+import time
+
+from pose4d_ros.core.camera import cad60_intrinsics
+from pose4d_ros.core.dpm.model import load_model
+from pose4d_ros.core.pipeline import DetectorStage, FramePipeline
+from pose4d_ros.models import model_path, shipped_models
+
+
+def main() -> int:
+    t0 = time.monotonic()
+    intr = cad60_intrinsics()
+    for name in shipped_models():
+        FramePipeline(DetectorStage(load_model(model_path(name)))).warm_up(intr)
+    print(f'compiled the kernels for {len(shipped_models())} shipped model(s) in '
+          f'{time.monotonic() - t0:.1f} s')
+    return 0
+
+
+if __name__ == '__main__':
+    sys.exit(main())
