@@ -242,14 +242,14 @@ def model_arrays(model: PartModel) -> tuple:
 
 def score_level(level: Level, model: PartModel, arrays: tuple | None = None
                 ) -> LevelResult | None:
-    """Filter responses (one GEMM) and the tree DP on one pyramid level; None if the level is
-    smaller than a filter."""
+    """Filter responses (one GEMM) and the tree DP on one pyramid level; None if the level's
+    image (without its padding) is smaller than a filter."""
     wmat, parents, springs, anchors, bias = arrays if arrays is not None else model_arrays(model)
     fh, fw = model.filter_shape
     h, w, _ = level.feat.shape
-    ny, nx = h - fh + 1, w - fw + 1
-    if ny < 1 or nx < 1:
+    if h - 2 * level.pad[0] < fh or w - 2 * level.pad[1] < fw:
         return None
+    ny, nx = h - fh + 1, w - fw + 1
     cols = im2col(level.feat, fh, fw)
     resp = (wmat @ cols.T).reshape(model.n_parts, model.n_types, ny, nx)
     root, ix, iy, ik = tree_dp(resp, parents, springs, anchors, bias)
@@ -438,8 +438,8 @@ class Detector:
             return []
         flags: tuple[str, ...] = ()
         if self.model.channels == 'rgbd' and not plan.depth_guided:
-            dok = depth_m is not None and np.isfinite(np.asarray(depth_m, np.float32)).any()
-            if not dok:
+            d = None if depth_m is None else np.asarray(depth_m, np.float32)
+            if d is None or not (np.isfinite(d) & (d > 0)).any():
                 flags = ('no_depth',)
         levels = self.pyramid(color, depth_m, plan, mask=mask)
         return self.poses_from_levels(levels, top_k=top_k, flags=flags)

@@ -1,0 +1,356 @@
+"""The part model: distance transforms, tree inference, model files, the QP, bad input."""
+
+from __future__ import annotations
+
+import itertools
+from pathlib import Path
+
+import numpy as np
+import pytest
+from numpy.testing import assert_allclose, assert_array_equal
+
+from pose4d_ros.core.dpm import Detector, PartModel, SearchConfig, load_model, save_model
+from pose4d_ros.core.dpm.dt import dt1d, dt2d
+from pose4d_ros.core.dpm.infer import backtrack, best_roots, im2col, score_level, tree_dp
+from pose4d_ros.core.dpm.train import _dcd, _Examples, _margins, kmeans
+from pose4d_ros.core.hog import feature_pyramid
+from pose4d_ros.core.skeleton import PARTS_10
+
+# --------------------------------------------------------------------------- distance transforms
+
+def brute_dt1d(src, a, b, shift, n_out):
+    q = np.arange(len(src))[None, :]
+    d = q - np.arange(n_out)[:, None] - shift
+    val = src[None, :].astype(np.float64) - a * d * d - b * d
+    return val.max(1), val
+
+
+@pytest.mark.parametrize('shift', [-7, -1, 0, 2, 9])
+def test_dt1d_equals_brute_force(shift: int) -> None:
+    rng = np.random.default_rng(0)
+    for _ in range(50):
+        n = int(rng.integers(1, 25))
+        src = (rng.normal(size=n) * 3).astype(np.float32)
+        a, b = float(rng.uniform(0.01, 2.0)), float(rng.normal())
+        out = np.empty(n, np.float32)
+        arg = np.empty(n, np.int32)
+        dt1d(src, a, b, shift, n, out, arg, np.empty(n, np.int32), np.empty(n + 1))
+        best, val = brute_dt1d(src, a, b, shift, n)
+        assert_allclose(out, best, rtol=1e-5, atol=1e-4)
+        assert_allclose(val[np.arange(n), arg], best, rtol=1e-5, atol=1e-4)  # argmax is a max
+
+
+def test_dt2d_equals_brute_force() -> None:
+    rng = np.random.default_rng(0)
+    ny, nx = 7, 9
+    for _ in range(10):
+        s = rng.normal(size=(ny, nx)).astype(np.float32)
+        wx, wx2, wy, wy2 = rng.normal(), rng.uniform(0.05, 1), rng.normal(), rng.uniform(0.05, 1)
+        ax, ay = (int(v) for v in rng.integers(-3, 4, 2))
+        out = np.empty((ny, nx), np.float32)
+        ix = np.empty((ny, nx), np.int32)
+        iy = np.empty((ny, nx), np.int32)
+        dt2d(s, wx, wx2, wy, wy2, ax, ay, out, ix, iy, np.empty((ny, nx), np.float32))
+        yc, xc = np.mgrid[0:ny, 0:nx]
+        for y in range(ny):
+            for x in range(nx):
+                dx, dy = xc - x - ax, yc - y - ay
+                val = s - (wx * dx + wx2 * dx * dx + wy * dy + wy2 * dy * dy)
+                assert_allclose(out[y, x], val.max(), rtol=1e-5, atol=1e-4)
+                cy = iy[y, x]
+                cx = ix[cy, x]
+                assert_allclose(val[cy, cx], val.max(), rtol=1e-5, atol=1e-4)
+
+
+# --------------------------------------------------------------------------- tree inference
+
+def random_model(parents, k=2, fs=2, channels='rgb', seed=0) -> PartModel:
+    rng = np.random.default_rng(seed)
+    p = len(parents)
+    c = 32 if channels == 'rgb' else 64
+    springs = np.zeros((p, k, 4), np.float32)
+    springs[1:] = rng.uniform(0.0, 0.3, (p - 1, k, 4))
+    springs[1:, :, [1, 3]] += 0.05
+    names = tuple(f'p{i}' for i in range(p))
+    return PartModel(names, tuple(parents), channels, 4,
+                     rng.normal(size=(p, k, fs, fs, c)).astype(np.float32),
+                     springs, rng.integers(-2, 3, (p, k, 2)).astype(np.int32),
+                     rng.normal(size=(p, k, k)).astype(np.float32), 32.0, 0.5, (20.0, 60.0),
+                     'float' if channels == 'rgbd' else '')
+
+
+def test_tree_dp_equals_brute_force_over_all_poses() -> None:
+    """A 4-part tree (root with two children, one grandchild) on a 2x3 map, 2 types."""
+    rng = np.random.default_rng(0)
+    parents = (-1, 0, 1, 0)
+    m = random_model(parents)
+    p_n, k = 4, 2
+    ny, nx = 2, 3
+    resp = rng.normal(size=(p_n, k, ny, nx)).astype(np.float32)
+    par = np.asarray(parents, np.int64)
+    root, ix, iy, ik = tree_dp(resp, par, m.springs, m.anchors, m.bias)
+    cells = list(itertools.product(range(ny), range(nx)))
+
+    def pose_score(types, locs):
+        s = resp[0, types[0], *locs[0]] + m.bias[0, 0, types[0]]
+        for c in range(1, p_n):
+            t, (y, x) = types[c], locs[c]
+            pt, (py, px) = types[parents[c]], locs[parents[c]]
+            dx, dy = x - px - m.anchors[c, t, 0], y - py - m.anchors[c, t, 1]
+            sp = m.springs[c, t]
+            s += resp[c, t, y, x] - (sp[0] * dx + sp[1] * dx * dx + sp[2] * dy
+                                     + sp[3] * dy * dy) + m.bias[c, pt, t]
+        return s
+
+    best = np.full((k, ny, nx), -np.inf)
+    for types in itertools.product(range(k), repeat=p_n):
+        for locs in itertools.product(cells, repeat=p_n - 1):
+            for r in cells:
+                v = pose_score(types, (r, *locs))
+                best[types[0], r[0], r[1]] = max(best[types[0], r[0], r[1]], v)
+    assert_allclose(root, best, rtol=1e-5, atol=1e-4)
+    # backtracking reproduces the maximum: the parts' shares add up to the root's score
+    roots = np.array([[t, y, x] for t in range(k) for y, x in cells], np.int64)
+    parts, local = backtrack(roots, par, resp, ix, iy, ik, m.springs, m.anchors, m.bias)
+    assert_allclose(local.sum(1), best[roots[:, 0], roots[:, 1], roots[:, 2]], rtol=1e-5,
+                    atol=1e-4)
+    for j in range(len(roots)):
+        assert_allclose(pose_score(parts[j, :, 0], [tuple(c) for c in parts[j, :, 1:]]),
+                        local[j].sum(), rtol=1e-5, atol=1e-4)
+
+
+def test_im2col_rows_are_the_filter_windows() -> None:
+    rng = np.random.default_rng(0)
+    feat = rng.random((6, 7, 5)).astype(np.float32)
+    cols = im2col(feat, 3, 2)
+    assert cols.shape == (4 * 6, 3 * 2 * 5)
+    for y, x in ((0, 0), (3, 5), (2, 1)):
+        assert_array_equal(cols[y * 6 + x], feat[y:y + 3, x:x + 2].ravel())
+
+
+def planted_image(rng: np.random.Generator) -> np.ndarray:
+    """Grey noise with three distinct bright/dark blobs (the 'parts')."""
+    im = rng.integers(90, 110, (96, 96)).astype(np.float32)
+    yy, xx = np.mgrid[0:96, 0:96]
+    for (cy, cx, r, v) in ((30, 40, 6, 250.0), (60, 30, 5, 0.0), (62, 66, 7, 200.0)):
+        im[(yy - cy) ** 2 + (xx - cx) ** 2 < r * r] = v
+    return np.repeat(im[:, :, None], 3, axis=2).astype(np.uint8)
+
+
+def test_inference_recovers_a_planted_pose_exactly() -> None:
+    """Filters = the HOG windows at planted cells (matched filters), anchors = the planted
+    offsets: the best pose is the planted one, and its pixels come back exactly."""
+    rng = np.random.default_rng(0)
+    im = planted_image(rng)
+    fs = 4
+    (level,) = feature_pyramid(im, None, [1.0], sbin=4, pad=(3, 3))
+    planted = np.array([[7, 9], [14, 6], [14, 15]])            # (row, col) top-left cells
+    parents = (-1, 0, 0)
+    mean = level.feat.reshape(-1, 32).mean(0)
+    filters = np.stack([level.feat[r:r + fs, c:c + fs] - mean for r, c in planted])[:, None]
+    anchors = np.zeros((3, 1, 2), np.int32)
+    for c in (1, 2):
+        anchors[c, 0] = planted[c, ::-1] - planted[0, ::-1]   # (dx, dy)
+    springs = np.tile(np.array([0, 0.5, 0, 0.5], np.float32), (3, 1, 1))
+    springs[0] = 0
+    m = PartModel(('a', 'b', 'c'), parents, 'rgb', 4, filters.astype(np.float32), springs,
+                  anchors, np.zeros((3, 1, 1), np.float32), 32.0, 0.5, (20.0, 60.0))
+    det = Detector(m)
+    (pose,) = det.poses_from_levels([level])
+    u, v = level.cell_to_pixel(planted[:, 0], planted[:, 1], (fs, fs))
+    assert_allclose(pose.uv, np.stack([u, v], 1))
+    res = score_level(level, m)
+    r = best_roots(res, 1)
+    assert_array_equal(r[0, 1:], planted[0])
+    assert pose.flags == ()
+
+
+# --------------------------------------------------------------------------- model files
+
+def tenpart_model(channels: str = 'rgbd') -> PartModel:
+    rng = np.random.default_rng(1)
+    k = 3
+    base = random_model(PARTS_10.parents, k=k, fs=5, channels=channels, seed=1)
+    return PartModel(PARTS_10.names, PARTS_10.parents, channels, 4, base.filters * 0.05,
+                     base.springs, base.anchors, base.bias * 0.1, 32.0, 0.5, (30.0, 80.0),
+                     base.depth_encoding, (0.5, 4.5),
+                     rng.normal(size=(10, 3)).astype(np.float32), True,
+                     {'data': 'unit test', 'seed': '1'})
+
+
+def test_model_save_load_round_trip(tmp_path: Path) -> None:
+    m = tenpart_model()
+    path = tmp_path / 'm.npz'
+    save_model(m, path)
+    back = load_model(path)
+    for f in m.__dataclass_fields__:
+        a, b = getattr(m, f), getattr(back, f)
+        if isinstance(a, np.ndarray):
+            assert_array_equal(a, b)
+            assert a.dtype == b.dtype
+        else:
+            assert a == b, f
+    assert [p.name for p in tmp_path.iterdir()] == ['m.npz']  # no temporary left
+
+
+def test_bad_model_files_are_refused_with_the_file_name(tmp_path: Path) -> None:
+    with pytest.raises(OSError, match='no such model'):
+        load_model(tmp_path / 'missing.npz')
+    junk = tmp_path / 'junk.npz'
+    junk.write_bytes(b'not a zip file at all')
+    with pytest.raises(ValueError, match='junk.npz'):
+        load_model(junk)
+    other = tmp_path / 'other.npz'
+    np.savez(other, a=np.zeros(3))
+    with pytest.raises(ValueError, match='other.npz.*missing'):
+        load_model(other)
+    m = tenpart_model()
+    bad = tmp_path / 'bad.npz'
+    save_model(m, bad)
+    with np.load(bad) as d:
+        parts = {k: d[k] for k in d.files}
+    parts['springs'] = parts['springs'][:, :2]
+    np.savez(bad, **parts)
+    with pytest.raises(ValueError, match='bad.npz.*springs'):
+        load_model(bad)
+
+
+def test_model_validation() -> None:
+    m = tenpart_model()
+    with pytest.raises(ValueError, match='channels'):
+        PartModel(m.part_names, m.parents, 'xyz', 4, m.filters, m.springs, m.anchors, m.bias,
+                  32.0, 0.5, (30.0, 80.0), 'float')
+    springs = m.springs.copy()
+    springs[3, 0, 1] = 0.0
+    with pytest.raises(ValueError, match='w_dx2'):
+        PartModel(m.part_names, m.parents, 'rgbd', 4, m.filters, springs, m.anchors, m.bias,
+                  32.0, 0.5, (30.0, 80.0), 'float')
+    with pytest.raises(ValueError, match='filters'):
+        PartModel(m.part_names, m.parents, 'rgb', 4, m.filters, m.springs, m.anchors, m.bias,
+                  32.0, 0.5, (30.0, 80.0))
+
+
+# --------------------------------------------------------------------------- bad input
+
+def person_frame(rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """A box 'person' at 2.5 m in front of a wall at 4 m."""
+    col = rng.integers(0, 256, (240, 320, 3)).astype(np.uint8)
+    depth = np.full((240, 320), 4.0, np.float32)
+    mask = np.zeros((240, 320), bool)
+    mask[40:220, 130:190] = True
+    depth[mask] = 2.5
+    return col, depth, mask
+
+
+def test_detect_finds_a_pose_and_maps_it_into_the_box() -> None:
+    rng = np.random.default_rng(0)
+    col, depth, mask = person_frame(rng)
+    det = Detector(tenpart_model(), SearchConfig(n_levels=2))
+    poses = det.detect(col, depth, mask=mask, top_k=3)
+    assert 1 <= len(poses) <= 3
+    assert [p.score for p in poses] == sorted((p.score for p in poses), reverse=True)
+    p = poses[0]
+    assert p.uv.shape == (10, 2) and p.names == PARTS_10.names
+    assert np.all((p.confidence >= 0) & (p.confidence <= 1))
+    assert_allclose(p.part_scores.sum(), p.score, rtol=1e-5)
+    # the search box is the mask's box plus a margin of 0.6 person scales
+    margin = 0.6 * 285.171 * 0.5 / 2.5 + 10
+    assert (p.uv[:, 0] > 130 - margin).all() and (p.uv[:, 0] < 190 + margin).all()
+
+
+def test_bad_inputs_give_flagged_or_empty_results() -> None:
+    rng = np.random.default_rng(0)
+    col, depth, mask = person_frame(rng)
+    det = Detector(tenpart_model())
+    assert det.detect(col, depth, mask=np.zeros_like(mask)) == []          # empty mask
+    assert det.detect(col[:9, :9], depth[:9, :9]) == []                      # tiny frame
+    nan_depth = np.full_like(depth, np.nan)
+    poses = det.detect(col, nan_depth, mask=mask)                            # no depth at all
+    assert len(poses) == 1 and 'no_depth' in poses[0].flags and poses[0].low_confidence
+    poses = det.detect(col, np.zeros_like(depth), mask=mask)                 # all-zero depth
+    assert len(poses) == 1 and 'no_depth' in poses[0].flags
+    with pytest.raises(ValueError, match='mask shape'):
+        det.detect(col, depth, mask=mask[:100])
+    with pytest.raises(ValueError, match='top_k'):
+        det.detect(col, depth, mask=mask, top_k=0)
+
+
+def test_masked_model_ignores_what_lies_outside_the_mask() -> None:
+    rng = np.random.default_rng(0)
+    col, depth, mask = person_frame(rng)
+    det = Detector(tenpart_model())           # masked_input=True
+    a = det.detect(col, depth, mask=mask)[0]
+    col2 = col.copy()
+    col2[~mask] = 255 - col2[~mask]
+    depth2 = np.where(mask, depth, 1.0).astype(np.float32)
+    b = det.detect(col2, depth2, mask=mask)[0]
+    assert_allclose(a.uv, b.uv)
+    assert a.score == pytest.approx(b.score, rel=1e-6)
+
+
+# --------------------------------------------------------------------------- training pieces
+
+def test_dual_coordinate_descent_reaches_the_svm_optimum() -> None:
+    """Random block examples, including structural ones (ref), and a lower bound: the dual
+    solution's w equals w0 + sum a y x + sum b e, and the duality gap closes."""
+    rng = np.random.default_rng(0)
+    p_n, dim, k = 3, 6, 2
+    size = p_n * k * dim + p_n * k * 4 + p_n * k * k
+    ex = _Examples(80, p_n, dim)
+    n_pos = 20
+    for i in range(60):
+        t = rng.integers(0, k, p_n)
+        of = np.array([(c * k + t[c]) * dim for c in range(p_n)])
+        od = np.array([-1] + [p_n * k * dim + (c * k + t[c]) * 4 for c in range(1, p_n)])
+        ob = np.array([p_n * k * dim + p_n * k * 4 + (c * k) * k + t[c] for c in range(p_n)])
+        xd = rng.normal(size=(p_n, 4)).astype(np.float32)
+        xd[0] = 0
+        blocks = (rng.normal(size=(p_n, dim)).astype(np.float32) + (0.5 if i < n_pos else 0),
+                  of, xd, od, np.ones(p_n, np.float32), ob)
+        if i < n_pos:
+            ex.add(blocks, 1.0, 1.0, -1, ('pos', i))
+        elif i < 45:
+            ex.add(blocks, -1.0, 1.0, -1, ('neg', i))
+        else:   # structural: Phi(pos) - Phi(z), own blocks = -Phi(z)
+            neg = (-blocks[0], of, -xd, od, -blocks[4], ob)
+            ex.add(neg, 1.0, 0.5, int(rng.integers(0, n_pos)), ('pose', i))
+    arr = ex.arrays()
+    alpha = ex.alpha[:ex.n]
+    w0 = rng.normal(size=size) * 0.1
+    w = w0.copy()
+    lb_idx = np.array([p_n * k * dim + 5], np.int64)
+    lb_val = np.array([0.4])
+    beta = np.zeros(1)
+    c = 0.5
+    for epoch in range(200):
+        _dcd(w, *arr, alpha, c, lb_idx, lb_val, beta, 10, epoch)
+    # w consistency
+    dense = np.zeros((ex.n, size))
+    for i in range(ex.n):
+        for j in (i, arr[8][i]) if arr[8][i] >= 0 else (i,):
+            for cc in range(p_n):
+                dense[i, arr[1][j, cc]:arr[1][j, cc] + dim] += arr[0][j, cc]
+                if arr[3][j, cc] >= 0:
+                    dense[i, arr[3][j, cc]:arr[3][j, cc] + 4] += arr[2][j, cc]
+                dense[i, arr[5][j, cc]] += arr[4][j, cc]
+    rebuilt = w0 + (alpha * arr[6]) @ dense
+    rebuilt[lb_idx] += beta
+    assert_allclose(w, rebuilt, atol=1e-8)
+    assert w[lb_idx[0]] >= lb_val[0] - 1e-9
+    # optimality: the duality gap of 1/2|w - w0|^2 + C sum hinge closes
+    marg = _margins(w, *arr[:7], arr[8])
+    assert_allclose(marg, arr[6] * (dense @ w), atol=1e-8)
+    u = w - w0
+    primal = 0.5 * u @ u + c * np.maximum(0, arr[7] - marg).sum()
+    dual = alpha @ arr[7] + beta @ lb_val - 0.5 * u @ u - w0 @ u
+    assert primal - dual < 1e-6 * max(1.0, primal)
+
+
+def test_kmeans_is_deterministic_and_finds_separated_clusters() -> None:
+    rng = np.random.default_rng(0)
+    x = np.concatenate([rng.normal(m, 0.1, (30, 2)) for m in ((0, 0), (5, 0), (0, 5))])
+    c1, l1 = kmeans(x, 3, np.random.default_rng(4))
+    c2, l2 = kmeans(x, 3, np.random.default_rng(4))
+    assert_array_equal(l1, l2)
+    assert sorted(np.bincount(l1).tolist()) == [30, 30, 30]
+    assert_allclose(np.sort(np.round(c1).sum(1)), [0, 5, 5])
