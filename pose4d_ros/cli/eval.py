@@ -170,8 +170,10 @@ def write_json(path: Path, obj: dict) -> None:
 
 
 def _clean(table: dict[str, dict[str, float]]) -> dict[str, dict[str, float | None]]:
-    return {k: {g: (round(float(v), 3) if np.isfinite(v) else None) for g, v in row.items()}
-            for k, row in table.items()}
+    """The row in the JSON's order (pck, pck@0.2, apk, error_px), NaN as null."""
+    order = [k for k, _ in TABLE_METRICS] + [k for k in table if k not in dict(TABLE_METRICS)]
+    return {k: {g: (round(float(v), 3) if np.isfinite(v) else None)
+                for g, v in table[k].items()} for k in order if k in table}
 
 
 def default_models(kind: str) -> list[str]:

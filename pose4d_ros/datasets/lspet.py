@@ -33,10 +33,11 @@ LSPET_JOINTS: tuple[str, ...] = (
 @lru_cache(maxsize=4)
 def _load(path: str, mtime: float) -> tuple[NDArray[np.float64], NDArray[np.bool_]]:
     import scipy.io
+    from scipy.io.matlab import MatReadError
 
     try:
         mat = scipy.io.loadmat(path, variable_names=['joints'])
-    except (OSError, ValueError, TypeError, NotImplementedError) as exc:
+    except (OSError, ValueError, TypeError, NotImplementedError, MatReadError) as exc:
         raise ValueError(f'{path}: cannot read as a MATLAB file: {exc}') from exc
     if 'joints' not in mat:
         raise ValueError(f"{path}: no variable 'joints'")

@@ -1,0 +1,129 @@
+"""`pose4d train`, `pose4d eval` and `pose4d bench` end to end on a tiny synthetic CAD-60 set."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+from test_synth import write_utkinect
+
+from pose4d_ros.cli.main import main as pose4d_main
+from pose4d_ros.core.dpm import PartModel, load_model, save_model
+from pose4d_ros.core.skeleton import PARTS_10, PARTS_14
+
+GROUPS_10 = ['head', 'shoulder', 'wrist', 'hip', 'ankle', 'average']
+METRICS = ['pck', 'pck@0.2', 'apk', 'error_px']
+
+
+@pytest.fixture(scope='module')
+def tiny_set(tmp_path_factory) -> Path:
+    """Two subjects x one video x four frames, rendered by `pose4d synth`."""
+    root = tmp_path_factory.mktemp('cad60')
+    write_utkinect(root / 'ut')
+    out = root / 'set'
+    assert pose4d_main(['synth', '--utkinect', str(root / 'ut'), '--out', str(out), '--seed', '5',
+                        '--takes', 's01-s02', '--frames', '4', '--stride', '3', '--quiet']) == 0
+    return out
+
+
+def random_model(tree, channels: str, seed: int) -> PartModel:
+    rng = np.random.default_rng(seed)
+    p, k = len(tree), 2
+    springs = np.zeros((p, k, 4), np.float32)
+    springs[1:, :, [1, 3]] = 0.1
+    anchors = rng.integers(-3, 4, (p, k, 2)).astype(np.int32)
+    c = 64 if channels == 'rgbd' else 32
+    return PartModel(tree.names, tree.parents, channels, 4,
+                     (rng.normal(size=(p, k, 5, 5, c)) * 0.05).astype(np.float32), springs,
+                     anchors, np.zeros((p, k, k), np.float32), 32.0, 0.5, (40.0, 80.0),
+                     'float' if channels == 'rgbd' else '')
+
+
+def test_eval_writes_the_table_json(tiny_set: Path, tmp_path: Path, capsys) -> None:
+    rgbd, rgb = tmp_path / 'rgbd.npz', tmp_path / 'rgb.npz'
+    save_model(random_model(PARTS_10, 'rgbd', 0), rgbd)
+    save_model(random_model(PARTS_10, 'rgb', 1), rgb)
+    out = tmp_path / 'table.json'
+    code = pose4d_main(['eval', str(tiny_set), '--json', str(out), '--model', str(rgbd),
+                        '--model', str(rgb)])
+    assert code == 0
+    table = json.loads(out.read_text())
+    assert table['frames'] == 8
+    assert list(table['rows']) == ['rgbd', 'rgb']
+    for row in table['rows'].values():
+        assert list(row) == METRICS
+        for metric in METRICS:
+            assert list(row[metric]) == GROUPS_10
+            for v in row[metric].values():
+                assert v is None or np.isfinite(v)
+        assert all(0 <= row['pck'][g] <= 100 for g in GROUPS_10)
+        assert row['pck@0.2']['average'] >= row['pck']['average']
+    text = capsys.readouterr().out
+    assert 'PCK@0.1' in text and 'rgbd' in text and 'APK' in text
+
+
+def test_train_then_eval_and_bench(tiny_set: Path, tmp_path: Path, capsys) -> None:
+    model = tmp_path / 'tiny.npz'
+    code = pose4d_main(['train', str(tiny_set), '--out', str(model), '--types', '2',
+                        '--rounds', '1', '--masked', '--no-background', '--seed', '3'])
+    assert code == 0
+    m = load_model(model)
+    assert m.part_names == PARTS_10.names and m.channels == 'rgbd' and m.masked_input
+    assert m.metadata['seed'] == '3' and 'train_config' in m.metadata
+    assert m.calibration is not None and m.calibration.shape == (10, 3)
+    out = tmp_path / 'table.json'
+    assert pose4d_main(['eval', str(tiny_set), '--json', str(out), '--model', str(model)]) == 0
+    table = json.loads(out.read_text())
+    assert list(table['rows']) == ['rgbd']
+    # trained and tested on the same 8 frames: the parts must mostly be found
+    assert table['rows']['rgbd']['pck@0.2']['average'] > 50
+    bench = tmp_path / 'bench.json'
+    assert pose4d_main(['bench', str(tiny_set), '--json', str(bench), '--model', str(model),
+                        '--frames', '4', '--warmup', '2']) == 0
+    stages = json.loads(bench.read_text())['stages_ms']
+    assert list(stages) == ['foreground', 'detector']
+    for st in stages.values():
+        assert 0 < st['p50'] <= st['p95']
+    text = capsys.readouterr().out
+    assert 'cores' in text and 'BLAS' in text
+
+
+def test_eval_on_an_lspet_layout_scores_elbows_and_knees(tmp_path: Path) -> None:
+    import cv2
+    import scipy.io
+
+    root = tmp_path / 'lspet'
+    (root / 'images').mkdir(parents=True)
+    rng = np.random.default_rng(0)
+    j = np.zeros((14, 3, 4))
+    j[:, :2] = rng.uniform(20, 100, (14, 2, 4))
+    j[:, 2] = 1
+    scipy.io.savemat(root / 'joints.mat', {'joints': j})
+    for i in range(1, 5):
+        cv2.imwrite(str(root / 'images' / f'im{i:05d}.jpg'),
+                    rng.integers(0, 256, (120, 120, 3)).astype(np.uint8))
+    model = tmp_path / 'm14.npz'
+    save_model(random_model(PARTS_14, 'rgb', 2), model)
+    out = tmp_path / 't.json'
+    assert pose4d_main(['eval', str(root), '--range', '2-4', '--json', str(out),
+                        '--model', str(model)]) == 0
+    table = json.loads(out.read_text())
+    assert table['frames'] == 3 and list(table['rows']) == ['rgb']
+    assert list(table['rows']['rgb']['pck']) == ['head', 'shoulder', 'elbow', 'wrist', 'hip',
+                                                 'knee', 'ankle', 'average']
+
+
+@pytest.mark.parametrize(('argv', 'message'), [
+    (['eval', '{set}', '--json', '{tmp}/t.json', '--model', '{tmp}/missing.npz'],
+     'missing.npz'),
+    (['eval', '{tmp}/nothing', '--json', '{tmp}/t.json'], 'nothing'),
+    (['train', '{set}', '--out', '{tmp}/m.txt'], 'must end in .npz'),
+    (['bench', '{set}', '--json', '{tmp}/b.json', '--frames', '0'], '--frames'),
+])
+def test_errors_name_the_file_and_exit_2(tiny_set: Path, tmp_path: Path, capsys, argv,
+                                         message: str) -> None:
+    args = [a.format(set=tiny_set, tmp=tmp_path) for a in argv]
+    assert pose4d_main(args) == 2
+    assert message in capsys.readouterr().err
