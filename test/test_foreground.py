@@ -329,6 +329,7 @@ def test_rendered_people_in_furnished_rooms() -> None:
                 previous = segment(depth_to_metres(frame.depth_mm), K, previous=previous)
                 scores.append(iou(previous.mask, frame.mask))
     assert len(scores) == 18
-    # measured 0.94 mean (0.65-0.97) with the defaults; the synthetic test set gives 0.91
-    assert np.mean(scores) > 0.88
-    assert np.median(scores) > 0.9
+    # measured with the defaults: mean 0.943, every frame 0.91-0.97 (the synthetic test set
+    # of 400 frames: mean 0.912, median 0.944)
+    assert np.mean(scores) > 0.92
+    assert np.min(scores) > 0.85

@@ -81,12 +81,13 @@ class ForegroundConfig:
     ----------
     depth_near_m, depth_far_m : depth range mapped to the 8-bit image, metres (near -> 255,
         far -> 1, everything else 0).
-    mser_delta : MSER stability step, 8-bit levels (one level = (far - near) / 254 metres).
+    mser_delta : MSER stability step, 8-bit levels (one level = (far - near) / 254 metres;
+        6 levels = 10 cm with the defaults).
     mser_min_area_px : smallest region, pixels (at the input resolution).
-    max_region_area_px : the trained background area threshold: larger regions are background.
-        It is also the largest region MSER reports.
-    mser_max_variation : the paper's stability score: largest relative area change over
-        +-delta levels for a region to be stable.
+    max_region_area_px : the trained background area threshold: larger regions are
+        background, pixels (at the input resolution).
+    mser_max_variation : the paper's stability score: largest relative area growth over
+        `mser_delta` levels further away for a region to be stable.
     connectivity : pixel neighbourhood of the regions, 4 or 8.
     tree_step : the region tree is built on every `tree_step`-th pixel of each row and
         column (1 = all; 2 = four times faster); chosen regions are traced at full
@@ -124,7 +125,8 @@ class ForegroundConfig:
     close_px : size of the closing (ellipse, pixels) whose no-reading pixels join the mask;
         0 or 1 = none.
     fill_holes : fill holes of the mask that have no depth reading.
-    stability_weight : a region's score is ``log(area) - stability_weight * variation``.
+    stability_weight : a region's score is ``log(area) - stability_weight * variation -
+        border_penalty * touches_side``.
     previous_bonus : with `previous`, score added to a region whose box overlaps the previous
         box by more than 0.3 (intersection over union); 0 = no temporal preference.
     seed : RANSAC random seed (the result is a function of the input).
