@@ -18,6 +18,7 @@ from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
 from std_msgs.msg import Header
 
+from pose4d_ros.core.dpm.threads import set_blas_threads
 from pose4d_ros.nodes.params import ParameterError
 
 DIAGNOSTICS_TOPIC = '/diagnostics'
@@ -29,6 +30,9 @@ def run(factory: Callable[[], Node], args: list[str] | None = None,
 
     Returns the exit status: 0, or 2 when a parameter was refused (logged as FATAL).
     """
+    # One owner of parallelism: the graph's processes share the cores, and OpenBLAS threads
+    # spin-waiting for a core make the detector's GEMM several times slower (core.dpm.threads).
+    set_blas_threads(1)
     rclpy.init(args=args)
     node = None
     code = 0
