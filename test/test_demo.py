@@ -1,0 +1,36 @@
+"""`pose4d demo` end to end: the sample bag through the node graph, scored (slow)."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+
+import cv2
+import pytest
+from harness import executable
+
+from pose4d_ros.models import shipped_models
+
+pytestmark = pytest.mark.slow
+
+
+def test_demo_runs_the_graph_and_scores_it(tmp_path):
+    if 'rgbd_10' not in shipped_models():
+        pytest.fail('the default model rgbd_10 is not shipped in pose4d_ros/models')
+    run = subprocess.run([str(executable('pose4d')), 'demo', '--out', str(tmp_path)],
+                         capture_output=True, text=True, timeout=600)
+    assert run.returncode == 0, run.stdout[-3000:] + run.stderr[-3000:]
+    results = json.loads((tmp_path / 'results.json').read_text())
+    assert results['frames_in'] == 45
+    assert 0 < results['skeletons_out'] <= 45
+    assert results['frames_lost'] == 45 - results['skeletons_out']
+    assert results['latency_ms']['n'] == results['skeletons_out']
+    for table in (results['graph'], *results['offline'].values()):
+        assert set(table) == {'pck', 'pck@0.2', 'apk', 'error_px'}
+    assert set(results['offline']) == {'rgbd', 'rgbd_kf', 'rgbd_kf_ik'}
+    assert {'elbow', 'knee'} <= set(results['graph']['pck'])  # IK completes them
+    overlay = cv2.imread(str(tmp_path / 'overlay.png'))
+    assert overlay is not None and overlay.shape[1] == 4 * 640
+    for exe in ('replay', 'recorder', 'foreground', 'detector', 'tracker', 'ik'):
+        assert (tmp_path / 'logs' / f'{exe}.log').is_file()
+    assert 'frames in 45' in run.stdout
