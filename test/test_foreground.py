@@ -285,6 +285,7 @@ def test_apply_mask_checks_shapes() -> None:
     ('depth_near_m', -1.0),
     ('depth_far_m', 0.2),
     ('mser_delta', 0),
+    ('mser_delta', 4.5),
     ('mser_min_area_px', 0),
     ('max_region_area_px', 10),
     ('mser_max_variation', 0.0),
