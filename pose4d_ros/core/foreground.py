@@ -473,14 +473,6 @@ def _fill_holes(mask: NDArray[np.bool_], fillable: NDArray[np.bool_],
     crop |= ~bad[lab]
 
 
-def _box_of(mask: NDArray[np.bool_]) -> tuple[int, int, int, int] | None:
-    rows = np.flatnonzero(mask.any(axis=1))
-    if rows.size == 0:
-        return None
-    cols = np.flatnonzero(mask.any(axis=0))
-    return int(cols[0]), int(rows[0]), int(cols[-1]) + 1, int(rows[-1]) + 1
-
-
 def _overlap(a: tuple[int, int, int, int], b: tuple[int, int, int, int]) -> float:
     """Intersection over union of two boxes."""
     iw = min(a[2], b[2]) - max(a[0], b[0])
