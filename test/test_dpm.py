@@ -88,7 +88,7 @@ def test_tree_dp_equals_brute_force_over_all_poses() -> None:
     ny, nx = 2, 3
     resp = rng.normal(size=(p_n, k, ny, nx)).astype(np.float32)
     par = np.asarray(parents, np.int64)
-    root, ix, iy, ik = tree_dp(resp, par, m.springs, m.anchors, m.bias)
+    root, ix, iy, ik, _ = tree_dp(resp, par, m.springs, m.anchors, m.bias)
     cells = list(itertools.product(range(ny), range(nx)))
 
     def pose_score(types, locs):
@@ -155,10 +155,13 @@ def test_inference_recovers_a_planted_pose_exactly() -> None:
     springs[0] = 0
     m = PartModel(('a', 'b', 'c'), parents, 'rgb', 4, filters.astype(np.float32), springs,
                   anchors, np.zeros((3, 1, 1), np.float32), 32.0, 0.5, (20.0, 60.0))
-    det = Detector(m)
-    (pose,) = det.poses_from_levels([level])
+    (pose,) = Detector(m, SearchConfig(subcell=False)).poses_from_levels([level])
     u, v = level.cell_to_pixel(planted[:, 0], planted[:, 1], (fs, fs))
     assert_allclose(pose.uv, np.stack([u, v], 1))
+    # sub-cell refinement moves each part by at most half a cell (2 px here)
+    (fine,) = Detector(m).poses_from_levels([level])
+    assert np.abs(fine.uv - pose.uv).max() <= 2.0 + 1e-9
+    assert fine.score == pytest.approx(pose.score)
     res = score_level(level, m)
     r = best_roots(res, 1)
     assert_array_equal(r[0, 1:], planted[0])

@@ -21,7 +21,7 @@ import numpy as np
 from pose4d_ros.cli._dpm import load_samples, machine, progress
 from pose4d_ros.cli.eval import default_models, resolve_model, write_json
 from pose4d_ros.core.camera import cad60_intrinsics
-from pose4d_ros.core.dpm.infer import Detector
+from pose4d_ros.core.dpm.infer import Detector, SearchConfig
 from pose4d_ros.core.dpm.model import load_model
 from pose4d_ros.core.dpm.threads import set_blas_threads
 from pose4d_ros.datasets.sources import source_kind
@@ -39,6 +39,8 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument('--range', dest='frame_range', metavar='A-B', help='LSPET image numbers')
     p.add_argument('--frames', type=int, default=200, help='frames timed (spread over the set)')
     p.add_argument('--warmup', type=int, default=10, help='frames run before timing')
+    p.add_argument('--levels', type=int, default=SearchConfig.n_levels,
+                   help='pyramid levels searched around the depth-predicted scale (1-3)')
     p.add_argument('--blas-threads', type=int, default=1, help='OpenBLAS threads')
     p.set_defaults(func=run)
 
@@ -55,6 +57,8 @@ def run(args: argparse.Namespace) -> int:
     if args.frames < 1 or args.warmup < 0:
         raise ValueError(f'--frames must be >= 1 and --warmup >= 0, got {args.frames}, '
                          f'{args.warmup}')
+    from pose4d_ros.core.foreground import segment  # loads scipy (and its BLAS) first
+
     threads = set_blas_threads(args.blas_threads)
     kind = source_kind(args.source)
     model = load_model(resolve_model(args.model or default_models(kind)[0]))
@@ -63,9 +67,7 @@ def run(args: argparse.Namespace) -> int:
     use_depth = model.channels == 'rgbd'
     if use_depth and all(s.depth_m is None for s in samples):
         raise ValueError(f'{args.source}: no depth images for the rgbd model')
-    from pose4d_ros.core.foreground import segment
-
-    det = Detector(model)
+    det = Detector(model, SearchConfig(n_levels=args.levels))
     fg_ms: list[float] = []
     det_ms: list[float] = []
     for i, s in enumerate(progress(samples, 'bench')):

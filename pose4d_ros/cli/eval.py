@@ -32,7 +32,7 @@ from numpy.typing import NDArray
 
 from pose4d_ros.cli._dpm import load_samples, log, progress
 from pose4d_ros.core.camera import cad60_intrinsics
-from pose4d_ros.core.dpm.infer import Detector
+from pose4d_ros.core.dpm.infer import Detector, SearchConfig
 from pose4d_ros.core.dpm.model import PartModel, load_model
 from pose4d_ros.core.dpm.threads import set_blas_threads
 from pose4d_ros.core.dpm.train import part_joints
@@ -75,11 +75,12 @@ class Variant:
     run: FrameFn
 
 
-def detector_variant(name: str, model: PartModel, *, use_depth: bool) -> Variant:
+def detector_variant(name: str, model: PartModel, *, use_depth: bool,
+                     search: SearchConfig | None = None) -> Variant:
     """The part detector as a variant: with depth, the foreground stage's mask bounds the
     search and gives the scale (the live pipeline); without, the whole image (Yang &
     Ramanan)."""
-    det = Detector(model)
+    det = Detector(model, search)
     if use_depth:
         from pose4d_ros.core.foreground import segment
 
@@ -202,11 +203,15 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
                    help='LSPET image numbers (inclusive), e.g. 2501-3000')
     p.add_argument('--stride', type=int, default=1, help='every n-th frame of a CAD-60 video')
     p.add_argument('--max-frames', type=int, default=None)
+    p.add_argument('--levels', type=int, default=SearchConfig.n_levels,
+                   help='pyramid levels searched around the depth-predicted scale (1-3)')
     p.add_argument('--blas-threads', type=int, default=1)
     p.set_defaults(func=run)
 
 
 def run(args: argparse.Namespace) -> int:
+    import pose4d_ros.core.foreground  # noqa: F401  (loads scipy and its BLAS before the set)
+
     set_blas_threads(args.blas_threads)
     kind = source_kind(args.source)
     models = [load_model(resolve_model(m)) for m in (args.model or default_models(kind))]
@@ -221,7 +226,9 @@ def run(args: argparse.Namespace) -> int:
         name = m.channels
         while name in rows:
             name += "'"
-        pred = run_variant(detector_variant(name, m, use_depth=use_depth), samples)
+        search = SearchConfig(n_levels=args.levels)
+        pred = run_variant(detector_variant(name, m, use_depth=use_depth, search=search),
+                           samples)
         if not pred.found.all():
             log(f'{name}: no pose in {int((~pred.found).sum())} of {len(samples)} frames')
         rows[name] = score(pred, samples)

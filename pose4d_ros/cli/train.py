@@ -170,6 +170,8 @@ def build_negatives(samples: list[Sample], cfg: TrainConfig, max_images: int, se
 
 
 def run(args: argparse.Namespace) -> int:
+    import pose4d_ros.core.foreground  # noqa: F401  (loads scipy and its BLAS before the set)
+
     t0 = time.time()
     set_blas_threads(args.blas_threads)
     cfg = TrainConfig(parts=args.parts, channels=args.channels, n_types=args.types,

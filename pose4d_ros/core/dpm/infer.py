@@ -49,14 +49,17 @@ class SearchConfig:
     margin : search-box margin around the foreground box, in person scales (fx * L / z).
     low_score : poses scoring below this are flagged 'low_score' (0 = the SVM's boundary).
     nms_overlap : top-k suppression: pose boxes overlapping more than this (IoU) are dropped.
+    subcell : refine each part below the cell size: a parabola through its subtree score (less
+        its spring) at the chosen cell and its two neighbours, per axis (at most half a cell).
     """
 
-    n_levels: int = 3
+    n_levels: int = 1
     level_step: float = 2.0 ** 0.2
     levels_per_octave: int = 5
     margin: float = 0.6
     low_score: float = 0.0
     nms_overlap: float = 0.5
+    subcell: bool = True
 
     def __post_init__(self) -> None:
         if not 1 <= self.n_levels <= 9:
@@ -141,6 +144,8 @@ def tree_dp(resp: NDArray[np.float32], parents: NDArray[np.int64],
     root : (K, ny, nx) float32 best pose score with the root of type k at each cell.
     ix, iy : (P, K, ny, nx) int32 spring argmaxes of each child type (see `dt.dt2d`).
     ik : (P, K, ny, nx) int32 best child type for each parent type and parent cell.
+    score : (P, K, ny, nx) float32 each part's filter response plus its children's messages
+        (the best score of the subtree below the part, for sub-cell refinement).
     """
     p_n, k_n, ny, nx = resp.shape
     score = resp.copy()
@@ -170,7 +175,7 @@ def tree_dp(resp: NDArray[np.float32], parents: NDArray[np.int64],
     root = np.empty((k_n, ny, nx), np.float32)
     for k in range(k_n):
         root[k] = score[0, k] + bias[0, 0, k]
-    return root, ix, iy, ik
+    return root, ix, iy, ik, score
 
 
 @nb.njit(cache=True)
@@ -216,6 +221,47 @@ def backtrack(roots: NDArray[np.int64], parents: NDArray[np.int64], resp: NDArra
     return out, local
 
 
+@nb.njit(cache=True)
+def subcell_offsets(score: NDArray[np.float32], parts: NDArray[np.int64],
+                    parents: NDArray[np.int64], springs: NDArray[np.float32],
+                    anchors: NDArray[np.int32]):
+    """Sub-cell offsets (rows, cols) of a backtracked pose, each in [-0.5, 0.5]: per part and
+    axis, the vertex of the parabola through its subtree score less its spring (the parent
+    kept where it is) at the chosen cell and its two neighbours; 0 where that is not a peak."""
+    p_n = parts.shape[0]
+    ny, nx = score.shape[2], score.shape[3]
+    dr = np.zeros(p_n)
+    dc = np.zeros(p_n)
+    for c in range(p_n):
+        t, r, q = parts[c, 0], parts[c, 1], parts[c, 2]
+        vals = np.empty(5)  # centre, up, down, left, right
+        offs = ((0, 0), (-1, 0), (1, 0), (0, -1), (0, 1))
+        ok = True
+        for n in range(5):
+            rr, qq = r + offs[n][0], q + offs[n][1]
+            if rr < 0 or rr >= ny or qq < 0 or qq >= nx:
+                vals[n] = np.nan
+                continue
+            v = np.float64(score[c, t, rr, qq])
+            if c > 0:
+                par = parents[c]
+                dx = qq - parts[par, 2] - anchors[c, t, 0]
+                dy = rr - parts[par, 1] - anchors[c, t, 1]
+                sp = springs[c, t]
+                v -= sp[0] * dx + sp[1] * dx * dx + sp[2] * dy + sp[3] * dy * dy
+            vals[n] = v
+        ok = not np.isnan(vals[0])
+        if ok and not (np.isnan(vals[1]) or np.isnan(vals[2])):
+            den = vals[1] - 2.0 * vals[0] + vals[2]
+            if den < 0:
+                dr[c] = min(max(0.5 * (vals[1] - vals[2]) / den, -0.5), 0.5)
+        if ok and not (np.isnan(vals[3]) or np.isnan(vals[4])):
+            den = vals[3] - 2.0 * vals[0] + vals[4]
+            if den < 0:
+                dc[c] = min(max(0.5 * (vals[3] - vals[4]) / den, -0.5), 0.5)
+    return dr, dc
+
+
 # --------------------------------------------------------------------------- one level
 
 
@@ -229,6 +275,7 @@ class LevelResult:
     ix: NDArray[np.int32]
     iy: NDArray[np.int32]
     ik: NDArray[np.int32]
+    score: NDArray[np.float32] | None = None   # (P, K, ny, nx) subtree scores
 
 
 def model_arrays(model: PartModel) -> tuple:
@@ -252,8 +299,8 @@ def score_level(level: Level, model: PartModel, arrays: tuple | None = None
     ny, nx = h - fh + 1, w - fw + 1
     cols = im2col(level.feat, fh, fw)
     resp = (wmat @ cols.T).reshape(model.n_parts, model.n_types, ny, nx)
-    root, ix, iy, ik = tree_dp(resp, parents, springs, anchors, bias)
-    return LevelResult(level, resp, root, ix, iy, ik)
+    root, ix, iy, ik, score = tree_dp(resp, parents, springs, anchors, bias)
+    return LevelResult(level, resp, root, ix, iy, ik, score)
 
 
 def best_roots(result: LevelResult, count: int, threshold: float = -np.inf,
@@ -481,7 +528,13 @@ class Detector:
         m = self.model
         out = []
         for j in range(len(roots)):
-            u, v = res.level.cell_to_pixel(parts[j, :, 1], parts[j, :, 2], m.filter_shape)
+            rows = parts[j, :, 1].astype(np.float64)
+            cols = parts[j, :, 2].astype(np.float64)
+            if self.config.subcell and res.score is not None:
+                dr, dc = subcell_offsets(res.score, parts[j], parents, springs, anchors)
+                rows += dr
+                cols += dc
+            u, v = res.level.cell_to_pixel(rows, cols, m.filter_shape)
             loc = local[j].astype(np.float64)
             total = float(loc.sum())
             if m.calibration is not None:

@@ -834,7 +834,7 @@ def _mine_structural(model: PartModel, pos: list[_Positive], samples: Sequence,
         far = np.hypot(yy[None] - p.cells[:, 0, None, None],
                        xx[None] - p.cells[:, 1, None, None]) > p.tau     # (P, ny, nx)
         aug = res.resp + (unit * far).astype(np.float32)[:, None]
-        root, ix, iy, ik = tree_dp(aug, parents, springs, anchors, bias)
+        root, ix, iy, ik, _ = tree_dp(aug, parents, springs, anchors, bias)
         aug_res = LevelResult(level, aug, root, ix, iy, ik)
         roots = best_roots(aug_res, cfg.structural_per_positive, min_dist=2)
         if len(roots) == 0:
