@@ -98,6 +98,7 @@ class RosPeer:
         self.node = rclpy.create_node(name, context=self.context)
         self.executor = SingleThreadedExecutor(context=self.context)
         self.executor.add_node(self.node)
+        self.subscriptions: dict[str, Any] = {}
 
     def spin_until(self, done: Callable[[], bool], timeout: float, what: str = '') -> None:
         """Spin until `done()`; AssertionError after `timeout` seconds."""
@@ -107,6 +108,13 @@ class RosPeer:
                 raise AssertionError(f'timed out after {timeout} s waiting for {what or done}')
             self.executor.spin_once(timeout_sec=0.02)
 
+    def wait(self, done: Callable[[], bool], timeout: float) -> bool:
+        """Spin until `done()` or `timeout` seconds; whether it is done."""
+        deadline = time.monotonic() + timeout
+        while not done() and time.monotonic() < deadline:
+            self.executor.spin_once(timeout_sec=0.02)
+        return done()
+
     def spin_for(self, seconds: float) -> None:
         deadline = time.monotonic() + seconds
         while time.monotonic() < deadline:
@@ -115,7 +123,8 @@ class RosPeer:
     def collect(self, msg_type: type, topic: str, qos: Any = 10) -> list:
         """Subscribe and return the list that received messages are appended to."""
         received: list = []
-        self.node.create_subscription(msg_type, topic, received.append, qos)
+        self.subscriptions[topic] = self.node.create_subscription(msg_type, topic,
+                                                                  received.append, qos)
         return received
 
     def wait_for_subscribers(self, publisher: Any, count: int = 1, timeout: float = 10.0) -> None:
@@ -123,7 +132,12 @@ class RosPeer:
                         f'{count} subscriber(s) on {publisher.topic_name}')
 
     def wait_for_publishers(self, topic: str, count: int = 1, timeout: float = 10.0) -> None:
-        self.spin_until(lambda: self.node.count_publishers(topic) >= count, timeout,
+        """Wait until `count` publishers are matched with our subscription on `topic` (or, with
+        no subscription of ours, seen on the graph). A publisher seen on the graph may not be
+        matched yet, and what it publishes before then is lost."""
+        sub = self.subscriptions.get(topic)
+        self.spin_until(lambda: (sub.get_publisher_count() if sub is not None
+                                 else self.node.count_publishers(topic)) >= count, timeout,
                         f'{count} publisher(s) on {topic}')
 
     def close(self) -> None:

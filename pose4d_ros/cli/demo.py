@@ -195,7 +195,7 @@ def run_graph(bag_path: Path, out: Path, *, rate: float = 1.0, model: str = 'rgb
         t_play = time.monotonic()
         graph.start('replay', {'replay.bag': str(bag_path), 'replay.rate': rate,
                                'replay.topics': ['camera/*'],
-                               'replay.wait_for_subscribers': 1})
+                               'replay.wait_for_subscribers': 1, 'replay.delay_s': 1.0})
         replay = graph.procs['replay']
         while replay.poll() is None:
             graph.check_alive()

@@ -10,7 +10,7 @@ Publications
 
 Parameters (config/replay.yaml)
     replay.bag, replay.rate, replay.loop, replay.start_offset_s, replay.topics,
-    replay.publish_clock, replay.wait_for_subscribers, replay.wait_timeout_s
+    replay.publish_clock, replay.wait_for_subscribers, replay.wait_timeout_s, replay.delay_s
 """
 
 from __future__ import annotations
@@ -55,6 +55,9 @@ PARAMS = (
           'at least this many subscribers.', range=(0, 100)),
     Param('replay.wait_timeout_s', 10.0, 'Longest wait for subscribers, seconds.',
           range=(0.0, 3600.0)),
+    Param('replay.delay_s', 0.0, 'Wait this long before playing (after the subscribers are '
+          'there), seconds: discovery can match a subscriber to us a moment after we see it, '
+          'and a best-effort subscriber drops what comes before.', range=(0.0, 3600.0)),
 )
 
 
@@ -139,6 +142,7 @@ class ReplayNode(Node):
 
     def play(self) -> None:
         self.wait_for_subscribers()
+        self._sleep_until(time.monotonic() + self.cfg['replay.delay_s'])
         t0 = time.monotonic()
         rounds = 0
         while rclpy.ok():
