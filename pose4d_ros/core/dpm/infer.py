@@ -32,7 +32,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from pose4d_ros.core.camera import Intrinsics, cad60_intrinsics
-from pose4d_ros.core.dpm.dt import NEG, dt2d
+from pose4d_ros.core.dpm.dt import dt2d
 from pose4d_ros.core.dpm.model import PartModel
 from pose4d_ros.core.hog import Level, depth_image, feature_pyramid
 
@@ -148,30 +148,40 @@ def tree_dp(resp: NDArray[np.float32], parents: NDArray[np.int64],
         (the best score of the subtree below the part, for sub-cell refinement).
     """
     p_n, k_n, ny, nx = resp.shape
+    n = ny * nx
     score = resp.copy()
-    ix = np.zeros((p_n, k_n, ny, nx), np.int32)
-    iy = np.zeros((p_n, k_n, ny, nx), np.int32)
+    ix = np.empty((p_n, k_n, ny, nx), np.int32)
+    iy = np.empty((p_n, k_n, ny, nx), np.int32)
     ik = np.zeros((p_n, k_n, ny, nx), np.int32)
     msg = np.empty((k_n, ny, nx), np.float32)
     tmp = np.empty((ny, nx), np.float32)
+    best = np.empty(n, np.float32)
+    flat_msg = msg.reshape(k_n, n)
+    flat_score = score.reshape(p_n, k_n, n)
+    flat_ik = ik.reshape(p_n, k_n, n)
     for c in range(p_n - 1, 0, -1):
         par = parents[c]
         for k in range(k_n):
             dt2d(score[c, k], springs[c, k, 0], springs[c, k, 1], springs[c, k, 2],
                  springs[c, k, 3], anchors[c, k, 0], anchors[c, k, 1], msg[k], ix[c, k],
                  iy[c, k], tmp)
+        # max over child types with the co-occurrence bias, type by type over whole maps
+        # (contiguous inner loops that the compiler vectorises)
         for l in range(k_n):
-            for y in range(ny):
-                for x in range(nx):
-                    best = 2.0 * NEG
-                    bk = 0
-                    for k in range(k_n):
-                        s = msg[k, y, x] + bias[c, l, k]
-                        if s > best:
-                            best = s
-                            bk = k
-                    score[par, l, y, x] += best
-                    ik[c, l, y, x] = bk
+            b0 = bias[c, l, 0]
+            out_k = flat_ik[c, l]
+            for j in range(n):
+                best[j] = flat_msg[0, j] + b0
+            for k in range(1, k_n):
+                b = bias[c, l, k]
+                for j in range(n):
+                    s = flat_msg[k, j] + b
+                    if s > best[j]:
+                        best[j] = s
+                        out_k[j] = k
+            dst = flat_score[par, l]
+            for j in range(n):
+                dst[j] += best[j]
     root = np.empty((k_n, ny, nx), np.float32)
     for k in range(k_n):
         root[k] = score[0, k] + bias[0, 0, k]
