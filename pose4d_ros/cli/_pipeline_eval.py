@@ -17,7 +17,7 @@ from pose4d_ros.core.joints import JointSet
 from pose4d_ros.core.metrics import score_joint_sets
 from pose4d_ros.core.pipeline import DetectorStage, FramePipeline
 from pose4d_ros.core.skeleton import SKELETON_14
-from pose4d_ros.datasets.cad60_bag import BagFrame, read_frames
+from pose4d_ros.datasets.cad60_bag import BagFrame, cad60_frames, read_frames
 from pose4d_ros.models import model_path
 
 ROWS = ('rgbd', 'rgbd_kf', 'rgbd_kf_ik')
@@ -59,11 +59,30 @@ def score_rows(preds: dict[str, list[JointSet]], truths: list[JointSet]
     return rows
 
 
+def frames_of(source: str | Path, *, stride: int = 1) -> Iterable[BagFrame]:
+    """The frames of a bag (a directory with metadata.yaml) or of a CAD-60 directory."""
+    source = Path(source)
+    if (source / 'metadata.yaml').is_file():
+        if stride != 1:
+            raise ValueError(f'{source}: --stride applies to CAD-60 directories, not bags')
+        return read_frames(source)
+    return cad60_frames(source, stride=stride)
+
+
+def evaluate_source(source: str | Path, *, model: str | Path = 'rgbd_10', stride: int = 1,
+                    progress: Callable[[int], Any] | None = None) -> dict[str, Any]:
+    """{'frames': N, 'rows': {row: table}} of the whole pipeline over a bag with ground truth
+    on /cad60/skeleton, or over a CAD-60 directory (each video a new track)."""
+    pipeline = pipeline_for(model)
+    preds, truths = run_pipeline(frames_of(source, stride=stride), pipeline, progress)
+    if not truths:
+        raise ValueError(f'{source}: no frames with colour, depth and camera_info')
+    return {'frames': len(truths), 'rows': score_rows(preds, truths)}
+
+
 def evaluate_bag(path: str | Path, *, model: str | Path = 'rgbd_10',
                  progress: Callable[[int], Any] | None = None) -> dict[str, Any]:
-    """{'frames': N, 'rows': {row: table}} for a bag with ground truth on /cad60/skeleton."""
-    pipeline = pipeline_for(model)
-    preds, truths = run_pipeline(read_frames(path), pipeline, progress)
-    if not truths:
-        raise ValueError(f'{path}: no frames with colour, depth and camera_info')
-    return {'frames': len(truths), 'rows': score_rows(preds, truths)}
+    """`evaluate_source` of a bag."""
+    if not (Path(path) / 'metadata.yaml').is_file():
+        raise ValueError(f'{path}: not a rosbag2 directory (no metadata.yaml)')
+    return evaluate_source(path, model=model, progress=progress)

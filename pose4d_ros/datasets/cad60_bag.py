@@ -235,3 +235,40 @@ def _frame(stamp: int, got: dict[str, Any], color_topic: str, depth_topic: str,
 
 def _pixels(msg: Any) -> np.ndarray:
     return decode(msg.data, msg.height, msg.width, msg.step, msg.encoding, msg.is_bigendian)
+
+
+def cad60_frames(root: str | Path, *, projection: str = 'perspective',
+                 t0_s: float = 1_700_000_000.0, videos: Sequence[str] | None = None,
+                 stride: int = 1) -> Iterator[BagFrame]:
+    """The frames of a CAD-60 directory as `read_frames` gives them from its converted bag.
+
+    Stamps follow `convert` (30 fps from `t0_s`, a one-second gap between videos), so a
+    directory and its bag give the same frames, and a tracker sees each video as a new track.
+    `stride` keeps every n-th frame of each video.
+    """
+    if stride < 1:
+        raise ValueError(f'stride must be >= 1, got {stride}')
+    selected = cad60.list_videos(root)
+    if videos is not None:
+        selected = [v for v in selected if v.video_id in set(videos)]
+    intr = cad60_intrinsics()
+    stamp_ns = int(round(t0_s * 1e9))
+    for video in selected:
+        skeleton = cad60.read_skeleton(video.skeleton_path)
+        pixels = skeleton.pixels(intr, model=projection)
+        optical = skeleton.joints_optical()
+        with_mask = len(skeleton) > 0 and \
+            cad60.frame_paths(video.frame_dir, int(skeleton.frames[0]))[2].is_file()
+        for i, frame in enumerate(cad60.iter_frames(video, skeleton=skeleton,
+                                                    with_mask=with_mask)):
+            if i:
+                stamp_ns += FRAME_PERIOD_NS * int(frame.frame - skeleton.frames[i - 1])
+            if i % stride:
+                continue
+            conf = frame.joint_conf
+            truth = cj.JointSet(CAD60_JOINTS, pixels[i], optical[i],
+                                confidence=conf.astype(np.float32),
+                                source=np.where(conf > 0, cj.DETECTED, cj.MISSING), track_id=1)
+            yield BagFrame(stamp_ns, frame.rgb, depth_to_metres(frame.depth_mm), intr, truth,
+                           frame.mask)
+        stamp_ns += VIDEO_GAP_NS
