@@ -71,13 +71,13 @@ demo: setup
 bench: setup
 	$(BIN)/pose4d bench bags/sample --json out/bench.json
 
-# The bundled sample bag: 45 frames (1.5 s at 30 fps) of synthetic RGB-D people posed by held-out
+# The bundled sample bag: 45 frames (1.5 s at 30 fps) of a synthetic RGB-D person (no occluder) posed by held-out
 # UTKinect motion (subject 8, waving), made by the project's own tools from ../shared/data.
 UTKINECT ?= ../shared/data/utkinect
 sample-bag: setup
 	rm -rf build/sample_cad60 bags/sample.new
 	$(BIN)/pose4d synth --utkinect $(UTKINECT) --out build/sample_cad60 --seed 7 \
-		--takes s08_e01 --start 86 --frames 45 --quiet
+		--takes s08_e01 --start 86 --frames 45 --occluders 0 --quiet
 	$(BIN)/pose4d cad60-to-bag build/sample_cad60 bags/sample.new
 	rm -rf bags/sample && mv bags/sample.new bags/sample
 
