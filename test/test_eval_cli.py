@@ -13,6 +13,7 @@ from pose4d_ros.cli.main import main as pose4d_main
 from pose4d_ros.core.dpm import PartModel, load_model, save_model
 from pose4d_ros.core.skeleton import PARTS_10, PARTS_14
 
+GROUPS_14 = ['head', 'shoulder', 'elbow', 'wrist', 'hip', 'knee', 'ankle', 'average']
 GROUPS_10 = ['head', 'shoulder', 'wrist', 'hip', 'ankle', 'average']
 METRICS = ['pck', 'pck@0.2', 'apk', 'error_px']
 
@@ -51,14 +52,16 @@ def test_eval_writes_the_table_json(tiny_set: Path, tmp_path: Path, capsys) -> N
     assert code == 0
     table = json.loads(out.read_text())
     assert table['frames'] == 8
-    assert list(table['rows']) == ['rgbd', 'rgb']
-    for row in table['rows'].values():
+    # the rgbd model runs as the graph does: detector, + Kalman filter, + IK (elbows, knees)
+    assert list(table['rows']) == ['rgbd', 'rgbd_kf', 'rgbd_kf_ik', 'rgb']
+    for name, row in table['rows'].items():
         assert list(row) == METRICS
+        groups = GROUPS_14 if name.endswith('_ik') else GROUPS_10
         for metric in METRICS:
-            assert list(row[metric]) == GROUPS_10
+            assert list(row[metric]) == groups
             for v in row[metric].values():
                 assert v is None or np.isfinite(v)
-        assert all(0 <= row['pck'][g] <= 100 for g in GROUPS_10)
+        assert all(0 <= row['pck'][g] <= 100 for g in groups)
         assert row['pck@0.2']['average'] >= row['pck']['average']
     text = capsys.readouterr().out
     assert 'PCK@0.1' in text and 'rgbd' in text and 'APK' in text
@@ -76,7 +79,7 @@ def test_train_then_eval_and_bench(tiny_set: Path, tmp_path: Path, capsys) -> No
     out = tmp_path / 'table.json'
     assert pose4d_main(['eval', str(tiny_set), '--json', str(out), '--model', str(model)]) == 0
     table = json.loads(out.read_text())
-    assert list(table['rows']) == ['rgbd']
+    assert list(table['rows']) == ['rgbd', 'rgbd_kf', 'rgbd_kf_ik']
     # trained and tested on the same 8 frames: the parts must mostly be found
     assert table['rows']['rgbd']['pck@0.2']['average'] > 50
     bench = tmp_path / 'bench.json'

@@ -12,7 +12,8 @@ from collections.abc import Callable, Iterable
 from pathlib import Path
 from typing import Any
 
-from pose4d_ros.core.dpm.model import load_model
+from pose4d_ros.core.dpm.infer import SearchConfig
+from pose4d_ros.core.dpm.model import PartModel, load_model
 from pose4d_ros.core.joints import JointSet
 from pose4d_ros.core.metrics import score_joint_sets
 from pose4d_ros.core.pipeline import DetectorStage, FramePipeline
@@ -23,18 +24,23 @@ from pose4d_ros.models import model_path
 ROWS = ('rgbd', 'rgbd_kf', 'rgbd_kf_ik')
 
 
-def pipeline_for(model: str | Path) -> FramePipeline:
+def pipeline_for(model: str | Path | PartModel, *, search: SearchConfig | None = None
+                 ) -> FramePipeline:
     """A FramePipeline with the default stages and the given part model."""
-    return FramePipeline(DetectorStage(load_model(model_path(model))))
+    if not isinstance(model, PartModel):
+        model = load_model(model_path(model))
+    return FramePipeline(DetectorStage(model, search=search))
 
 
 def run_pipeline(frames: Iterable[BagFrame], pipeline: FramePipeline,
                  progress: Callable[[int], Any] | None = None
-                 ) -> tuple[dict[str, list[JointSet]], list[JointSet]]:
-    """Predictions of every row and the ground truths, frame by frame."""
+                 ) -> tuple[dict[str, list[JointSet]], list[JointSet], tuple[int, int]]:
+    """Predictions of every row, the ground truths (frame by frame) and the image size."""
     preds: dict[str, list[JointSet]] = {row: [] for row in ROWS}
     truths: list[JointSet] = []
+    size = (0, 0)
     for k, frame in enumerate(frames):
+        size = (frame.color.shape[1], frame.color.shape[0])
         if frame.truth is None:
             raise ValueError(f'frame at {frame.stamp_ns} ns has no ground truth')
         out = pipeline.step(frame.color, frame.depth_m, frame.intrinsics, frame.stamp_ns * 1e-9)
@@ -44,18 +50,18 @@ def run_pipeline(frames: Iterable[BagFrame], pipeline: FramePipeline,
         truths.append(frame.truth)
         if progress is not None:
             progress(k + 1)
-    return preds, truths
+    return preds, truths, size
 
 
-def score_rows(preds: dict[str, list[JointSet]], truths: list[JointSet]
-               ) -> dict[str, dict[str, dict[str, float]]]:
+def score_rows(preds: dict[str, list[JointSet]], truths: list[JointSet],
+               image_size: tuple[int, int]) -> dict[str, dict[str, dict[str, float]]]:
     """The table of each row. Rows of 10 parts score their joints; the IK row scores all 14
-    (elbows and knees included)."""
+    (elbows and knees included). Ground truth outside the image is not scored."""
     rows = {}
     for row, p in preds.items():
         names = SKELETON_14 if row.endswith('_ik') else tuple(
             n for n in SKELETON_14 if p and n in p[0].names)
-        rows[row] = score_joint_sets(p, truths, names)
+        rows[row] = score_joint_sets(p, truths, names, image_size=image_size)
     return rows
 
 
@@ -69,15 +75,16 @@ def frames_of(source: str | Path, *, stride: int = 1) -> Iterable[BagFrame]:
     return cad60_frames(source, stride=stride)
 
 
-def evaluate_source(source: str | Path, *, model: str | Path = 'rgbd_10', stride: int = 1,
+def evaluate_source(source: str | Path, *, model: str | Path | PartModel = 'rgbd_10',
+                    stride: int = 1, search: SearchConfig | None = None,
                     progress: Callable[[int], Any] | None = None) -> dict[str, Any]:
     """{'frames': N, 'rows': {row: table}} of the whole pipeline over a bag with ground truth
     on /cad60/skeleton, or over a CAD-60 directory (each video a new track)."""
-    pipeline = pipeline_for(model)
-    preds, truths = run_pipeline(frames_of(source, stride=stride), pipeline, progress)
+    pipeline = pipeline_for(model, search=search)
+    preds, truths, size = run_pipeline(frames_of(source, stride=stride), pipeline, progress)
     if not truths:
         raise ValueError(f'{source}: no frames with colour, depth and camera_info')
-    return {'frames': len(truths), 'rows': score_rows(preds, truths)}
+    return {'frames': len(truths), 'rows': score_rows(preds, truths, size)}
 
 
 def evaluate_bag(path: str | Path, *, model: str | Path = 'rgbd_10',

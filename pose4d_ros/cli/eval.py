@@ -2,13 +2,16 @@
 
     pose4d eval SOURCE --json FILE [--model M ...] [--range A-B]
 
-SOURCE is a CAD-60 directory (real or synthetic) or an LSPET root (with --range). Each row is a
-variant of the core run over every frame:
+SOURCE is a CAD-60 directory (real or synthetic), a rosbag2 with ground truth (`pose4d
+cad60-to-bag`) or an LSPET root (with --range). Each row is a variant of the core run over every
+frame:
 
-- `rgbd`: the 4D-DPM as the live pipeline runs it: the foreground stage (`core.foreground`)
-  finds the person's mask on the depth image, and the RGB-D part model searches the levels that
-  the person's depth gives, inside the mask's box (a model trained on masked frames also sees
-  the frame blanked outside the mask).
+- `rgbd`, `rgbd_kf`, `rgbd_kf_ik`: the live pipeline's own stages (`core.pipeline.FramePipeline`,
+  what the nodes run), frame after frame, each video a new track: the foreground stage
+  (`core.foreground`) masks the person on the depth image, the RGB-D part model searches the
+  levels that the person's depth gives inside the mask's box (`rgbd`); the SLQE Kalman filter
+  tracks the parts (`rgbd_kf`); inverse kinematics adds elbows and knees (`rgbd_kf_ik`, which
+  scores them too). With --max-frames (a subset, no longer a sequence) only `rgbd` is given.
 - `rgb`: the Yang & Ramanan baseline: the RGB-only part model over the whole colour image and
   the whole trained scale range, no depth at all.
 
@@ -31,6 +34,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from pose4d_ros.cli._dpm import load_samples, log, progress
+from pose4d_ros.cli._pipeline_eval import evaluate_source
 from pose4d_ros.core.camera import cad60_intrinsics
 from pose4d_ros.core.dpm.infer import Detector, SearchConfig
 from pose4d_ros.core.dpm.model import PartModel, load_model
@@ -227,6 +231,15 @@ def run(args: argparse.Namespace) -> int:
         while name in rows:
             name += "'"
         search = SearchConfig(n_levels=args.levels)
+        if use_depth and kind in ('cad60', 'bag') and args.max_frames is None:
+            # the graph's own stages, frame after frame: rgbd, + Kalman filter, + IK
+            bar = progress(None, name)
+            res = evaluate_source(args.source, model=m, stride=args.stride, search=search,
+                                  progress=lambda n, bar=bar: bar.update(n - bar.n))
+            bar.close()
+            for row, table in res['rows'].items():
+                rows[name + row[len('rgbd'):]] = table
+            continue
         pred = run_variant(detector_variant(name, m, use_depth=use_depth, search=search),
                            samples)
         if not pred.found.all():

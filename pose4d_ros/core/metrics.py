@@ -159,7 +159,8 @@ def _with_average(values: dict[str, float]) -> dict[str, float]:
 
 
 def score_joint_sets(predictions: list[JointSet | None], truths: list[JointSet],
-                     names: tuple[str, ...], *, alphas: tuple[float, ...] = (0.1, 0.2)
+                     names: tuple[str, ...], *, alphas: tuple[float, ...] = (0.1, 0.2),
+                     image_size: tuple[int, int] | None = None
                      ) -> dict[str, dict[str, float]]:
     """The table of `score_groups` for frame-aligned predictions and ground truths.
 
@@ -172,6 +173,7 @@ def score_joint_sets(predictions: list[JointSet | None], truths: list[JointSet],
         `skeleton.ground_truth_name` (a predicted `left_wrist` is scored against CAD-60's
         `left_hand`).
     names : the joints to score (predicted names).
+    image_size : (width, height); ground-truth joints outside the image are not visible.
     """
     if len(predictions) != len(truths):
         raise ValueError(f'{len(predictions)} predictions for {len(truths)} frames')
@@ -185,7 +187,11 @@ def score_joint_sets(predictions: list[JointSet | None], truths: list[JointSet],
             ti = t.get(ground_truth_name(name))
             if ti is not None:
                 gt[k, i] = t.uv[ti]
+                u, v = t.uv[ti]
                 visible[k, i] = bool(t.confidence[ti] > 0) and bool(np.isfinite(t.uv[ti]).all())
+                if image_size is not None:
+                    visible[k, i] &= bool(0 <= u <= image_size[0] - 1
+                                          and 0 <= v <= image_size[1] - 1)
             pi = p.get(name) if p is not None else None
             if pi is not None and p.source[pi] != MISSING:
                 pred[k, i] = p.uv[pi]

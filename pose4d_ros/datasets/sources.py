@@ -74,17 +74,20 @@ def parse_range(text: str | None) -> tuple[int, int] | None:
 
 def source_kind(path: str | Path) -> str:
     """'lspet' for an LSPET root (joints.mat + images/), 'cad60' for a CAD-60 root (dataN/
-    directories, or one dataN directory)."""
+    directories, or one dataN directory), 'bag' for a rosbag2 with ground truth (made by
+    `pose4d cad60-to-bag`)."""
     p = Path(path)
     if not p.exists():
         raise OSError(f'{p}: no such file or directory')
+    if (p / 'metadata.yaml').is_file():
+        return 'bag'
     if (p / 'joints.mat').is_file() and (p / 'images').is_dir():
         return 'lspet'
     if p.is_dir() and (any(p.glob('data*/activityLabel.txt'))
                        or (p / 'activityLabel.txt').is_file()):
         return 'cad60'
-    raise ValueError(f'{p}: neither an LSPET root (joints.mat, images/) nor a CAD-60 directory '
-                     '(dataN/ with activityLabel.txt)')
+    raise ValueError(f'{p}: neither an LSPET root (joints.mat, images/), a CAD-60 directory '
+                     '(dataN/ with activityLabel.txt) nor a rosbag2 (metadata.yaml)')
 
 
 def open_source(path: str | Path, *, frame_range: tuple[int, int] | None = None,
@@ -103,6 +106,8 @@ def open_source(path: str | Path, *, frame_range: tuple[int, int] | None = None,
         if frame_range is None:
             raise ValueError(f'{path}: an LSPET source needs --range A-B (e.g. 1-2500)')
         return lspet_samples(path, *frame_range)
+    if kind == 'bag':
+        return bag_samples(path, stride=stride)
     return cad60_samples(path, stride=stride)
 
 
@@ -136,3 +141,21 @@ def cad60_samples(root: str | Path, *, stride: int = 1) -> Iterator[Sample]:
                          mask=mask, intrinsics=intr,
                          key=str(cad60.frame_paths(video.frame_dir, int(k))[0]),
                          extra={'video': f'{video.person}/{video.video_id}', 'frame': int(k)})
+
+
+def bag_samples(path: str | Path, *, stride: int = 1) -> Iterator[Sample]:
+    """Samples of a bag with ground truth on /cad60/skeleton (`cad60_bag.read_frames`)."""
+    from pose4d_ros.datasets.cad60_bag import read_frames
+
+    if stride < 1:
+        raise ValueError(f'stride must be >= 1, got {stride}')
+    for i, f in enumerate(read_frames(path)):
+        if i % stride:
+            continue
+        if f.truth is None:
+            raise ValueError(f'{path}: frame at {f.stamp_ns} ns has no ground truth '
+                             '(/cad60/skeleton)')
+        yield Sample(color=f.color, depth_m=f.depth_m, joints_uv=f.truth.uv,
+                     visible=f.truth.confidence > 0, names=f.truth.names, mask=f.mask,
+                     intrinsics=f.intrinsics, key=f'{path}@{f.stamp_ns}',
+                     extra={'stamp_ns': f.stamp_ns})
