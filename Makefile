@@ -69,7 +69,7 @@ demo: setup
 	$(BIN)/pose4d demo
 
 bench: setup
-	$(BIN)/pose4d bench bags/sample --json out/bench.json
+	$(BIN)/pose4d bench bags/sample --json out/bench.json --graph
 
 # The bundled sample bag: 45 frames (1.5 s at 30 fps) of a synthetic RGB-D person (no occluder) posed by held-out
 # UTKinect motion (subject 8, waving), made by the project's own tools from ../shared/data.

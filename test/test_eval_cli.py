@@ -86,7 +86,7 @@ def test_train_then_eval_and_bench(tiny_set: Path, tmp_path: Path, capsys) -> No
     assert pose4d_main(['bench', str(tiny_set), '--json', str(bench), '--model', str(model),
                         '--frames', '4', '--warmup', '2']) == 0
     stages = json.loads(bench.read_text())['stages_ms']
-    assert list(stages) == ['foreground', 'detector']
+    assert list(stages) == ['foreground', 'detector', 'tracker', 'ik']
     for st in stages.values():
         assert 0 < st['p50'] <= st['p95']
     text = capsys.readouterr().out

@@ -1,11 +1,17 @@
-"""`pose4d bench`: time per perception stage (foreground, detector) on real frames.
+"""`pose4d bench`: time per stage on real frames, and the node graph's throughput and latency.
 
-    pose4d bench SOURCE --json FILE [--model rgbd_10] [--frames N] [--warmup W]
+    pose4d bench SOURCE --json FILE [--model rgbd_10] [--frames N] [--warmup W] [--graph]
 
-Each frame goes through the stages as the live pipeline runs them: the foreground stage's
-MSER mask on the depth image (`core.foreground.segment`), then the part detector on the frame,
-its mask and depth (`core.dpm.infer.Detector.detect`). The p50 and p95 of each stage's wall time
-are taken over the frames after `--warmup` (numba compilation and caches). The machine (cores,
+Each frame goes through the stages as the live pipeline runs them (`core.pipeline`): the
+foreground stage's mask on the depth image (`core.foreground.segment`), the part detector on the
+masked frame (`DetectorStage`: `core.dpm.infer.Detector.detect` and the 3-D lift), the SLQE
+tracker and the IK (`TrackerStage`, `IkStage`). The p50 and p95 of each stage's wall time are
+taken over the frames after `--warmup` (numba compilation and caches).
+
+With `--graph` (SOURCE a bag), the bag is then replayed at `--rate` through the node graph, one
+process per stage as `ros2 run` starts them (`nodes`), and through the one-process `pipeline`
+node: colour frames in and skeletons out are counted, and the latency from a frame's arrival to
+its skeleton's is measured in this process on one clock. The machine (cores,
 CPU) and the thread settings are printed, because on a 2-core machine they decide the numbers:
 BLAS is set to `--blas-threads` (1 by default, the measured best; see `core.dpm.threads`).
 """
@@ -21,7 +27,7 @@ import numpy as np
 from pose4d_ros.cli._dpm import load_samples, machine, progress
 from pose4d_ros.cli.eval import default_models, resolve_model, write_json
 from pose4d_ros.core.camera import cad60_intrinsics
-from pose4d_ros.core.dpm.infer import Detector, SearchConfig
+from pose4d_ros.core.dpm.infer import SearchConfig
 from pose4d_ros.core.dpm.model import load_model
 from pose4d_ros.core.dpm.threads import set_blas_threads
 from pose4d_ros.datasets.sources import source_kind
@@ -42,6 +48,11 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument('--levels', type=int, default=SearchConfig.n_levels,
                    help='pyramid levels searched around the depth-predicted scale (1-3)')
     p.add_argument('--blas-threads', type=int, default=1, help='OpenBLAS threads')
+    p.add_argument('--graph', action='store_true',
+                   help='also replay SOURCE (a bag) through the node graph and the pipeline node')
+    p.add_argument('--rate', type=float, default=1.0, help='replay rate of --graph')
+    p.add_argument('--out', type=Path, default=Path('out/bench'),
+                   help='where --graph writes its recordings and node logs')
     p.set_defaults(func=run)
 
 
@@ -57,7 +68,8 @@ def run(args: argparse.Namespace) -> int:
     if args.frames < 1 or args.warmup < 0:
         raise ValueError(f'--frames must be >= 1 and --warmup >= 0, got {args.frames}, '
                          f'{args.warmup}')
-    from pose4d_ros.core.foreground import segment  # loads scipy (and its BLAS) first
+    from pose4d_ros.core.foreground import apply_mask, segment
+    from pose4d_ros.core.pipeline import DetectorStage, IkStage, TrackerStage
 
     threads = set_blas_threads(args.blas_threads)
     kind = source_kind(args.source)
@@ -67,37 +79,69 @@ def run(args: argparse.Namespace) -> int:
     use_depth = model.channels == 'rgbd'
     if use_depth and all(s.depth_m is None for s in samples):
         raise ValueError(f'{args.source}: no depth images for the rgbd model')
-    det = Detector(model, SearchConfig(n_levels=args.levels))
-    fg_ms: list[float] = []
-    det_ms: list[float] = []
+    stage = DetectorStage(model, search=SearchConfig(n_levels=args.levels))
+    tracker, ik = TrackerStage(), IkStage()
+    ms: dict[str, list[float]] = {k: [] for k in ('foreground', 'detector', 'tracker', 'ik')}
     for i, s in enumerate(progress(samples, 'bench')):
-        mask = None
-        intr = None
-        t0 = time.perf_counter()
-        if s.depth_m is not None and use_depth:
-            h, w = s.depth_m.shape
-            intr = s.intrinsics or cad60_intrinsics(w, h)
-            fg = segment(s.depth_m, intr)
-            mask = fg.mask if fg.found else None
-        t1 = time.perf_counter()
-        det.detect(s.color, s.depth_m if use_depth else None, mask=mask, intrinsics=intr)
-        t2 = time.perf_counter()
+        if i == min(args.warmup, len(samples) - 1):
+            threads = set_blas_threads(args.blas_threads)  # also the libraries loaded since
+        h, w = s.color.shape[:2]
+        intr = s.intrinsics or cad60_intrinsics(w, h)
+        t = [time.perf_counter()]
+        color, depth, mask = s.color, s.depth_m if use_depth else None, None
+        if depth is not None:
+            fg = segment(depth, intr)
+            mask = fg.mask
+            color, depth = apply_mask(color, depth, mask)
+        t.append(time.perf_counter())
+        parts = stage.step(color, depth, intr, mask=mask)
+        t.append(time.perf_counter())
+        tracked = tracker.step(parts, i / 30.0, intr)  # the subset is no sequence: timing only
+        t.append(time.perf_counter())
+        ik.step(tracked, depth, intr)
+        t.append(time.perf_counter())
         if i >= args.warmup:
-            if use_depth:
-                fg_ms.append((t1 - t0) * 1e3)
-            det_ms.append((t2 - t1) * 1e3)
+            for k, name in enumerate(ms):
+                if name != 'foreground' or depth is not None:
+                    ms[name].append((t[k + 1] - t[k]) * 1e3)
     m = machine()
     h, w = samples[0].color.shape[:2]
     print(f"machine: {m['cores']} cores, {m['cpu']}, load average {m['load_average']}")
     print(f"threads: numba {m['numba_threads']} (no parallel kernels), BLAS {m['blas_threads']}"
           f" (set to {args.blas_threads}: {', '.join(f'{v}' for v in threads.values())})")
     print(f'model: {model.channels}, {model.n_parts} parts x {model.n_types} types; '
-          f'{len(det_ms)} frames of {w}x{h} after {args.warmup} warm-up')
-    out = {'stages_ms': {'foreground': _stats(fg_ms), 'detector': _stats(det_ms)}}
+          f'{len(ms["detector"])} frames of {w}x{h} after {args.warmup} warm-up')
+    out: dict = {'stages_ms': {name: _stats(v) for name, v in ms.items()}}
     for stage, st in out['stages_ms'].items():
         if st['p50'] is None:
             print(f'{stage:<12} -')
         else:
             print(f"{stage:<12} p50 {st['p50']:8.2f} ms   p95 {st['p95']:8.2f} ms")
+    if args.graph:
+        out['graph'] = graph_bench(Path(args.source), args)
     write_json(args.json, out)
     return 0
+
+
+def graph_bench(bag_path: Path, args: argparse.Namespace) -> dict:
+    """Replay a bag through the stage processes and through the pipeline node."""
+    from pose4d_ros.cli.demo import run_graph
+
+    if (kind := source_kind(bag_path)) != 'bag':
+        raise ValueError(f'{bag_path}: --graph needs a bag (got a {kind} source)')
+    out = {}
+    for name, single in (('nodes', False), ('pipeline', True)):
+        r = run_graph(bag_path, args.out, rate=args.rate, model=args.model or 'rgbd_10',
+                      pipeline=single)
+        lat = r.latency_ms()
+        t_out = np.sort(np.fromiter(r.left.values(), float))
+        out_rate = (len(t_out) - 1) / (t_out[-1] - t_out[0]) if len(t_out) > 1 else None
+        out[name] = {'frames_in': r.frames, 'frames_out': len(r.left),
+                     'input_rate_hz': round(r.input_rate_hz(), 2),
+                     'output_rate_hz': round(out_rate, 2) if out_rate else None,
+                     'latency_ms': _stats(lat.tolist())}
+        st = out[name]
+        print(f"graph {name:<9} {st['frames_out']}/{st['frames_in']} frames out, in "
+              f"{st['input_rate_hz']} Hz, out {st['output_rate_hz']} Hz, latency p50 "
+              f"{st['latency_ms']['p50']} ms p95 {st['latency_ms']['p95']} ms")
+    return out
