@@ -97,6 +97,18 @@ class _Graph:
     def tail(self, exe: str, lines: int = 8) -> str:
         return '\n'.join(self.logs[exe].read_text().splitlines()[-lines:])
 
+    def cpu_seconds(self) -> dict[str, float]:
+        """CPU time (user + system) each running process has used so far (Linux /proc)."""
+        tick = os.sysconf('SC_CLK_TCK')
+        out = {}
+        for exe, proc in self.procs.items():
+            try:
+                fields = Path(f'/proc/{proc.pid}/stat').read_text().rsplit(')', 1)[1].split()
+                out[exe] = (int(fields[11]) + int(fields[12])) / tick
+            except (OSError, IndexError, ValueError):
+                continue
+        return out
+
     def stop(self) -> dict[str, int]:
         """SIGINT every process (the recorder last, so it closes its bag after the graph)."""
         codes = {}
@@ -126,6 +138,8 @@ class GraphRun:
     entered : {stamp: monotonic s} when each frame's camera_info reached this process.
     left : {stamp: monotonic s} when each frame's skeleton reached this process.
     logs : {executable: log file}.
+    cpu_s : {executable: CPU seconds used while the bag played and drained} (replay's whole
+        run).
     """
 
     recorded: Path
@@ -133,6 +147,7 @@ class GraphRun:
     entered: dict[int, float]
     left: dict[int, float]
     logs: dict[str, Path]
+    cpu_s: dict[str, float]
 
     def latency_ms(self) -> np.ndarray:
         """Colour frame in -> skeleton out, per frame that came out (both seen here, on one
@@ -192,13 +207,16 @@ def run_graph(bag_path: Path, out: Path, *, rate: float = 1.0, model: str = 'rgb
                 raise OSError(f'the graph did not connect within {timeout} s: too few '
                               f'subscribers on {", ".join(lacking)}')
             rclpy.spin_once(node, timeout_sec=0.1)
+        cpu_before = graph.cpu_seconds()
         t_play = time.monotonic()
         graph.start('replay', {'replay.bag': str(bag_path), 'replay.rate': rate,
                                'replay.topics': ['camera/*'],
                                'replay.wait_for_subscribers': 1, 'replay.delay_s': 1.0})
         replay = graph.procs['replay']
+        replay_cpu = 0.0
         while replay.poll() is None:
             graph.check_alive()
+            replay_cpu = graph.cpu_seconds().get('replay', replay_cpu)
             rclpy.spin_once(node, timeout_sec=0.05)
         if replay.returncode != 0:
             raise OSError(f'replay failed ({replay.returncode}):\n{graph.tail("replay")}')
@@ -207,6 +225,8 @@ def run_graph(bag_path: Path, out: Path, *, rate: float = 1.0, model: str = 'rgb
             if time.monotonic() - max(max(left.values(), default=t_play), t_play) > 3.0:
                 break
             rclpy.spin_once(node, timeout_sec=0.05)
+        cpu = {exe: t - cpu_before.get(exe, 0.0) for exe, t in graph.cpu_seconds().items()}
+        cpu['replay'] = replay_cpu
     finally:
         node.destroy_node()
         rclpy.try_shutdown()
@@ -215,7 +235,7 @@ def run_graph(bag_path: Path, out: Path, *, rate: float = 1.0, model: str = 'rgb
     if bad:
         raise OSError('processes did not exit cleanly: ' + ', '.join(
             f'{exe} ({code}, see {graph.logs[exe]})' for exe, code in bad.items()))
-    return GraphRun(recorded, frames, entered, left, dict(graph.logs))
+    return GraphRun(recorded, frames, entered, left, dict(graph.logs), cpu)
 
 
 def run(args: argparse.Namespace) -> int:
