@@ -16,9 +16,14 @@ import rclpy
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
+from sensor_msgs.msg import CameraInfo
 from std_msgs.msg import Header
 
+from pose4d_ros.core.camera import Intrinsics
 from pose4d_ros.core.dpm.threads import set_blas_threads
+from pose4d_ros.core.sync import StampSync
+from pose4d_ros.nodes import qos
+from pose4d_ros.nodes.convert import intrinsics_from_msg, stamp_to_ns
 from pose4d_ros.nodes.params import ParameterError
 
 DIAGNOSTICS_TOPIC = '/diagnostics'
@@ -140,3 +145,49 @@ class LatestOnly:
         item, self._pending = self._pending, None
         if item is not None:
             self._process(item)
+
+
+class PairedInputs:
+    """Subscribe to several topics, pair their messages by header stamp, process the newest set.
+
+    The first topic is the pivot (colour); a set is complete when every topic has a message of
+    the pivot's stamp (or the nearest within `slop_ns`, `core.sync.StampSync`). Complete sets go
+    through `LatestOnly`, so a slow `process` never builds a backlog; unpaired messages and
+    replaced sets are counted as dropped on the monitor.
+
+    Parameters
+    ----------
+    topics : (message type, topic, QoS profile) per stream.
+    process : called with the tuple of messages of one stamp.
+    """
+
+    def __init__(self, node: Node, topics: list[tuple[type, str, object]],
+                 process: Callable[[tuple], None], monitor: StageMonitor, *,
+                 slop_ns: int = 0) -> None:
+        self._sync = StampSync(len(topics), slop_ns=slop_ns)
+        self._monitor = monitor
+        self._latest = LatestOnly(node, process, monitor)
+        for k, (kind, topic, profile) in enumerate(topics):
+            node.create_subscription(kind, topic, lambda m, k=k: self._on(k, m), profile)
+
+    def _on(self, stream: int, msg: object) -> None:
+        before = self._sync.dropped[0]
+        for _, items in self._sync.push(stream, stamp_to_ns(msg.header.stamp), msg):
+            self._latest.submit(items)
+        self._monitor.dropped(self._sync.dropped[0] - before)
+
+
+class LatestIntrinsics:
+    """The intrinsics of the latest camera_info (for stages whose inputs carry none)."""
+
+    def __init__(self, node: Node, monitor: StageMonitor,
+                 topic: str = 'camera/color/camera_info') -> None:
+        self.intrinsics: Intrinsics | None = None
+        self._monitor = monitor
+        node.create_subscription(CameraInfo, topic, self._on, qos.SENSOR_QOS)
+
+    def _on(self, msg: CameraInfo) -> None:
+        try:
+            self.intrinsics = intrinsics_from_msg(msg)
+        except ValueError as exc:
+            self._monitor.bad_input(f'camera_info refused: {exc}')

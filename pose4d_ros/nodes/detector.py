@@ -25,21 +25,19 @@ from typing import Any
 
 from pose4d_msgs.msg import JointArray
 from rclpy.node import Node
-from sensor_msgs.msg import CameraInfo, Image
+from sensor_msgs.msg import Image
 
-from pose4d_ros.core.camera import Intrinsics, cad60_intrinsics
+from pose4d_ros.core.camera import cad60_intrinsics
 from pose4d_ros.core.dpm.infer import SearchConfig
 from pose4d_ros.core.dpm.model import load_model
 from pose4d_ros.core.pipeline import DetectorStage
-from pose4d_ros.core.sync import StampSync
 from pose4d_ros.models import model_path
 from pose4d_ros.nodes import qos
-from pose4d_ros.nodes.common import LatestOnly, StageMonitor, run
+from pose4d_ros.nodes.common import LatestIntrinsics, PairedInputs, StageMonitor, run
 from pose4d_ros.nodes.convert import (
     color_from_msg,
     depth_from_msg,
     image_to_array,
-    intrinsics_from_msg,
     joints_to_msg,
     stamp_to_ns,
 )
@@ -90,33 +88,16 @@ class DetectorNode(Node):
         p = declare(self, PARAMS)
         self.stage = detector_stage(p)
         self.stage.warm_up(cad60_intrinsics())  # compile before the first camera frame
-        self.intrinsics: Intrinsics | None = None
         self.monitor = StageMonitor(self, 'detector')
-        self.latest = LatestOnly(self, self.process, self.monitor)
-        self.sync = StampSync(3)
+        self.camera = LatestIntrinsics(self, self.monitor)
         self.pub = self.create_publisher(JointArray, 'pose4d/parts', qos.OUTPUT_QOS)
-        for k, topic in enumerate(('pose4d/foreground/color', 'pose4d/foreground/depth',
-                                   'pose4d/foreground/mask')):
-            self.create_subscription(Image, topic, lambda m, k=k: self.on_image(k, m),
-                                     qos.SENSOR_QOS)
-        self.create_subscription(CameraInfo, 'camera/color/camera_info', self.on_info,
-                                 qos.SENSOR_QOS)
+        self.inputs = PairedInputs(
+            self, [(Image, f'pose4d/foreground/{name}', qos.SENSOR_QOS)
+                   for name in ('color', 'depth', 'mask')], self.process, self.monitor)
         self.get_logger().info(
             f'detecting {len(self.stage.names)} parts with {Path(str(p["detector.model"])).name}'
             f' ({self.stage.model.channels}) in {self.resolve_topic_name("pose4d/foreground")}'
             f' -> {self.resolve_topic_name("pose4d/parts")}')
-
-    def on_info(self, msg: CameraInfo) -> None:
-        try:
-            self.intrinsics = intrinsics_from_msg(msg)
-        except ValueError as exc:
-            self.monitor.bad_input(f'camera_info refused: {exc}')
-
-    def on_image(self, stream: int, msg: Image) -> None:
-        before = self.sync.dropped[0]
-        for _, items in self.sync.push(stream, stamp_to_ns(msg.header.stamp), msg):
-            self.latest.submit(items)
-        self.monitor.dropped(self.sync.dropped[0] - before)
 
     def process(self, items: Any) -> None:
         color_msg, depth_msg, mask_msg = items
@@ -129,7 +110,7 @@ class DetectorNode(Node):
             if not color.shape[:2] == depth.shape == mask.shape:
                 raise ValueError(f'colour {color.shape[:2]}, depth {depth.shape} and mask '
                                  f'{mask.shape} differ in size')
-            parts = self.stage.step(color, depth, self.intrinsics, mask=mask)
+            parts = self.stage.step(color, depth, self.camera.intrinsics, mask=mask)
         except ValueError as exc:
             self.monitor.bad_input(f'frame at {stamp} ns refused: {exc}')
             return

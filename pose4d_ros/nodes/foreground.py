@@ -34,9 +34,8 @@ from std_msgs.msg import Header
 from pose4d_ros.core.camera import backproject, cad60_intrinsics, depth_to_millimetres
 from pose4d_ros.core.foreground import ForegroundConfig, ForegroundResult, apply_mask, segment
 from pose4d_ros.core.pipeline import warm_up_frame
-from pose4d_ros.core.sync import StampSync
 from pose4d_ros.nodes import qos
-from pose4d_ros.nodes.common import LatestOnly, StageMonitor, run
+from pose4d_ros.nodes.common import PairedInputs, StageMonitor, run
 from pose4d_ros.nodes.convert import (
     array_to_image,
     cloud_to_msg,
@@ -70,6 +69,12 @@ PARAMS = (
           '(pose4d/foreground/points).'),
     Param('foreground.cloud_step', 2, 'Pixel stride of the point cloud.', range=(1, 16)),
 )
+
+
+# colour, depth and camera_info of one stamp (the pivot, colour, first)
+CAMERA_TOPICS = [(Image, 'camera/color/image_raw', qos.SENSOR_QOS),
+                 (Image, 'camera/depth/image_raw', qos.SENSOR_QOS),
+                 (CameraInfo, 'camera/color/camera_info', qos.SENSOR_QOS)]
 
 
 def foreground_config(p: dict[str, Any]) -> ForegroundConfig:
@@ -107,8 +112,6 @@ class ForegroundNode(Node):
         segment(depth, cad60_intrinsics(), config=self.config,
                 previous=segment(depth, cad60_intrinsics(), config=self.config))
         self.monitor = StageMonitor(self, 'foreground')
-        self.latest = LatestOnly(self, self.process, self.monitor)
-        self.sync = StampSync(3, slop_ns=int(p['foreground.slop_s'] * 1e9))
         self.pub_mask = self.create_publisher(Image, 'pose4d/foreground/mask', qos.OUTPUT_QOS)
         self.pub_color = self.create_publisher(Image, 'pose4d/foreground/color',
                                                qos.OUTPUT_QOS)
@@ -116,23 +119,13 @@ class ForegroundNode(Node):
                                                qos.OUTPUT_QOS)
         self.pub_cloud = (self.create_publisher(PointCloud2, 'pose4d/foreground/points',
                                                 qos.OUTPUT_QOS) if self.publish_cloud else None)
-        self.create_subscription(Image, 'camera/color/image_raw',
-                                 lambda m: self.on_msg(0, m), qos.SENSOR_QOS)
-        self.create_subscription(Image, 'camera/depth/image_raw',
-                                 lambda m: self.on_msg(1, m), qos.SENSOR_QOS)
-        self.create_subscription(CameraInfo, 'camera/color/camera_info',
-                                 lambda m: self.on_msg(2, m), qos.SENSOR_QOS)
+        self.inputs = PairedInputs(self, CAMERA_TOPICS, self.process, self.monitor,
+                                   slop_ns=int(p['foreground.slop_s'] * 1e9))
         self.get_logger().info(
             f'masking {self.resolve_topic_name("camera/color/image_raw")} + '
             f'{self.resolve_topic_name("camera/depth/image_raw")} -> '
             f'{self.resolve_topic_name("pose4d/foreground")} (background area > '
             f'{self.config.max_region_area_px} px, floor removal {self.config.floor_remove})')
-
-    def on_msg(self, stream: int, msg: Any) -> None:
-        before = self.sync.dropped[0]
-        for _, items in self.sync.push(stream, stamp_to_ns(msg.header.stamp), msg):
-            self.latest.submit(items)
-        self.monitor.dropped(self.sync.dropped[0] - before)
 
     def process(self, items: Any) -> None:
         color_msg, depth_msg, info_msg = items

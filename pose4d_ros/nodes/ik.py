@@ -25,18 +25,15 @@ from typing import Any
 
 from pose4d_msgs.msg import JointArray
 from rclpy.node import Node
-from sensor_msgs.msg import CameraInfo, Image
+from sensor_msgs.msg import Image
 from visualization_msgs.msg import MarkerArray
 
-from pose4d_ros.core.camera import Intrinsics
 from pose4d_ros.core.kinematics import DEFAULT_LIMB_LENGTHS_M
 from pose4d_ros.core.pipeline import IkStage, limb_bones
-from pose4d_ros.core.sync import StampSync
 from pose4d_ros.nodes import qos
-from pose4d_ros.nodes.common import StageMonitor, run
+from pose4d_ros.nodes.common import LatestIntrinsics, PairedInputs, StageMonitor, run
 from pose4d_ros.nodes.convert import (
     depth_from_msg,
-    intrinsics_from_msg,
     joints_from_msg,
     joints_to_msg,
     skeleton_markers,
@@ -79,49 +76,31 @@ class IkNode(Node):
         self.stage = ik_stage(p)
         self.marker_lifetime_s = p['ik.marker_lifetime_s']
         self.bones = limb_bones()
-        self.intrinsics: Intrinsics | None = None
         self.monitor = StageMonitor(self, 'ik')
+        self.camera = LatestIntrinsics(self, self.monitor)
         self.pub = self.create_publisher(JointArray, 'pose4d/skeleton', qos.OUTPUT_QOS)
         self.markers = self.create_publisher(MarkerArray, 'pose4d/skeleton/markers',
                                              qos.OUTPUT_QOS)
-        self.sync = StampSync(2, slop_ns=int(p['ik.depth_slop_s'] * 1e9))
-        self.create_subscription(JointArray, 'pose4d/parts/tracked', self.on_tracked,
-                                 qos.OUTPUT_QOS)
         if self.stage.use_depth:
-            self.create_subscription(Image, 'pose4d/foreground/depth', self.on_depth,
-                                     qos.SENSOR_QOS)
-        self.create_subscription(CameraInfo, 'camera/color/camera_info', self.on_info,
-                                 qos.SENSOR_QOS)
+            self.inputs = PairedInputs(
+                self, [(JointArray, 'pose4d/parts/tracked', qos.OUTPUT_QOS),
+                       (Image, 'pose4d/foreground/depth', qos.SENSOR_QOS)],
+                lambda items: self.process(*items), self.monitor,
+                slop_ns=int(p['ik.depth_slop_s'] * 1e9))
+        else:
+            self.create_subscription(JointArray, 'pose4d/parts/tracked',
+                                     lambda m: self.process(m, None), qos.OUTPUT_QOS)
         self.get_logger().info(
             f'completing {self.resolve_topic_name("pose4d/parts/tracked")} -> '
             f'{self.resolve_topic_name("pose4d/skeleton")} (depth: {self.stage.use_depth}, '
             f'learn lengths: {p["ik.learn_lengths"]})')
-
-    def on_info(self, msg: CameraInfo) -> None:
-        try:
-            self.intrinsics = intrinsics_from_msg(msg)
-        except ValueError as exc:
-            self.monitor.bad_input(f'camera_info refused: {exc}')
-
-    def on_tracked(self, msg: JointArray) -> None:
-        if not self.stage.use_depth:
-            self.process(msg, None)
-            return
-        for _, (tracked, depth) in self.sync.push(0, stamp_to_ns(msg.header.stamp), msg):
-            self.process(tracked, depth)
-
-    def on_depth(self, msg: Image) -> None:
-        before = self.sync.dropped[0]
-        for _, (tracked, depth) in self.sync.push(1, stamp_to_ns(msg.header.stamp), msg):
-            self.process(tracked, depth)
-        self.monitor.dropped(self.sync.dropped[0] - before)
 
     def process(self, msg: JointArray, depth_msg: Image | None) -> None:
         t0 = time.perf_counter()
         stamp = stamp_to_ns(msg.header.stamp)
         try:
             depth = depth_from_msg(depth_msg) if depth_msg is not None else None
-            skeleton = self.stage.step(joints_from_msg(msg), depth, self.intrinsics)
+            skeleton = self.stage.step(joints_from_msg(msg), depth, self.camera.intrinsics)
         except ValueError as exc:
             self.monitor.bad_input(f'frame at {stamp} ns refused: {exc}')
             return

@@ -24,14 +24,13 @@ from typing import Any
 
 from pose4d_msgs.msg import JointArray
 from rclpy.node import Node
-from sensor_msgs.msg import CameraInfo, Image
+from sensor_msgs.msg import Image
 from visualization_msgs.msg import MarkerArray
 
 from pose4d_ros.core.camera import cad60_intrinsics
 from pose4d_ros.core.pipeline import FramePipeline, limb_bones
-from pose4d_ros.core.sync import StampSync
 from pose4d_ros.nodes import detector, foreground, ik, qos, tracker
-from pose4d_ros.nodes.common import LatestOnly, StageMonitor, run
+from pose4d_ros.nodes.common import PairedInputs, StageMonitor, run
 from pose4d_ros.nodes.convert import (
     color_from_msg,
     depth_from_msg,
@@ -64,8 +63,6 @@ class PipelineNode(Node):
         self.marker_lifetime_s = p['ik.marker_lifetime_s']
         self.bones = limb_bones()
         self.monitor = StageMonitor(self, 'pipeline')
-        self.latest = LatestOnly(self, self.process, self.monitor)
-        self.sync = StampSync(3, slop_ns=int(p['foreground.slop_s'] * 1e9))
         pub = self.create_publisher
         self.pubs = {
             'skeleton': pub(JointArray, 'pose4d/skeleton', qos.OUTPUT_QOS),
@@ -76,21 +73,12 @@ class PipelineNode(Node):
         if self.publish_foreground:
             for name in ('mask', 'color', 'depth'):
                 self.pubs[name] = pub(Image, f'pose4d/foreground/{name}', qos.OUTPUT_QOS)
-        for k, (kind, topic) in enumerate(((Image, 'camera/color/image_raw'),
-                                           (Image, 'camera/depth/image_raw'),
-                                           (CameraInfo, 'camera/color/camera_info'))):
-            self.create_subscription(kind, topic, lambda m, k=k: self.on_msg(k, m),
-                                     qos.SENSOR_QOS)
+        self.inputs = PairedInputs(self, foreground.CAMERA_TOPICS, self.process, self.monitor,
+                                   slop_ns=int(p['foreground.slop_s'] * 1e9))
         self.get_logger().info(
             f'pipeline on {self.resolve_topic_name("camera/color/image_raw")} -> '
             f'{self.resolve_topic_name("pose4d/skeleton")} (model {p["detector.model"]}, '
             f'tracker {p["tracker.kind"]}, IK depth {p["ik.use_depth"]})')
-
-    def on_msg(self, stream: int, msg: Any) -> None:
-        before = self.sync.dropped[0]
-        for _, items in self.sync.push(stream, stamp_to_ns(msg.header.stamp), msg):
-            self.latest.submit(items)
-        self.monitor.dropped(self.sync.dropped[0] - before)
 
     def process(self, items: Any) -> None:
         color_msg, depth_msg, info_msg = items

@@ -18,15 +18,12 @@ from typing import Any
 
 from pose4d_msgs.msg import JointArray
 from rclpy.node import Node
-from sensor_msgs.msg import CameraInfo
 
-from pose4d_ros.core.camera import Intrinsics
 from pose4d_ros.core.pipeline import TrackerStage
 from pose4d_ros.core.slqe import CvConfig, SlqeConfig
 from pose4d_ros.nodes import qos
-from pose4d_ros.nodes.common import StageMonitor, run
+from pose4d_ros.nodes.common import LatestIntrinsics, StageMonitor, run
 from pose4d_ros.nodes.convert import (
-    intrinsics_from_msg,
     joints_from_msg,
     joints_to_msg,
     stamp_to_ns,
@@ -75,28 +72,20 @@ class TrackerNode(Node):
     def __init__(self) -> None:
         super().__init__('tracker')
         self.stage = tracker_stage(declare(self, PARAMS))
-        self.intrinsics: Intrinsics | None = None
         self.monitor = StageMonitor(self, 'tracker')
+        self.camera = LatestIntrinsics(self, self.monitor)
         self.pub = self.create_publisher(JointArray, 'pose4d/parts/tracked', qos.OUTPUT_QOS)
         self.create_subscription(JointArray, 'pose4d/parts', self.on_parts, qos.OUTPUT_QOS)
-        self.create_subscription(CameraInfo, 'camera/color/camera_info', self.on_info,
-                                 qos.SENSOR_QOS)
         self.get_logger().info(
             f'tracking {self.resolve_topic_name("pose4d/parts")} -> '
             f'{self.resolve_topic_name("pose4d/parts/tracked")} with {self.stage.kind}')
-
-    def on_info(self, msg: CameraInfo) -> None:
-        try:
-            self.intrinsics = intrinsics_from_msg(msg)
-        except ValueError as exc:
-            self.monitor.bad_input(f'camera_info refused: {exc}')
 
     def on_parts(self, msg: JointArray) -> None:
         t0 = time.perf_counter()
         stamp = stamp_to_ns(msg.header.stamp)
         try:
             parts = joints_from_msg(msg)
-            tracked = self.stage.step(parts, stamp * 1e-9, self.intrinsics)
+            tracked = self.stage.step(parts, stamp * 1e-9, self.camera.intrinsics)
         except ValueError as exc:
             self.monitor.bad_input(f'pose4d/parts frame at {stamp} ns refused: {exc}')
             return
