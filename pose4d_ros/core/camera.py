@@ -153,18 +153,33 @@ def robust_depth(depth_m: NDArray[np.floating], uv: NDArray[np.floating], *,
     h, w = depth_m.shape
     uv = np.asarray(uv, dtype=np.float64).reshape(-1, 2)
     out = np.full(len(uv), np.nan)
-    for i, (u, v) in enumerate(uv):
-        if not (np.isfinite(u) and np.isfinite(v)):
-            continue
-        c, r = int(round(u)), int(round(v))
-        if not (0 <= c < w and 0 <= r < h):
-            continue
-        r0, r1, c0, c1 = max(r - radius, 0), min(r + radius + 1, h), max(c - radius, 0), \
-            min(c + radius + 1, w)
-        window = depth_m[r0:r1, c0:c1]
-        valid = np.isfinite(window) & (window > 0)
-        if mask is not None:
-            valid &= mask[r0:r1, c0:c1]
-        if valid.any():
-            out[i] = float(np.median(window[valid]))
+    ok = np.isfinite(uv).all(axis=1)
+    c = np.zeros(len(uv), np.int64)
+    r = np.zeros(len(uv), np.int64)
+    c[ok] = np.rint(uv[ok, 0]).astype(np.int64)
+    r[ok] = np.rint(uv[ok, 1]).astype(np.int64)
+    ok &= (c >= 0) & (c < w) & (r >= 0) & (r < h)
+    if not ok.any():
+        return out
+    off = np.arange(-radius, radius + 1)
+    rows = (r[ok, None, None] + off[None, :, None]).reshape(ok.sum(), -1, 1)
+    cols = (c[ok, None, None] + off[None, None, :]).reshape(ok.sum(), 1, -1)
+    rows, cols = np.broadcast_arrays(rows, cols)
+    rows, cols = rows.reshape(ok.sum(), -1), cols.reshape(ok.sum(), -1)
+    inside = (rows >= 0) & (rows < h) & (cols >= 0) & (cols < w)
+    rc, cc = np.clip(rows, 0, h - 1), np.clip(cols, 0, w - 1)
+    vals = depth_m[rc, cc]
+    valid = inside & np.isfinite(vals) & (vals > 0)
+    if mask is not None:
+        valid &= np.asarray(mask, dtype=bool)[rc, cc]
+    # Median of the valid values: sort with the invalid ones last, then pick the middle.
+    vals = np.sort(np.where(valid, vals, np.inf), axis=1)
+    k = valid.sum(axis=1)
+    rows_k = np.arange(len(k))
+    lo = vals[rows_k, np.maximum((k - 1) // 2, 0)]
+    hi = vals[rows_k, np.maximum(k // 2, 0)]
+    # float32 images: average as numpy's median does (in the image's dtype).
+    med = (lo + hi) / vals.dtype.type(2) if np.issubdtype(vals.dtype, np.floating) else \
+        (lo + hi) / 2.0
+    out[ok] = np.where(k > 0, med, np.nan)
     return out

@@ -53,7 +53,7 @@ from enum import IntEnum
 import numpy as np
 from numpy.typing import NDArray
 
-from pose4d_ros.core.camera import Intrinsics, project
+from pose4d_ros.core.camera import Intrinsics, project, robust_depth
 from pose4d_ros.core.skeleton import LIMBS, PARTS_10
 
 # Default bone lengths (upper, lower), metres: medians of the Kinect v1 skeletons of UTKinect
@@ -276,59 +276,6 @@ def _plane_basis(axis: NDArray[np.float64], reference: NDArray[np.float64]
 # Depth support
 
 
-def sample_depth(depth_m: NDArray[np.floating], uv: NDArray[np.floating], *, radius: int = 2,
-                 mask: NDArray[np.bool_] | None = None) -> NDArray[np.float64]:
-    """`core.camera.robust_depth` for many pixels at once (same result, vectorised).
-
-    Parameters
-    ----------
-    depth_m : (H, W) float metres, NaN = no reading.
-    uv : (N, 2) float pixel (u, v); NaN rows give NaN.
-    radius : half-size of the square window, pixels.
-    mask : (H, W) bool, optional; True = person.
-
-    Returns
-    -------
-    (N,) float64 metres, the median of the window's valid pixels; NaN if none or off-image.
-    """
-    if radius < 0:
-        raise ValueError(f'radius must be >= 0, got {radius}')
-    depth_m = np.asarray(depth_m)
-    h, w = depth_m.shape
-    uv = np.asarray(uv, dtype=np.float64).reshape(-1, 2)
-    out = np.full(len(uv), np.nan)
-    ok = np.isfinite(uv).all(axis=1)
-    c = np.zeros(len(uv), np.int64)
-    r = np.zeros(len(uv), np.int64)
-    c[ok] = np.rint(uv[ok, 0]).astype(np.int64)
-    r[ok] = np.rint(uv[ok, 1]).astype(np.int64)
-    ok &= (c >= 0) & (c < w) & (r >= 0) & (r < h)
-    if not ok.any():
-        return out
-    off = np.arange(-radius, radius + 1)
-    rows = (r[ok, None, None] + off[None, :, None]).reshape(ok.sum(), -1, 1)
-    cols = (c[ok, None, None] + off[None, None, :]).reshape(ok.sum(), 1, -1)
-    rows, cols = np.broadcast_arrays(rows, cols)
-    rows, cols = rows.reshape(ok.sum(), -1), cols.reshape(ok.sum(), -1)
-    inside = (rows >= 0) & (rows < h) & (cols >= 0) & (cols < w)
-    rc, cc = np.clip(rows, 0, h - 1), np.clip(cols, 0, w - 1)
-    vals = depth_m[rc, cc]
-    valid = inside & np.isfinite(vals) & (vals > 0)
-    if mask is not None:
-        valid &= np.asarray(mask, dtype=bool)[rc, cc]
-    # Median of the valid values: sort with the invalid ones last, then pick the middle.
-    vals = np.sort(np.where(valid, vals, np.inf), axis=1)
-    k = valid.sum(axis=1)
-    rows_k = np.arange(len(k))
-    lo = vals[rows_k, np.maximum((k - 1) // 2, 0)]
-    hi = vals[rows_k, np.maximum(k // 2, 0)]
-    # float32 images: average as numpy's median does (in the image's dtype).
-    med = (lo + hi) / vals.dtype.type(2) if np.issubdtype(vals.dtype, np.floating) else \
-        (lo + hi) / 2.0
-    out[ok] = np.where(k > 0, med, np.nan)
-    return out
-
-
 @dataclass(frozen=True)
 class IkConfig:
     """Parameters of the middle-joint inference.
@@ -493,7 +440,7 @@ def _depth_cost(depth_m: NDArray, root: NDArray, end: NDArray, cands: NDArray,
     if len(fr):
         depth_in_front[:, 1:] = entry(np.concatenate(dirs[1:], axis=1), ray[:, 1:])
     uv = project(flat, intrinsics)
-    measured = sample_depth(depth_m, uv, radius=config.depth_radius_px, mask=mask)
+    measured = robust_depth(depth_m, uv, radius=config.depth_radius_px, mask=mask)
     expected = flat[:, 2] - depth_in_front.reshape(-1)
     resid = measured - expected  # > 0: the camera saw farther than the limb's surface
     excess = 1.0 - np.exp(-0.5 * (resid / config.depth_scale_m) ** 2)
