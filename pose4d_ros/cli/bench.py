@@ -136,14 +136,16 @@ def graph_bench(bag_path: Path, args: argparse.Namespace) -> dict:
         lat = r.latency_ms()
         t_out = np.sort(np.fromiter(r.left.values(), float))
         out_rate = (len(t_out) - 1) / (t_out[-1] - t_out[0]) if len(t_out) > 1 else None
-        out[name] = {'frames_in': r.frames, 'frames_out': len(r.left),
+        out[name] = {'frames_in': r.frames, 'frames_replayed': len(r.entered),
+                     'frames_out': len(r.left),
                      'input_rate_hz': round(r.input_rate_hz(), 2),
                      'output_rate_hz': round(out_rate, 2) if out_rate else None,
                      'latency_ms': _stats(lat.tolist()),
                      'cpu_ms_per_frame': {exe: round(t * 1e3 / max(r.frames, 1), 2)
                                           for exe, t in r.cpu_s.items()}}
         st = out[name]
-        print(f"graph {name:<9} {st['frames_out']}/{st['frames_in']} frames out, in "
+        print(f"graph {name:<9} {st['frames_replayed']}/{st['frames_in']} frames replayed, "
+              f"{st['frames_out']} out, in "
               f"{st['input_rate_hz']} Hz, out {st['output_rate_hz']} Hz, latency p50 "
               f"{st['latency_ms']['p50']} ms p95 {st['latency_ms']['p95']} ms; CPU ms per frame: "
               + ', '.join(f'{k} {v}' for k, v in st['cpu_ms_per_frame'].items()))
