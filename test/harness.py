@@ -16,6 +16,8 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
+from pose4d_ros.nodes.params import override_args
+
 PACKAGE = 'pose4d_ros'
 
 
@@ -26,16 +28,6 @@ def executable(name: str) -> Path:
     return Path(get_package_prefix(PACKAGE)) / 'lib' / PACKAGE / name
 
 
-def _format(value: Any) -> str:
-    if isinstance(value, bool):
-        return 'true' if value else 'false'
-    if isinstance(value, list | tuple):
-        return '[' + ','.join(_format(v) for v in value) + ']'
-    if isinstance(value, str):
-        return f"'{value}'" if value == '' or any(c in value for c in ',[]') else value
-    return repr(value)
-
-
 class RunningNode:
     """A node executable running as a subprocess; its output goes to a log file."""
 
@@ -43,9 +35,7 @@ class RunningNode:
                  remaps: dict[str, str] | None = None, *, log_dir: Path,
                  extra: list[str] | None = None) -> None:
         self.exe = exe
-        cmd = [str(executable(exe)), '--ros-args']
-        for key, value in (params or {}).items():
-            cmd += ['-p', f'{key}:={_format(value)}']
+        cmd = [str(executable(exe)), '--ros-args', *override_args(params or {})]
         for src, dst in (remaps or {}).items():
             cmd += ['-r', f'{src}:={dst}']
         cmd += extra or []

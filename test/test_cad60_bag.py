@@ -88,8 +88,8 @@ def test_cad60_round_trip_through_replay_and_recorder(tmp_path):
     recorder = start('recorder', {'recorder.output': str(out), 'recorder.topics': topics},
                      log_dir=tmp_path)
     try:
-        replay = start('replay', {'replay.bag': str(source), 'replay.wait_for_subscribers': 1},
-                       log_dir=tmp_path)
+        replay = start('replay', {'replay.bag': str(source),
+                                  'replay.wait_for_subscribers': ['*=1']}, log_dir=tmp_path)
         assert replay.wait(30) == 0, replay.output()
     finally:
         assert recorder.stop() == 0, recorder.output()

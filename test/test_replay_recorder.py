@@ -51,7 +51,7 @@ def test_replay_to_recorder_round_trip(tmp_path, sig):
                      log_dir=tmp_path)
     try:
         replay = start('replay', {'replay.bag': str(source), 'replay.rate': 1.0,
-                                  'replay.wait_for_subscribers': 1}, log_dir=tmp_path)
+                                  'replay.wait_for_subscribers': ['*=1']}, log_dir=tmp_path)
         assert replay.wait(30) == 0, replay.output()
         assert 'sent 24 messages' in replay.output()
     finally:
@@ -79,7 +79,7 @@ def test_replay_paces_by_recorded_stamps(tmp_path):
     try:
         replay = start('replay', {'replay.bag': str(source), 'replay.rate': 2.0,
                                   'replay.topics': ['camera/color/*'],
-                                  'replay.wait_for_subscribers': 1}, log_dir=tmp_path)
+                                  'replay.wait_for_subscribers': ['*=1']}, log_dir=tmp_path)
         assert replay.wait(30) == 0, replay.output()
     finally:
         assert recorder.stop() == 0, recorder.output()
@@ -113,3 +113,16 @@ def test_out_of_range_parameter_is_refused(tmp_path):
     node = start('replay', {'replay.bag': str(source), 'replay.rate': -1.0}, log_dir=tmp_path)
     assert node.wait(20) == 2
     assert 'replay.rate' in node.output()
+
+
+def test_subscriber_counts_parse_and_refuse() -> None:
+    from pose4d_ros.nodes.params import override_args
+    from pose4d_ros.nodes.replay import subscriber_counts
+
+    assert subscriber_counts(['camera/*=1', '/camera/color/camera_info=5']) == [
+        ('camera/*', 1), ('camera/color/camera_info', 5)]
+    for bad in ('camera/*', '=3', 'camera/*=x', 'camera/*=-1'):
+        with pytest.raises(ValueError, match='pattern=count'):
+            subscriber_counts([bad])
+    assert override_args({'a.b': ['*=1'], 'c': 1.0, 'd': True, 'e': '/x:y'}) == [
+        '-p', 'a.b:=["*=1"]', '-p', 'c:=1.0', '-p', 'd:=true', '-p', 'e:="/x:y"']

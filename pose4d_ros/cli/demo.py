@@ -75,13 +75,10 @@ class _Graph:
         self.logs: dict[str, Path] = {}
 
     def start(self, exe: str, params: dict[str, Any]) -> None:
-        cmd = [str(Path(sys.prefix) / 'lib' / 'pose4d_ros' / exe), '--ros-args']
-        for key, value in params.items():
-            if isinstance(value, list):
-                value = '[' + ','.join(value) + ']'
-            elif isinstance(value, bool):
-                value = str(value).lower()
-            cmd += ['-p', f'{key}:={value}']
+        from pose4d_ros.nodes.params import override_args
+
+        cmd = [str(Path(sys.prefix) / 'lib' / 'pose4d_ros' / exe), '--ros-args',
+               *override_args(params)]
         self.logs[exe] = self.out / 'logs' / f'{exe}.log'
         self.logs[exe].parent.mkdir(parents=True, exist_ok=True)
         log = self.logs[exe].open('w')
@@ -209,9 +206,12 @@ def run_graph(bag_path: Path, out: Path, *, rate: float = 1.0, model: str = 'rgb
             rclpy.spin_once(node, timeout_sec=0.1)
         cpu_before = graph.cpu_seconds()
         t_play = time.monotonic()
+        # the replay plays once it has matched every subscriber seen here (this one too)
+        played = [t.lstrip('/') for t in bag.topics(bag_path) if t.startswith('/camera/')]
         graph.start('replay', {'replay.bag': str(bag_path), 'replay.rate': rate,
-                               'replay.topics': ['camera/*'],
-                               'replay.wait_for_subscribers': 1, 'replay.delay_s': 1.0})
+                               'replay.topics': played, 'replay.delay_s': 0.5,
+                               'replay.wait_for_subscribers': [
+                                   f'{t}={node.count_subscribers(t)}' for t in played]})
         replay = graph.procs['replay']
         replay_cpu = 0.0
         while replay.poll() is None:

@@ -8,7 +8,8 @@ parameter, the value and the rule. `config/<node>.yaml` holds the same defaults 
 
 from __future__ import annotations
 
-from collections.abc import Callable, Sequence
+import json
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
 
@@ -114,3 +115,11 @@ def declare(node: Node, params: Sequence[Param],
 
     node.add_on_set_parameters_callback(_on_set)
     return values
+
+
+def override_args(params: Mapping[str, Value]) -> list[str]:
+    """`-p name:=value` command-line overrides (after `--ros-args`) for `params`: values
+    written as JSON, which the ROS argument parser reads as YAML of the same types (strings
+    quoted, so '*', ':' or ',' in them stay text; 1.0 stays a double)."""
+    return [arg for name, value in params.items()
+            for arg in ('-p', f'{name}:={json.dumps(value)}')]

@@ -39,6 +39,25 @@ def _exists(path: str) -> str | None:
     return None if os.path.exists(path) else f'{path!r}: no such bag'
 
 
+def subscriber_counts(entries: list[str]) -> list[tuple[str, int]]:
+    """[(topic pattern, count)] from 'pattern=count' entries; ValueError names a bad one."""
+    out = []
+    for entry in entries:
+        pattern, sep, count = entry.rpartition('=')
+        if not sep or not pattern or not count.isdigit():
+            raise ValueError(f'{entry!r} is not pattern=count (e.g. camera/*=1)')
+        out.append((pattern.lstrip('/'), int(count)))
+    return out
+
+
+def _check_counts(entries: list[str]) -> str | None:
+    try:
+        subscriber_counts(entries)
+    except ValueError as exc:
+        return str(exc)
+    return None
+
+
 PARAMS = (
     Param('replay.bag', '', 'Path of the rosbag2 directory (mcap or sqlite3) to play.',
           check=_exists),
@@ -51,8 +70,10 @@ PARAMS = (
           'without leading slash.'),
     Param('replay.publish_clock', False, 'Publish /clock with the bag time of each message '
           '(for use_sim_time).'),
-    Param('replay.wait_for_subscribers', 0, 'Before playing, wait until every played topic has '
-          'at least this many subscribers.', range=(0, 100)),
+    Param('replay.wait_for_subscribers', ['*=0'], 'Before playing, wait until the played '
+          'topics have this many subscribers: pattern=count entries (camera/*=1, '
+          'camera/color/camera_info=4); a topic matched by several needs the largest count.',
+          check=_check_counts),
     Param('replay.wait_timeout_s', 10.0, 'Longest wait for subscribers, seconds.',
           range=(0.0, 3600.0)),
     Param('replay.delay_s', 0.0, 'Wait this long before playing (after the subscribers are '
@@ -102,19 +123,22 @@ class ReplayNode(Node):
             rclpy.spin_once(self, timeout_sec=min(remaining, 0.05))
 
     def wait_for_subscribers(self) -> bool:
-        need = self.cfg['replay.wait_for_subscribers']
-        if need <= 0:
-            return True
+        counts = subscriber_counts(self.cfg['replay.wait_for_subscribers'])
+        need = {name: max([c for pat, c in counts if fnmatch.fnmatchcase(name.lstrip('/'), pat)],
+                          default=0)
+                for name in self.selected}
+
+        def lacking() -> dict[str, int]:
+            return {n: c for n, c in need.items()
+                    if self.publishers_[n].get_subscription_count() < c}
+
         deadline = time.monotonic() + self.cfg['replay.wait_timeout_s']
-        while time.monotonic() < deadline:
-            if all(pub.get_subscription_count() >= need for pub in self.publishers_.values()):
-                return True
+        while lacking() and time.monotonic() < deadline:
             self._sleep_until(time.monotonic() + 0.05)
-        lacking = [n for n, pub in self.publishers_.items()
-                   if pub.get_subscription_count() < need]
-        self.get_logger().warning(f'playing although {lacking} have fewer than {need} '
-                                  'subscribers')
-        return False
+        if missing := lacking():
+            self.get_logger().warning('playing although these topics have fewer subscribers '
+                                      f'than asked: {missing}')
+        return not missing
 
     def play_once(self) -> int:
         """Play the bag once; returns the number of messages published."""
