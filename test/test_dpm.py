@@ -325,8 +325,9 @@ def test_dual_coordinate_descent_reaches_the_svm_optimum() -> None:
     lb_val = np.array([0.4])
     beta = np.zeros(1)
     c = 0.5
+    cost = np.full(ex.n, c)
     for epoch in range(200):
-        _dcd(w, *arr, alpha, c, lb_idx, lb_val, beta, 10, epoch)
+        _dcd(w, *arr, alpha, cost, lb_idx, lb_val, beta, 10, epoch)
     # w consistency
     dense = np.zeros((ex.n, size))
     for i in range(ex.n):

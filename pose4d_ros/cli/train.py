@@ -63,12 +63,14 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument('--masked', action='store_true',
                    help='train on frames blanked outside the foreground mask (core.foreground '
                         'run on each frame, as the live pipeline does)')
-    p.add_argument('--rounds', type=int, default=4, help='mining rounds')
-    p.add_argument('--svm-c', type=float, default=1e-5, help='SVM C of eq. (5)')
+    p.add_argument('--rounds', type=int, default=8, help='mining rounds')
+    p.add_argument('--svm-c', type=float, default=3e-4, help='SVM C of eq. (5)')
+    p.add_argument('--positive-weight', type=float, default=1.0,
+                   help="weight of the labelled poses' constraints (C x this)")
     p.add_argument('--no-background', action='store_true',
                    help='no background negatives (only wrong poses of the labelled frames)')
     p.add_argument('--negatives-per-image', type=int, default=6)
-    p.add_argument('--poses-per-frame', type=int, default=2,
+    p.add_argument('--poses-per-frame', type=int, default=4,
                    help='wrong poses mined per labelled frame and round')
     p.add_argument('--cache-limit', type=int, default=20000, help='constraint cache size')
     p.add_argument('--max-negative-images', type=int, default=1500)
@@ -178,6 +180,7 @@ def run(args: argparse.Namespace) -> int:
                       sbin=args.sbin, filter_cells=args.filter_cells,
                       canonical_scale_px=args.scale_px, depth_encoding=args.depth_encoding,
                       masked_input=args.masked, flip=not args.no_flip, svm_c=args.svm_c,
+                      positive_weight=args.positive_weight,
                       mining_rounds=args.rounds, background_negatives=not args.no_background,
                       negatives_per_image=args.negatives_per_image,
                       structural_per_positive=args.poses_per_frame,

@@ -85,6 +85,8 @@ class TrainConfig:
     masked_input : train (and detect) on frames blanked outside the person's mask.
     flip : add mirrored positives.
     svm_c : C of eq. (5) (per constraint; the whitened windows have unit variance per dim).
+    positive_weight : C of the labelled poses' constraints is svm_c times this (the
+        background constraints outnumber them many times on real photographs).
     bias_feature : value of the type-indicator features (a larger value regularises the
         biases less).
     spring_lb : lower bound of the quadratic spring weights.
@@ -113,13 +115,14 @@ class TrainConfig:
     depth_range_m: tuple[float, float] = (0.5, 4.5)
     masked_input: bool = False
     flip: bool = True
-    svm_c: float = 1e-5
+    svm_c: float = 3e-4
+    positive_weight: float = 1.0
     bias_feature: float = 1.0
     spring_lb: float = 0.01
-    mining_rounds: int = 4
+    mining_rounds: int = 8
     background_negatives: bool = True
     negatives_per_image: int = 6
-    structural_per_positive: int = 2
+    structural_per_positive: int = 4
     loss_alpha: float = 0.1
     cache_limit: int = 20000
     qp_epochs: int = 300
@@ -529,7 +532,7 @@ def _dot(w, xf, of, xd, od, xb, ob, ref, i):
 @nb.njit(cache=True)
 def _dcd(w, xf, of, xd, od, xb, ob, y, m, ref, alpha, cost, lb_idx, lb_val, beta, epochs,
          seed):
-    """Dual coordinate descent for the constraints y_i w.x_i >= m_i - xi_i (0 <= a_i <= C) and
+    """Dual coordinate descent for the constraints y_i w.x_i >= m_i - xi_i (0 <= a_i <= C_i) and
     the hard lower bounds w_k >= lb (b_k >= 0). `w` must equal w0 + sum_i a_i y_i x_i +
     sum_k b_k e_k on entry (warm start); it is kept so. Returns the largest projected gradient
     of the last epoch."""
@@ -553,12 +556,12 @@ def _dcd(w, xf, of, xd, od, xb, ob, y, m, ref, alpha, cost, lb_idx, lb_val, beta
             pg = g
             if a <= 0.0:
                 pg = min(g, 0.0)
-            elif a >= cost:
+            elif a >= cost[i]:
                 pg = max(g, 0.0)
             if abs(pg) > maxpg:
                 maxpg = abs(pg)
             if abs(pg) > 1e-12:
-                na = min(max(a - g / q[i], 0.0), cost)
+                na = min(max(a - g / q[i], 0.0), cost[i])
                 if na != a:
                     step = (na - a) * y[i]
                     _own_axpy(w, step, xf, of, xd, od, xb, ob, i)
@@ -1090,14 +1093,15 @@ def train(samples: Sequence, negatives: Sequence[Negative], cfg: TrainConfig, *,
         gap = np.inf
         obj = np.nan
         marg = np.zeros(ex.n)
+        cost = np.where(np.arange(ex.n) < n_pos, cfg.svm_c * cfg.positive_weight, cfg.svm_c)
         while epochs < cfg.qp_epochs:
-            _dcd(w, *arr[:9], alpha, cfg.svm_c, lb_idx, lb_val, beta, 10,
+            _dcd(w, *arr[:9], alpha, cost, lb_idx, lb_val, beta, 10,
                  cfg.seed + 1000 * rnd + epochs)
             epochs += 10
             marg = _margins(w, *arr[:7], arr[8])
-            loss = float(np.maximum(0.0, arr[7] - marg).sum())
+            loss = float(cost @ np.maximum(0.0, arr[7] - marg))
             u = w - w0
-            obj = 0.5 * float(u @ u) + cfg.svm_c * loss
+            obj = 0.5 * float(u @ u) + loss
             dual = float(alpha @ arr[7] + beta @ lb_val) - 0.5 * float(u @ u) - float(w0 @ u)
             gap = (obj - dual) / max(abs(obj), 1e-12)
             if gap < cfg.qp_tol:
