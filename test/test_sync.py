@@ -1,4 +1,5 @@
-"""Stamp pairing of colour and depth: exact, nearest within slop, never the latest."""
+"""Stamp pairing of colour and depth (exact, nearest within slop, never the latest) and the
+nodes' frame queue."""
 
 from __future__ import annotations
 
@@ -69,3 +70,30 @@ def test_restarted_stream_is_reset():
 def test_bad_arguments(kwargs):
     with pytest.raises(ValueError):
         StampSync(**kwargs)
+
+
+class _Counter:
+    """Stands in for the StageMonitor: counts what the queue drops."""
+
+    def __init__(self) -> None:
+        self.drops = 0
+
+    def dropped(self, n: int = 1) -> None:
+        self.drops += n
+
+
+def test_frame_queue_processes_a_burst_in_order_and_drops_the_oldest_beyond_its_size(ros):
+    from pose4d_ros.nodes.common import FrameQueue
+
+    done: list[int] = []
+    monitor = _Counter()
+    queue = FrameQueue(ros.node, done.append, monitor, size=3)
+    for frame in range(3):  # a burst: three frames before the executor runs
+        queue.submit(frame)
+    ros.spin_until(lambda: len(done) == 3, 5.0, 'the burst')
+    assert done == [0, 1, 2] and monitor.drops == 0
+    for frame in range(3, 8):  # more than fit: the two oldest go
+        queue.submit(frame)
+    ros.spin_until(lambda: len(done) == 6, 5.0, 'the overflow')
+    ros.spin_for(0.2)
+    assert done == [0, 1, 2, 5, 6, 7] and monitor.drops == 2

@@ -120,40 +120,45 @@ class StageMonitor:
 
 
 
-class LatestOnly:
-    """Process only the newest of the frames that arrive while a slow callback runs.
+class FrameQueue:
+    """Process frames in arrival order, keeping at most `size` waiting.
 
-    `submit(item)` keeps `item` as the pending frame (a frame still pending is dropped and
+    `submit(item)` queues `item` (when `size` frames already wait, the oldest is dropped and
     counted on the monitor) and wakes the executor through a guard condition, whose callback
-    processes the pending frame. A slow stage thus never builds a backlog.
+    processes one frame and wakes it again while frames wait, so subscriptions are served in
+    between. A burst (two frames in one executor turn, a slow first frame) is absorbed; a stage
+    slower than its input on average drops frames instead of building latency.
     """
 
     def __init__(self, node: Node, process: Callable[[object], None],
-                 monitor: StageMonitor) -> None:
+                 monitor: StageMonitor, size: int = 3) -> None:
         self._process = process
         self._monitor = monitor
-        self._pending: object | None = None
+        self._waiting: deque[object] = deque()
+        self._size = size
         self._guard = node.create_guard_condition(self._run)
 
     def submit(self, item: object) -> None:
-        if self._pending is not None:
+        if len(self._waiting) >= self._size:
+            self._waiting.popleft()
             self._monitor.dropped()
-        self._pending = item
+        self._waiting.append(item)
         self._guard.trigger()
 
     def _run(self) -> None:
-        item, self._pending = self._pending, None
-        if item is not None:
-            self._process(item)
+        if self._waiting:
+            self._process(self._waiting.popleft())
+        if self._waiting:
+            self._guard.trigger()
 
 
 class PairedInputs:
-    """Subscribe to several topics, pair their messages by header stamp, process the newest set.
+    """Subscribe to several topics, pair their messages by header stamp, process each set.
 
     The first topic is the pivot (colour); a set is complete when every topic has a message of
     the pivot's stamp (or the nearest within `slop_ns`, `core.sync.StampSync`). Complete sets go
-    through `LatestOnly`, so a slow `process` never builds a backlog; unpaired messages and
-    replaced sets are counted as dropped on the monitor.
+    through a `FrameQueue`, so a slow `process` never builds a long backlog; unpaired
+    messages and sets the queue had to drop are counted as dropped on the monitor.
 
     Parameters
     ----------
@@ -166,14 +171,14 @@ class PairedInputs:
                  slop_ns: int = 0) -> None:
         self._sync = StampSync(len(topics), slop_ns=slop_ns)
         self._monitor = monitor
-        self._latest = LatestOnly(node, process, monitor)
+        self._queue = FrameQueue(node, process, monitor)
         for k, (kind, topic, profile) in enumerate(topics):
             node.create_subscription(kind, topic, lambda m, k=k: self._on(k, m), profile)
 
     def _on(self, stream: int, msg: object) -> None:
         before = self._sync.dropped[0]
         for _, items in self._sync.push(stream, stamp_to_ns(msg.header.stamp), msg):
-            self._latest.submit(items)
+            self._queue.submit(items)
         self._monitor.dropped(self._sync.dropped[0] - before)
 
 
