@@ -1,4 +1,4 @@
-"""`foreground` (and `detector`) executables over Fast DDS on rendered RGB-D frames."""
+"""`foreground`, `detector` and `pipeline` executables over Fast DDS on rendered RGB-D frames."""
 
 from __future__ import annotations
 
@@ -90,3 +90,117 @@ def test_foreground_node_masks_the_person(ros, frames, tmp_path):
         assert (color[~mask] == 0).all()
         depth = depth_from_msg(depth_msg)
         assert depth_msg.encoding == '16UC1' and np.isnan(depth[~mask]).all()
+
+
+def _part_errors_px(joints, frame) -> dict[str, float]:
+    """Pixel error of each located part against the rendered body's joints."""
+    from pose4d_ros.core.camera import project
+    from pose4d_ros.datasets.utkinect import UTKINECT_JOINTS
+
+    truth = project(frame.joints, INTR)
+    out = {}
+    for k, name in enumerate(joints.names):
+        gt = UTKINECT_JOINTS.index('shoulder_center' if name == 'neck' else name)
+        if np.isfinite(joints.uv[k]).all():
+            out[name] = float(np.linalg.norm(joints.uv[k] - truth[gt]))
+    return out
+
+
+def _send_until_answered(ros, pubs, frames, headers, answers) -> None:
+    """Publish each frame until its answer comes out (a best-effort reader may drop what
+    comes before it has matched our writer)."""
+    for r, header in zip(frames, headers, strict=True):
+        for _ in range(15):
+            _publish_frame(ros, pubs, r, header)
+            if ros.wait(lambda h=header: h in [m.header for m in answers], 2.0):
+                break
+
+
+def _camera_publishers(ros):
+    from sensor_msgs.msg import CameraInfo, Image
+
+    from pose4d_ros.nodes import qos
+
+    return (ros.node.create_publisher(Image, 'camera/color/image_raw', qos.OUTPUT_QOS),
+            ros.node.create_publisher(Image, 'camera/depth/image_raw', qos.OUTPUT_QOS),
+            ros.node.create_publisher(CameraInfo, 'camera/color/camera_info', qos.OUTPUT_QOS))
+
+
+def test_foreground_and_detector_nodes_find_the_parts(ros, frames, tmp_path):
+    from pose4d_msgs.msg import JointArray
+    from std_msgs.msg import Header
+
+    from pose4d_ros.nodes import qos
+    from pose4d_ros.nodes.convert import joints_from_msg, ns_to_stamp
+
+    nodes = [start('foreground', {}, log_dir=tmp_path), start('detector', {}, log_dir=tmp_path)]
+    try:
+        pubs = _camera_publishers(ros)
+        parts = ros.collect(JointArray, 'pose4d/parts', qos.OUTPUT_QOS)
+        for pub in pubs:
+            ros.wait_for_subscribers(pub, count=2 if pub.topic_name.endswith('info') else 1,
+                                     timeout=30.0)
+        ros.wait_for_publishers('pose4d/parts', timeout=30.0)
+        headers = [Header(stamp=ns_to_stamp(10**18 + k * 33_333_334), frame_id='cam')
+                   for k in range(len(frames))]
+        _send_until_answered(ros, pubs, frames, headers, parts)
+        ros.spin_for(0.3)
+    finally:
+        for node in nodes:
+            assert node.stop() == 0, node.output()
+    answers = {m.header.stamp.nanosec: m for m in parts}
+    assert sorted(answers) == sorted(h.stamp.nanosec for h in headers)
+    for r, header in zip(frames, headers, strict=True):
+        joints = joints_from_msg(answers[header.stamp.nanosec])
+        assert len(joints.names) == 10
+        errors = _part_errors_px(joints, r)
+        assert len(errors) >= 8 and np.median(list(errors.values())) < 10, errors
+        assert np.isfinite(joints.xyz[[joints.names.index('head')]]).all()
+
+
+def test_pipeline_node_publishes_the_skeleton_and_survives_a_bad_frame(ros, frames, tmp_path):
+    from diagnostic_msgs.msg import DiagnosticArray
+    from pose4d_msgs.msg import JointArray
+    from std_msgs.msg import Header
+
+    from pose4d_ros.core.skeleton import SKELETON_14
+    from pose4d_ros.nodes import qos
+    from pose4d_ros.nodes.convert import (
+        array_to_image,
+        intrinsics_to_msg,
+        joints_from_msg,
+        ns_to_stamp,
+    )
+
+    node = start('pipeline', {'pipeline.publish_foreground': False}, log_dir=tmp_path)
+    try:
+        pubs = _camera_publishers(ros)
+        skeletons = ros.collect(JointArray, 'pose4d/skeleton', qos.OUTPUT_QOS)
+        diagnostics = ros.collect(DiagnosticArray, '/diagnostics')
+        for pub in pubs:
+            ros.wait_for_subscribers(pub, timeout=30.0)
+        ros.wait_for_publishers('pose4d/skeleton', timeout=30.0)
+        headers = [Header(stamp=ns_to_stamp(10**18 + k * 33_333_334), frame_id='cam')
+                   for k in range(len(frames))]
+        _send_until_answered(ros, pubs, frames[:1], headers[:1], skeletons)
+        # a depth image of the wrong size: refused, logged, counted; the node goes on
+        bad = Header(stamp=ns_to_stamp(10**18 + 16_666_667), frame_id='cam')
+        color, depth, info = pubs
+        color.publish(array_to_image(frames[1].rgb, 'rgb8', bad))
+        depth.publish(array_to_image(frames[1].depth_mm[::2, ::2].copy(), '16UC1', bad))
+        info.publish(intrinsics_to_msg(INTR, bad))
+        _send_until_answered(ros, pubs, frames[1:], headers[1:], skeletons)
+        ros.spin_until(lambda: any(kv.key == 'bad_inputs' and kv.value == '1'
+                                   for d in diagnostics for s in d.status for kv in s.values),
+                       5.0, 'the bad frame counted on /diagnostics')
+    finally:
+        assert node.stop() == 0, node.output()
+    answers = {m.header.stamp.nanosec: m for m in skeletons}
+    assert sorted(answers) == sorted(h.stamp.nanosec for h in headers)
+    for r, header in zip(frames, headers, strict=True):
+        skeleton = joints_from_msg(answers[header.stamp.nanosec])
+        assert skeleton.names == SKELETON_14
+        head = SKELETON_14.index('head')
+        assert _part_errors_px(skeleton, r)['head'] < 10
+        assert np.isfinite(skeleton.xyz[head]).all()
+    assert 'refused' in node.output()
