@@ -25,12 +25,14 @@ from pathlib import Path
 import numpy as np
 
 from pose4d_ros.cli._dpm import load_samples, machine, progress
-from pose4d_ros.cli.eval import default_models, resolve_model, write_json
+from pose4d_ros.cli.eval import default_models
 from pose4d_ros.core.camera import cad60_intrinsics
 from pose4d_ros.core.dpm.infer import SearchConfig
 from pose4d_ros.core.dpm.model import load_model
 from pose4d_ros.core.dpm.threads import set_blas_threads
+from pose4d_ros.core.files import write_json
 from pose4d_ros.datasets.sources import source_kind
+from pose4d_ros.models import model_path
 
 
 def add_parser(subparsers: argparse._SubParsersAction) -> None:
@@ -73,7 +75,7 @@ def run(args: argparse.Namespace) -> int:
 
     threads = set_blas_threads(args.blas_threads)
     kind = source_kind(args.source)
-    model = load_model(resolve_model(args.model or default_models(kind)[0]))
+    model = load_model(model_path(args.model or default_models(kind)[0]))
     samples = load_samples([args.source], frame_range=args.frame_range, stride=1,
                            max_frames=args.frames + args.warmup, seed=0)
     use_depth = model.channels == 'rgbd'

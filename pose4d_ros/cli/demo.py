@@ -11,7 +11,6 @@ out/results.json.
 from __future__ import annotations
 
 import argparse
-import json
 import os
 import shutil
 import signal
@@ -26,6 +25,7 @@ import cv2
 import numpy as np
 
 from pose4d_ros.core.draw import draw_skeleton, legend
+from pose4d_ros.core.files import write_atomic, write_json
 from pose4d_ros.core.joints import JointSet
 from pose4d_ros.core.metrics import score_joint_sets
 from pose4d_ros.core.pipeline import limb_bones
@@ -286,10 +286,11 @@ def report(bag_path: Path, result: GraphRun, args: argparse.Namespace) -> int:
         print(f'latency colour frame -> /pose4d/skeleton: p50 {results["latency_ms"]["p50"]:.1f}'
               f' ms, p95 {results["latency_ms"]["p95"]:.1f} ms (n = {latency.size})')
     overlay = overlay_picture(bag_path, stamps, skeletons, truths)
-    cv2.imwrite(str(args.out / 'overlay.png'), overlay[:, :, ::-1])
-    tmp = args.out / '.results.json.tmp'
-    tmp.write_text(json.dumps(results, indent=1))
-    tmp.replace(args.out / 'results.json')
+    ok, png = cv2.imencode('.png', overlay[:, :, ::-1])
+    if not ok:
+        raise ValueError(f'could not encode the overlay picture ({overlay.shape})')
+    write_atomic(args.out / 'overlay.png', png.tobytes())
+    write_json(args.out / 'results.json', results, indent=1)
     print(f'wrote {args.out / "overlay.png"} and {args.out / "results.json"}')
     return 0 if len(skeletons) else 1
 

@@ -23,9 +23,6 @@ Default models: the shipped `rgbd_10` and `rgb_10` for a CAD-60 set, `lspet_rgb_
 from __future__ import annotations
 
 import argparse
-import json
-import os
-import tempfile
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -40,9 +37,11 @@ from pose4d_ros.core.dpm.infer import Detector, SearchConfig
 from pose4d_ros.core.dpm.model import PartModel, load_model
 from pose4d_ros.core.dpm.threads import set_blas_threads
 from pose4d_ros.core.dpm.train import part_joints
+from pose4d_ros.core.files import write_json
 from pose4d_ros.core.metrics import score_groups
 from pose4d_ros.core.skeleton import JOINT_GROUPS
 from pose4d_ros.datasets.sources import Sample, source_kind
+from pose4d_ros.models import model_path
 
 TABLE_METRICS = (('pck', 'PCK@0.1 (%)'), ('pck@0.2', 'PCK@0.2 (%)'), ('apk', 'APK (%)'),
                  ('error_px', 'error (px)'))
@@ -160,20 +159,6 @@ def format_table(rows: dict[str, dict[str, dict[str, float]]], frames: int) -> s
     return '\n'.join(lines)
 
 
-def write_json(path: Path, obj: dict) -> None:
-    """Write JSON to a temporary name and rename it when complete."""
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=path.name + '.', suffix='.tmp', dir=path.parent)
-    try:
-        with os.fdopen(fd, 'w') as fh:
-            json.dump(obj, fh, indent=2, sort_keys=False)
-            fh.write('\n')
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
-
-
 def _clean(table: dict[str, dict[str, float]]) -> dict[str, dict[str, float | None]]:
     """The row in the JSON's order (pck, pck@0.2, apk, error_px), NaN as null."""
     order = [k for k, _ in TABLE_METRICS] + [k for k in table if k not in dict(TABLE_METRICS)]
@@ -183,14 +168,6 @@ def _clean(table: dict[str, dict[str, float]]) -> dict[str, dict[str, float | No
 
 def default_models(kind: str) -> list[str]:
     return ['lspet_rgb_14'] if kind == 'lspet' else ['rgbd_10', 'rgb_10']
-
-
-def resolve_model(name: str) -> Path:
-    """A shipped model name ('rgbd_10') or a path to a .npz."""
-    p = Path(name)
-    if p.suffix == '.npz' or p.exists():
-        return p
-    return Path(__file__).resolve().parents[1] / 'models' / f'{name}.npz'
 
 
 def add_parser(subparsers: argparse._SubParsersAction) -> None:
@@ -218,7 +195,7 @@ def run(args: argparse.Namespace) -> int:
 
     set_blas_threads(args.blas_threads)
     kind = source_kind(args.source)
-    models = [load_model(resolve_model(m)) for m in (args.model or default_models(kind))]
+    models = [load_model(model_path(m)) for m in (args.model or default_models(kind))]
     samples = load_samples([args.source], frame_range=args.frame_range, stride=args.stride,
                            max_frames=args.max_frames, seed=0)
     has_depth = any(s.depth_m is not None for s in samples)

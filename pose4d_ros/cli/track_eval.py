@@ -12,17 +12,15 @@ shoulders, hips, wrists and ankles, with the joint-limit prior alone and with de
 from __future__ import annotations
 
 import argparse
-import json
 import math
-import os
 import sys
-import tempfile
 import time
 from dataclasses import replace
 from pathlib import Path
 
 from pose4d_ros import __version__
 from pose4d_ros.core import motion_eval as me
+from pose4d_ros.core.files import write_json
 from pose4d_ros.core.kinematics import IkConfig
 from pose4d_ros.core.slqe import CvConfig, SlqeConfig
 
@@ -66,20 +64,6 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
                    help='skip the synthetic-body renderer variant of the IK')
     p.add_argument('--quiet', action='store_true', help='no progress messages')
     p.set_defaults(func=run)
-
-
-def _write_json(path: Path, data: dict) -> None:
-    """Write to a temporary file next to `path`, then rename (nothing half-written)."""
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f'.{path.name}.', dir=path.parent)
-    try:
-        with os.fdopen(fd, 'w') as f:
-            json.dump(data, f, indent=1, default=_jsonable)
-            f.write('\n')
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
 
 
 def _jsonable(value: object) -> object:
@@ -171,7 +155,7 @@ def run(args: argparse.Namespace) -> int:
     if not args.no_ik:
         report['ik'] = _run_ik(args, train, test, say)
     report['seconds'] = time.perf_counter() - t0
-    _write_json(args.json, report)
+    write_json(args.json, report, indent=1, default=_jsonable)
     say(f'wrote {args.json} ({report["seconds"]:.0f} s)')
     return 0
 

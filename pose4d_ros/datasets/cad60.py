@@ -32,9 +32,7 @@ when complete, so an interrupted run never leaves a half-written file behind.
 
 from __future__ import annotations
 
-import os
 import re
-import tempfile
 from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
@@ -44,6 +42,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from pose4d_ros.core.camera import Intrinsics, cad60_intrinsics, project
+from pose4d_ros.core.files import write_atomic
 from pose4d_ros.core.skeleton import CAD60_JOINTS
 
 N_JOINTS = 15
@@ -478,18 +477,6 @@ def iter_frames(video: Video, *, skeleton: Skeleton | None = None,
 # Writing (used by the synthetic renderer; files are written atomically)
 # --------------------------------------------------------------------------------------------
 
-def _write_atomic(path: Path, data: bytes) -> None:
-    path = Path(path)
-    fd, tmp = tempfile.mkstemp(prefix=f'.{path.name}.', suffix='.tmp', dir=path.parent)
-    try:
-        with os.fdopen(fd, 'wb') as f:
-            f.write(data)
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
-
-
 def format_skeleton(skeleton: Skeleton) -> str:
     """The text of a CAD-60 skeleton file for `skeleton` (anatomical sides -> file slots)."""
     perm = np.asarray(_MIRROR)  # an involution: anatomical joint i goes to slot _MIRROR[i]
@@ -520,7 +507,7 @@ def _fmt(x: float) -> str:
 
 def write_skeleton(path: str | Path, skeleton: Skeleton) -> None:
     """Write a CAD-60 skeleton file `<id>.txt` (mirrored OpenNI labels, trailing commas, END)."""
-    _write_atomic(Path(path), format_skeleton(skeleton).encode())
+    write_atomic(Path(path), format_skeleton(skeleton).encode())
 
 
 def write_activity_labels(path: str | Path, labels: dict[str, str]) -> None:
@@ -532,14 +519,14 @@ def write_activity_labels(path: str | Path, labels: dict[str, str]) -> None:
         if ',' in name or '\n' in name or not name.strip():
             raise ValueError(f'activity name must be non-empty without commas, got {name!r}')
         lines.append(f'{vid},{name},')
-    _write_atomic(Path(path), ('\n'.join(lines) + '\n').encode())
+    write_atomic(Path(path), ('\n'.join(lines) + '\n').encode())
 
 
 def _encode_png(path: Path, img: NDArray, compression: int) -> None:
     ok, buf = cv2.imencode('.png', img, [cv2.IMWRITE_PNG_COMPRESSION, compression])
     if not ok:
         raise ValueError(f'{path}: PNG encoding failed')
-    _write_atomic(path, buf.tobytes())
+    write_atomic(path, buf.tobytes())
 
 
 def write_rgb(path: str | Path, rgb: NDArray[np.uint8], *, compression: int = 1) -> None:

@@ -24,9 +24,8 @@ on the joints (see `core.dpm.train.person_scale`).
 
 from __future__ import annotations
 
+import io
 import json
-import os
-import tempfile
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -34,6 +33,7 @@ from pathlib import Path
 import numpy as np
 from numpy.typing import NDArray
 
+from pose4d_ros.core.files import write_atomic
 from pose4d_ros.core.hog import N_FEATURES
 
 CHANNELS = ('rgb', 'rgbd')
@@ -169,15 +169,9 @@ def save_model(model: PartModel, path: str | Path) -> None:
     arrays = {name: getattr(model, name) for name in _ARRAYS}
     if model.calibration is not None:
         arrays['calibration'] = model.calibration
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=path.name + '.', suffix='.tmp', dir=path.parent)
-    try:
-        with os.fdopen(fd, 'wb') as fh:
-            np.savez_compressed(fh, header=np.array(json.dumps(header)), **arrays)
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
+    buffer = io.BytesIO()
+    np.savez_compressed(buffer, header=np.array(json.dumps(header)), **arrays)
+    write_atomic(path, buffer.getvalue())
 
 
 def load_model(path: str | Path) -> PartModel:
