@@ -4,11 +4,17 @@ Frames: 3-D points are in the camera optical frame (x right, y down, z forward, 
 `sensor_msgs/CameraInfo`. Pixel (u, v) is column, row, with (0, 0) the centre of the top-left
 pixel. Depth images inside `core` are float32 metres with NaN where there is no reading; use
 `depth_to_metres` at the boundary (REP-118: `16UC1` millimetres or `32FC1` metres, 0 or NaN =
-no reading).
+no reading; a reading beyond `MAX_DEPTH_M` is no reading too).
+
+Everything that enters a node is checked against physical sense here and in `core.joints`:
+`Intrinsics` refuses a camera no lens makes (non-finite values, a field of view outside
+`FOV_RANGE_DEG`, the principal point off the image), so that no later stage can be asked for a
+pyramid of absurd size or a position of 1e300 m.
 """
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -19,6 +25,14 @@ CAD60_FX = 285.171
 CAD60_FY = 285.117
 CAD60_CX = 160.0
 CAD60_CY = 120.0
+
+# The farthest reading of the RGB-D cameras we serve (Kinect v1/v2, RealSense, Azure: <= 10 m),
+# with a margin; 16UC1's 65535 mm and a 32FC1 1e30 are not distances.
+MAX_DEPTH_M = 20.0
+# Fields of view a camera lens gives (Kinect v1: 58 x 45 degrees).
+FOV_RANGE_DEG = (10.0, 170.0)
+# Largest image side: 4K cameras and below.
+MAX_IMAGE_SIDE_PX = 8192
 
 
 @dataclass(frozen=True)
@@ -33,10 +47,31 @@ class Intrinsics:
     height: int
 
     def __post_init__(self) -> None:
+        """Refuse intrinsics no camera has (ValueError naming the value and the rule)."""
+        if not all(math.isfinite(v) for v in (self.fx, self.fy, self.cx, self.cy)):
+            raise ValueError(f'intrinsics must be finite, got fx={self.fx}, fy={self.fy}, '
+                             f'cx={self.cx}, cy={self.cy}')
         if not (self.fx > 0 and self.fy > 0):
             raise ValueError(f'focal lengths must be positive, got fx={self.fx}, fy={self.fy}')
-        if self.width <= 0 or self.height <= 0:
-            raise ValueError(f'image size must be positive, got {self.width}x{self.height}')
+        if not (0 < self.width <= MAX_IMAGE_SIDE_PX and 0 < self.height <= MAX_IMAGE_SIDE_PX):
+            raise ValueError(f'image size must be 1..{MAX_IMAGE_SIDE_PX} px a side, got '
+                             f'{self.width}x{self.height}')
+        lo, hi = FOV_RANGE_DEG
+        for name, f, side in (('fx', self.fx, self.width), ('fy', self.fy, self.height)):
+            fov = math.degrees(2 * math.atan(side / (2 * f)))
+            if not lo <= fov <= hi:
+                raise ValueError(f'{name}={f:.4g} px at {side} px gives a field of view of '
+                                 f'{fov:.1f} degrees, outside {lo:g}..{hi:g}')
+        if not (0 <= self.cx <= self.width and 0 <= self.cy <= self.height):
+            raise ValueError(f'principal point ({self.cx:.4g}, {self.cy:.4g}) is off the '
+                             f'{self.width}x{self.height} image')
+
+    def check_size(self, shape: tuple[int, ...], what: str = 'image') -> None:
+        """ValueError unless an image of `shape` (H, W, ...) is the size these intrinsics are
+        calibrated for (a camera_info of another resolution would misplace every point)."""
+        if tuple(shape[:2]) != (self.height, self.width):
+            raise ValueError(f'camera_info is for {self.width}x{self.height} but the {what} is '
+                             f'{shape[1]}x{shape[0]}')
 
     @property
     def k(self) -> NDArray[np.float64]:
@@ -105,21 +140,22 @@ def depth_to_metres(depth: NDArray) -> NDArray[np.float32]:
     Parameters
     ----------
     depth : (H, W) uint16 millimetres (0 = no reading), or float32/float64 metres (0 or NaN =
-        no reading), as REP-118's `16UC1` and `32FC1`.
+        no reading), as REP-118's `16UC1` and `32FC1`. Readings beyond `MAX_DEPTH_M` (REP-117's
+        +inf = too far, 65535 mm, 1e30) and negative ones are no reading either.
     """
     depth = np.asarray(depth)
     if depth.ndim != 2:
         raise ValueError(f'depth image must be 2-D, got shape {depth.shape}')
     if depth.dtype == np.uint16:
         out = depth.astype(np.float32) * np.float32(0.001)
-        out[depth == 0] = np.nan
-        return out
-    if depth.dtype in (np.float32, np.float64):
-        out = depth.astype(np.float32, copy=True)
-        out[~(out > 0)] = np.nan  # 0, negative, NaN; +inf (too far) stays inf -> see below
-        out[np.isinf(out)] = np.nan
-        return out
-    raise ValueError(f'depth must be uint16 millimetres or float metres, got dtype {depth.dtype}')
+    elif depth.dtype in (np.float32, np.float64):
+        with np.errstate(over='ignore'):  # 1e300 in float64 is inf in float32: no reading
+            out = depth.astype(np.float32, copy=True)
+    else:
+        raise ValueError(f'depth must be uint16 millimetres or float metres, '
+                         f'got dtype {depth.dtype}')
+    out[~((out > 0) & (out <= MAX_DEPTH_M))] = np.nan  # 0, negative, NaN, inf, beyond range
+    return out
 
 
 def depth_to_millimetres(depth_m: NDArray[np.floating]) -> NDArray[np.uint16]:

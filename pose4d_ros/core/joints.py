@@ -2,7 +2,7 @@
 
 `nodes/convert.py` turns it into a `pose4d_msgs/JointArray` and back; everything else works on
 this dataclass. Unknown values are NaN. Source codes equal the message's constants (a test
-checks it).
+checks it). `check_joints` is the physical-sense check of a JointSet that came from outside.
 """
 
 from __future__ import annotations
@@ -11,6 +11,8 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 from numpy.typing import NDArray
+
+from pose4d_ros.core.camera import MAX_DEPTH_M, Intrinsics
 
 DETECTED = 0  # measured by the part detector in this frame
 TRACKED = 1  # estimated by the tracker
@@ -85,3 +87,54 @@ class JointSet:
         n = len(names)
         return cls(tuple(names), np.full((n, 2), np.nan), confidence=np.zeros(n),
                     source=np.full(n, MISSING))
+
+
+# More joints than any skeleton has (CAD-60 15, COCO 17, Kinect v2 25, MediaPipe 33).
+MAX_JOINTS = 64
+# Largest pixel coordinate accepted without a camera to compare with.
+_MAX_PIXEL = 1e5
+
+
+def check_joints(joints: JointSet, intrinsics: Intrinsics | None = None) -> None:
+    """Refuse joints that no camera could have seen (ValueError naming the joint and value).
+
+    Accepted: at most `MAX_JOINTS` distinct names; pixels unknown (NaN) or on the image or
+    near it (within one image size of it, room for a tracker coasting out of view; within
+    +-1e5 px without intrinsics); 3-D components unknown or finite within `MAX_DEPTH_M` of the
+    camera; confidences in [0, 1]; finite covariances within (`MAX_DEPTH_M` m)^2; a finite or
+    NaN score.
+    """
+    names = joints.names
+    if len(names) > MAX_JOINTS:
+        raise ValueError(f'{len(names)} joints, more than the {MAX_JOINTS} any skeleton has')
+    if len(set(names)) != len(names):
+        repeated = sorted({n for n in names if names.count(n) > 1})
+        raise ValueError(f'joint name(s) repeated: {", ".join(map(repr, repeated))}')
+
+    def first_bad(values: NDArray, ok: NDArray, what: str) -> None:
+        bad = np.flatnonzero(~ok.reshape(len(names), -1).all(axis=1)) if names else ()
+        if len(bad):
+            i = int(bad[0])
+            raise ValueError(f'joint {names[i]!r}: {what}, got {values[i].tolist()}')
+
+    uv = joints.uv
+    if intrinsics is None:
+        lo, hi = np.array([-_MAX_PIXEL] * 2), np.array([_MAX_PIXEL] * 2)
+        where = f'within +-{_MAX_PIXEL:g} px'
+    else:
+        size = np.array([intrinsics.width, intrinsics.height], np.float64)
+        lo, hi = -size, 2 * size
+        where = (f'on or near the {intrinsics.width}x{intrinsics.height} image '
+                 f'({-size[0]:g}..{hi[0]:g}, {-size[1]:g}..{hi[1]:g})')
+    with np.errstate(invalid='ignore'):
+        first_bad(uv, np.isnan(uv) | ((uv >= lo) & (uv <= hi)), f'pixel must be NaN or {where}')
+        xyz = joints.xyz
+        first_bad(xyz, np.isnan(xyz) | (np.abs(xyz) <= MAX_DEPTH_M),
+                  f'position must be NaN or within {MAX_DEPTH_M:g} m of the camera')
+        conf = joints.confidence
+        first_bad(conf, (conf >= 0) & (conf <= 1), 'confidence must be in [0, 1]')
+        cov = joints.covariance
+        first_bad(cov, np.abs(cov) <= MAX_DEPTH_M ** 2,
+                  f'covariance must be finite, within {MAX_DEPTH_M ** 2:g} m^2')
+    if np.isinf(joints.score):
+        raise ValueError(f'score must be finite or NaN, got {joints.score}')

@@ -43,6 +43,16 @@ def _valid_xyz(xyz: NDArray[np.float64]) -> NDArray[np.bool_]:
         return np.isfinite(xyz).all(axis=1) & (xyz[:, 2] > 0)
 
 
+def check_known(joints: JointSet, names: tuple[str, ...], intrinsics: Intrinsics | None
+                ) -> None:
+    """`joints.check_joints`, and ValueError when none of `joints` is one of `names`."""
+    cj.check_joints(joints, intrinsics)
+    if not set(joints.names) & set(names):
+        given = ', '.join(joints.names[:4]) + (', ...' if len(joints) > 4 else '')
+        raise ValueError(f'none of the {len(joints)} joints ({given or "none"}) is one of '
+                         f'{", ".join(names[:3])}, ...')
+
+
 def reorder(joints: JointSet, names: tuple[str, ...]) -> JointSet:
     """`joints` in the order of `names`; names it lacks are MISSING."""
     n = len(names)
@@ -100,7 +110,10 @@ class DetectorStage:
         """The detected parts of one frame (all MISSING when there is no person to search).
 
         `last_flags` tells why a result is doubtful ('no_person', 'low_score', 'no_depth').
+        ValueError when `intrinsics` are for another image size.
         """
+        if intrinsics is not None:
+            intrinsics.check_size(np.shape(color))
         poses = self.detector.detect(color, depth_m, mask=mask, intrinsics=intrinsics)
         if not poses:
             self.last_flags = ('no_person',)
@@ -154,7 +167,10 @@ class TrackerStage:
         Parts the detector missed are predicted (TRACKED); parts lost for too long are MISSING.
         3-D positions: the tracked pixel back-projected at the part's depth, which is the depth
         of its detection in this frame or, if not detected now, of its last detection.
+        ValueError (and the track untouched) for parts no camera could have seen
+        (`joints.check_joints`) or none of which the tree has.
         """
+        check_known(parts, self.tree.names, intrinsics)
         parts = reorder(parts, self.tree.names)
         state = self.filter.state
         cfg = self.filter.config
@@ -219,8 +235,13 @@ class IkStage:
 
         Joints of `tracked` are copied (a 3-D position behind the camera or not finite makes the
         joint MISSING); elbows and knees `tracked` does not have (or has MISSING) are INFERRED
-        where IK finds them, MISSING otherwise (root or end unknown).
+        where IK finds them, MISSING otherwise (root or end unknown). ValueError for joints no
+        camera could have seen (`joints.check_joints`), or a depth image of another size than
+        the intrinsics'.
         """
+        check_known(tracked, SKELETON_14, intrinsics)
+        if depth_m is not None and intrinsics is not None:
+            intrinsics.check_size(np.shape(depth_m), 'depth image')
         if tracked.track_id != self.track_id:  # a new person: learn their limbs anew
             self.learner = LimbLengths(self.defaults)
             self.track_id = tracked.track_id

@@ -353,6 +353,10 @@ def _box_iou(a: NDArray, b: NDArray) -> float:
     return float(inter / union) if union > 0 else 0.0
 
 
+# How far beyond its trained scale range the depth-guided search may look (a ratio).
+_SCALE_SLACK = 1.25
+
+
 @dataclass(frozen=True)
 class SearchPlan:
     """Where a frame is searched: the crop (full-image pixels) and the level scales."""
@@ -416,7 +420,12 @@ class Detector:
                 z = float(np.median(vals))
         if np.isfinite(z):
             k = intrinsics or cad60_intrinsics(w, h)
-            s_pred = k.fx * m.scale_length_m / z
+            # Bounded work whatever the input: a person the depth puts outside the scales the
+            # model was trained on is searched at the nearest trained scale, never on a pyramid
+            # blown up by a depth or focal length no camera gives.
+            lo, hi = m.scale_range_px
+            s_pred = float(np.clip(k.fx * m.scale_length_m / z, lo / _SCALE_SLACK,
+                                   hi * _SCALE_SLACK))
             f0 = m.canonical_scale_px / s_pred
             n = cfg.n_levels
             scales = tuple(f0 * cfg.level_step ** (i - (n - 1) / 2) for i in range(n))
