@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import signal
+import time
 
 import numpy as np
 import pytest
@@ -126,3 +127,105 @@ def test_subscriber_counts_parse_and_refuse() -> None:
             subscriber_counts([bad])
     assert override_args({'a.b': ['*=1'], 'c': 1.0, 'd': True, 'e': '/x:y'}) == [
         '-p', 'a.b:=["*=1"]', '-p', 'c:=1.0', '-p', 'd:=true', '-p', 'e:="/x:y"']
+
+
+def _ticks(ros, topic='test/ticks'):
+    """A reliable publisher of std_msgs/String on `topic` (keep all: nothing dropped)."""
+    from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
+    from std_msgs.msg import String
+
+    pub = ros.node.create_publisher(String, topic, QoSProfile(
+        depth=1, history=HistoryPolicy.KEEP_ALL, reliability=ReliabilityPolicy.RELIABLE))
+    return pub, String
+
+
+@pytest.mark.parametrize('sig', [signal.SIGINT, signal.SIGTERM])
+def test_recorder_signal_right_after_a_burst_loses_nothing(tmp_path, ros, sig):
+    """500 messages as fast as the peer can publish, the signal straight after the last one:
+    the recorder takes what is still on its way before it closes the bag."""
+    out = tmp_path / 'burst'
+    recorder = start('recorder', {'recorder.output': str(out),
+                                  'recorder.topics': ['test/ticks']}, log_dir=tmp_path)
+    pub, String = _ticks(ros)
+    try:
+        ros.wait_for_subscribers(pub, timeout=20)
+        ros.spin_for(0.5)
+        for k in range(500):
+            pub.publish(String(data=f'tick {k}'))
+    finally:
+        code = recorder.stop(sig)
+    assert code == 0, recorder.output()
+    got = [bag.deserialize(m).data for m in bag.read_messages(out)]
+    assert got == [f'tick {k}' for k in range(500)]
+    assert 'wrote 500 messages' in recorder.output()
+
+
+def test_recorder_killed_keeps_all_but_the_last_second(tmp_path, ros):
+    """kill -9 after 4 s at 30 Hz: the hidden partial recording is no bag (reading it says so
+    and how to repair it); `pose4d bag-repair` recovers every message older than the last
+    second (flushes every 0.5 s), in order, and the bag gets the recording's name."""
+    from pose4d_ros.cli.main import main as pose4d
+
+    out = tmp_path / 'killed'
+    recorder = start('recorder', {'recorder.output': str(out),
+                                  'recorder.topics': ['test/ticks']}, log_dir=tmp_path)
+    pub, String = _ticks(ros)
+    sent = []
+    try:
+        ros.wait_for_subscribers(pub, timeout=20)
+        ros.spin_for(0.5)
+        for k in range(120):
+            pub.publish(String(data=f'tick {k}'))
+            sent.append(time.monotonic())
+            ros.spin_for(1 / 30)
+    finally:
+        recorder.proc.kill()  # SIGKILL: no chance to close the bag
+        killed_at = time.monotonic()
+        recorder.wait(10)
+    assert not out.exists()
+    partial, = bag.partial_recordings(tmp_path)
+    with pytest.raises(ValueError, match='unfinished recording.*bag-repair'):
+        bag.topics(partial / out.name)
+    # the next recorder started beside it names it
+    again = start('recorder', {'recorder.output': str(tmp_path / 'next')}, log_dir=tmp_path)
+    try:
+        ros.spin_until(lambda: 'recording' in again.output(), 20, 'the recorder to start')
+    finally:
+        assert again.stop() == 0, again.output()
+    assert f'{partial}: an unfinished recording' in again.output()
+    assert pose4d(['bag-repair', str(partial)]) == 0
+    assert not partial.exists()
+    got = [bag.deserialize(m).data for m in bag.read_messages(out)]
+    older = sum(t < killed_at - 1.0 for t in sent)
+    assert got == [f'tick {k}' for k in range(len(got))]  # in order, nothing made up
+    assert len(got) >= older, (len(got), older)
+
+
+def test_bag_repair_of_sqlite3_and_of_a_damaged_mcap(tmp_path, capsys):
+    """A .db3 with committed rows and no metadata, and an .mcap cut in its middle chunk."""
+    from pose4d_ros.cli.main import main as pose4d
+
+    for storage in ('sqlite3', 'mcap'):
+        staging = tmp_path / f'.{storage}.partial-999999999'
+        staging.mkdir()
+        writer = bag.BagWriter(staging / 'rec', storage=storage)
+        writer.add_topic('/t', 'std_msgs/msg/String')
+        String = bag.typestore().types['std_msgs/msg/String']
+        for k in range(30):
+            writer.write('/t', k, String(data=f'tick {k}'))
+            if k % 10 == 9:
+                writer.flush()
+        stored = next((writer._staging / 'rec').glob('rec.*'))
+        copy = staging / 'rec' / stored.name
+        copy.parent.mkdir()
+        data = stored.read_bytes()
+        writer.abort()
+        if storage == 'mcap':  # cut the file in the middle of the last chunk
+            data = data[:len(data) - 20]
+        copy.write_bytes(data)
+        assert pose4d(['bag-repair', str(staging), '--out', str(tmp_path / storage)]) == 0
+        printed = capsys.readouterr().out
+        got = [bag.deserialize(m).data for m in bag.read_messages(tmp_path / storage)]
+        assert got == [f'tick {k}' for k in range(len(got))] and len(got) >= 20, printed
+        assert f'recovered {len(got)} messages' in printed
+    assert pose4d(['bag-repair', str(tmp_path / 'nothing')]) == 2

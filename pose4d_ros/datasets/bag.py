@@ -7,12 +7,15 @@ definitions and are self-describing.
 
 Writing is atomic: a bag is built in a hidden temporary directory beside its destination and
 renamed into place when closed, so a crash never leaves a half-written bag under the final name.
+`BagWriter.flush` puts what was written so far on disk (an MCAP chunk, a SQLite commit); after a
+crash (`kill -9`) `repair` turns the hidden partial recording into a bag of every flushed message.
 """
 
 from __future__ import annotations
 
 import os
 import shutil
+import sqlite3
 import sys
 from collections.abc import Iterable, Iterator
 from dataclasses import dataclass
@@ -31,6 +34,8 @@ from rosbags.interfaces import (
 )
 from rosbags.rosbag2 import Reader, Writer
 from rosbags.rosbag2.enums import CompressionFormat, CompressionMode, StoragePlugin
+from rosbags.rosbag2.metadata import parse_qos
+from rosbags.rosbag2.storage_mcap import decompress, get_qos
 from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 from rosbags.typesys.store import Typestore
 
@@ -40,6 +45,8 @@ MSG_PACKAGE = 'pose4d_msgs'
 MSG_NAMES = ('Joint', 'JointArray')
 
 _INFINITE = QosTime(0x7FFFFFFF, 0xFFFFFFFF)
+# Hidden staging directory of a bag being written: .NAME.partial-PID
+PARTIAL_MARK = '.partial-'
 
 
 def make_qos(*, reliable: bool, depth: int, transient_local: bool = False) -> Qos:
@@ -125,7 +132,8 @@ class BagWriter:
             raise FileExistsError(f'{self.path}: exists already, not overwriting')
         if not self.path.parent.is_dir():
             raise FileNotFoundError(f'{self.path.parent}: no such directory')
-        self._staging = self.path.parent / f'.{self.path.name}.partial-{os.getpid()}'
+        self.storage = storage
+        self._staging = self.path.parent / f'.{self.path.name}{PARTIAL_MARK}{os.getpid()}'
         shutil.rmtree(self._staging, ignore_errors=True)
         self._staging.mkdir()
         plugin = StoragePlugin.MCAP if storage == 'mcap' else StoragePlugin.SQLITE3
@@ -160,6 +168,20 @@ class BagWriter:
         self._writer.write(connection, int(timestamp_ns), bytes(message))
         self.counts[topic] += 1
 
+    def flush(self) -> None:
+        """Put every message written so far on disk, where `repair` finds it after a crash.
+
+        MCAP: the pending chunk is closed and the file flushed; SQLite: a commit. (rosbags'
+        storage objects, at the pinned version, do both only on `close`.)
+        """
+        storage = self._writer.storage
+        if self.storage == 'mcap':
+            if storage.chunk.bio.tell():
+                storage.close_chunk()
+            storage.bio.flush()
+        else:
+            storage.conn.commit()
+
     def close(self) -> Path:
         """Finish the bag and move it into place; returns its path."""
         self._writer.close()
@@ -189,7 +211,11 @@ def _open_reader(path: str | Path) -> Reader:
     if not path.exists():
         raise FileNotFoundError(f'{path}: no such bag')
     if not (path / 'metadata.yaml').is_file():
-        raise ValueError(f'{path}: not a rosbag2 directory (no metadata.yaml)')
+        hint = ''
+        if PARTIAL_MARK in str(path) or any(path.glob('*.mcap')) or any(path.glob('*.db3')):
+            hint = (': an unfinished recording (its recorder did not close it); '
+                    f'`pose4d bag-repair {path}` recovers what it holds')
+        raise ValueError(f'{path}: not a rosbag2 directory (no metadata.yaml){hint}')
     try:
         reader = Reader(path)
         reader.open()
@@ -263,3 +289,170 @@ def joint_set(msg: Any) -> JointSet:
 def stamp_ns(msg: Any) -> int:
     """Header stamp of a message read from a bag, nanoseconds."""
     return int(msg.header.stamp.sec) * 1_000_000_000 + int(msg.header.stamp.nanosec)
+
+
+# ------------------------------------------------------------------ crash recovery
+@dataclass(frozen=True)
+class Repaired:
+    """What `repair` saved: the new bag, its messages per topic, and what it had to skip."""
+
+    path: Path
+    counts: dict[str, int]
+    skipped: str
+
+
+def partial_recordings(directory: str | Path) -> list[Path]:
+    """Unfinished recordings (`BagWriter`'s hidden staging directories) in `directory` whose
+    writing process is gone: what a killed recorder leaves."""
+    out = []
+    for path in sorted(Path(directory).glob(f'.*{PARTIAL_MARK}*')):
+        pid = path.name.rpartition(PARTIAL_MARK)[2]
+        if path.is_dir() and not (pid.isdigit() and _alive(int(pid))):
+            out.append(path)
+    return out
+
+
+def _alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:
+        pass
+    return True
+
+
+def repair(partial: str | Path, out: str | Path | None = None) -> Repaired:
+    """Turn an unfinished recording (a recorder killed before it closed its bag) into a bag.
+
+    Reads every complete record of the partial .mcap (the chunks the recorder flushed; one cut
+    short by the crash or damaged is skipped and reported) or every committed row of the
+    partial .db3, and writes them to a new bag, atomically like every bag.
+
+    Parameters
+    ----------
+    partial : the hidden staging directory (.NAME.partial-PID), a directory in it, or the
+        .mcap/.db3 file.
+    out : the new bag; default: NAME beside the staging directory (the recording's name).
+    """
+    partial = Path(partial)
+    if not partial.exists():
+        raise FileNotFoundError(f'{partial}: no such file or directory')
+    files = [partial] if partial.is_file() else sorted(
+        f for pattern in ('*.mcap', '*.db3', '*/*.mcap', '*/*.db3') for f in partial.glob(pattern))
+    if not files:
+        raise ValueError(f'{partial}: no .mcap or .db3 file in it to repair')
+    source = files[0]
+    if out is None:
+        staging = next((p for p in (partial, *partial.parents) if PARTIAL_MARK in p.name), None)
+        if staging is None:
+            raise ValueError(f'{partial}: not a partial recording (.NAME{PARTIAL_MARK}PID); '
+                             'name the output')
+        out = staging.parent / staging.name[1:].rpartition(PARTIAL_MARK)[0]
+    sqlite = source.suffix == '.db3'
+    skipped: list[str] = []
+    with BagWriter(out, storage='sqlite3' if sqlite else 'mcap') as writer:
+        for kind, *item in (_scan_sqlite(source) if sqlite else _scan_mcap(source, skipped)):
+            (writer.add_topic if kind == 'topic' else writer.write)(*item)
+    return Repaired(Path(out), dict(writer.counts), '; '.join(skipped))
+
+
+def remove_partial(partial: str | Path) -> Path | None:
+    """Delete an unfinished recording's staging directory (.NAME.partial-PID), whichever path
+    inside it is given, and return it; None (nothing deleted) for any other path."""
+    partial = Path(partial).resolve()
+    staging = next((p for p in (partial, *partial.parents) if PARTIAL_MARK in p.name), None)
+    if staging is not None:
+        shutil.rmtree(staging)
+    return staging
+
+
+def _scan_sqlite(path: Path) -> Iterator[tuple]:
+    """('topic', name, type, qos) and ('message', topic, time, data) of every committed row
+    of a rosbag2 .db3."""
+    try:
+        con = sqlite3.connect(path)  # read-write: SQLite rolls back a crashed transaction
+        try:
+            names = {}
+            for tid, name, msgtype, qos in con.execute(
+                    'SELECT id, name, type, offered_qos_profiles FROM topics ORDER BY id'):
+                names[tid] = name
+                yield 'topic', name, msgtype, parse_qos(qos) if qos else [QOS_RELIABLE]
+            for tid, stamp, data in con.execute(
+                    'SELECT topic_id, timestamp, data FROM messages ORDER BY id'):
+                yield 'message', names[tid], stamp, bytes(data)
+        finally:
+            con.close()
+    except sqlite3.DatabaseError as exc:
+        raise ValueError(f'{path}: not a readable rosbag2 SQLite file: {exc}') from None
+
+
+def _scan_mcap(path: Path, skipped: list[str]) -> Iterator[tuple]:
+    """('topic', name, type, qos) and ('message', topic, time, data) of every complete record
+    of a rosbag2 .mcap, however it ends; what cannot be read is described in `skipped`."""
+    data = memoryview(path.read_bytes())
+    if bytes(data[:8]) != b'\x89MCAP0\r\n':
+        raise ValueError(f'{path}: not an MCAP file (bad magic)')
+    schemas: dict[int, str] = {}
+    channels: dict[int, str] = {}
+
+    def take(op: int, body: memoryview) -> Iterator[tuple]:
+        f = _Fields(body)
+        if op == 0x03:  # schema: id, name, encoding, data
+            sid = f.int(2)  # (read before the name: an assignment evaluates its right first)
+            schemas[sid] = f.bytes().decode()
+        elif op == 0x04:  # channel: id, schema id, topic, message encoding, metadata
+            cid, sid, topic = f.int(2), f.int(2), f.bytes().decode()
+            f.bytes()
+            if topic not in channels.values():
+                yield 'topic', topic, schemas[sid], get_qos(f.bytes())
+            channels[cid] = topic
+        elif op == 0x05:  # message: channel, sequence, log time, publish time, data
+            cid, _, log_time, _ = f.int(2), f.int(4), f.int(8), f.int(8)
+            yield 'message', channels[cid], log_time, bytes(f.body[f.pos:])
+
+    end = 8
+    for op, body, end in _records(data, 8):
+        try:
+            if op == 0x06:  # chunk: start, end, size, crc, compression, records
+                f = _Fields(body)
+                f.int(16)
+                size, crc, compression = f.int(8), f.int(4), f.bytes().decode()
+                raw = decompress(f.bytes(8), compression, size, crc)
+                for inner in _records(memoryview(raw), 0):
+                    yield from take(*inner[:2])
+            else:
+                yield from take(op, body)
+        except Exception as exc:  # noqa: BLE001 - zstd, CRC, decoding: the record is damaged
+            skipped.append(f'record at byte {end - len(body) - 9} unreadable ({exc})')
+    if end < len(data):
+        skipped.append(f'the last {len(data) - end} bytes, cut short')
+
+
+def _records(data: memoryview, pos: int) -> Iterator[tuple[int, memoryview, int]]:
+    """(opcode, body, end offset) of each complete MCAP record from `pos` on, up to a cut."""
+    while pos + 9 <= len(data):
+        op, length = data[pos], int.from_bytes(data[pos + 1:pos + 9], 'little')
+        if pos + 9 + length > len(data):
+            return  # the record a crash cut short
+        yield op, data[pos + 9:pos + 9 + length], pos + 9 + length
+        pos += 9 + length
+
+
+class _Fields:
+    """Little-endian fields of one MCAP record body, read in order."""
+
+    def __init__(self, body: memoryview) -> None:
+        self.body, self.pos = body, 0
+
+    def int(self, size: int) -> int:
+        return int.from_bytes(self._take(size), 'little')
+
+    def bytes(self, size_bytes: int = 4) -> bytes:
+        return bytes(self._take(self.int(size_bytes)))
+
+    def _take(self, size: int) -> memoryview:
+        if self.pos + size > len(self.body):
+            raise ValueError('record shorter than its fields')
+        self.pos += size
+        return self.body[self.pos - size:self.pos]

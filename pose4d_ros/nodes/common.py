@@ -16,6 +16,7 @@ import rclpy
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
+from rclpy.signals import SignalHandlerOptions
 from sensor_msgs.msg import CameraInfo
 from std_msgs.msg import Header
 
@@ -30,15 +31,18 @@ DIAGNOSTICS_TOPIC = '/diagnostics'
 
 
 def run(factory: Callable[[], Node], args: list[str] | None = None,
-        body: Callable[[Node], None] = rclpy.spin) -> int:
+        body: Callable[[Node], None] = rclpy.spin, *, signal_handlers: bool = True) -> int:
     """Jazzy's main(): init, spin (or `body`), clean shutdown on Ctrl-C/SIGTERM.
 
+    `signal_handlers=False`: rclpy does not shut the context down on SIGINT/SIGTERM; `body`
+    handles them (the recorder, which must still take what is on its way).
     Returns the exit status: 0, or 2 when a parameter was refused (logged as FATAL).
     """
     # One owner of parallelism: the graph's processes share the cores, and OpenBLAS threads
     # spin-waiting for a core make the detector's GEMM several times slower (core.dpm.threads).
     set_blas_threads(1)
-    rclpy.init(args=args)
+    rclpy.init(args=args, signal_handler_options=None if signal_handlers
+               else SignalHandlerOptions.NO)
     node = None
     code = 0
     try:

@@ -2,22 +2,31 @@
 
 Finds each topic's type and its publishers' QoS on the graph (like `ros2 bag record`: reliable
 only when every publisher is reliable), subscribes to the raw CDR bytes and writes them with
-their receive time. On SIGINT or SIGTERM the bag is closed cleanly and moved into place; until
-then it lives under a hidden temporary name, so a bag under the final name is always complete.
+their receive time. On SIGINT or SIGTERM it first takes what is still on its way (nothing
+published before the signal is lost), then closes the bag and moves it into place; until then
+it lives under a hidden temporary name (.NAME.partial-PID), so a bag under the final name is
+always complete. Every `recorder.flush_period_s` what was received is put on disk, so after a
+crash (`kill -9`) `pose4d bag-repair` recovers all but the last moments; at start the recorder
+names the unfinished recordings such crashes left beside its output.
 
 Subscriptions
     every topic in `recorder.topics` (relative names; namespaces and remapping apply)
 
 Parameters (config/recorder.yaml)
-    recorder.output, recorder.topics, recorder.storage, recorder.compress, recorder.depth
+    recorder.output, recorder.topics, recorder.storage, recorder.compress, recorder.depth,
+    recorder.flush_period_s
 """
 
 from __future__ import annotations
 
 import os
+import signal
+import threading
+import time
 from typing import Any
 
 import rclpy
+from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, ReliabilityPolicy
 
@@ -45,6 +54,8 @@ PARAMS = (
     Param('recorder.storage', 'mcap', 'rosbag2 storage plugin.', choices=('mcap', 'sqlite3')),
     Param('recorder.compress', True, 'zstd chunk compression (mcap).'),
     Param('recorder.depth', 1000, 'Subscription queue depth, messages.', range=(1, 100000)),
+    Param('recorder.flush_period_s', 0.5, 'Put what was received on disk this often, seconds '
+          '(what a crash can lose).', range=(0.05, 60.0)),
 )
 
 
@@ -65,7 +76,12 @@ class RecorderNode(Node):
         self.received = 0
         self.closed = False
         self.timer = self.create_timer(0.2, self.discover)
+        self.flush_timer = self.create_timer(p['recorder.flush_period_s'], self.writer.flush)
         self.get_logger().info(f'recording {", ".join(self.topics)} to {self.writer.path}')
+        for partial in bag.partial_recordings(self.writer.path.parent):
+            self.get_logger().warning(
+                f'{partial}: an unfinished recording (its recorder was killed); '
+                f'`pose4d bag-repair {partial}` turns what it holds into a bag')
         self.discover()
 
     def discover(self) -> None:
@@ -97,6 +113,17 @@ class RecorderNode(Node):
             self.received += 1
         return write
 
+    def drain(self, executor: SingleThreadedExecutor, *, quiet_s: float = 0.3,
+              limit_s: float = 3.0) -> None:
+        """Take messages still on their way until none came for `quiet_s` (at most
+        `limit_s`)."""
+        start = last = time.monotonic()
+        count = self.received
+        while time.monotonic() - start < limit_s and time.monotonic() - last < quiet_s:
+            executor.spin_once(timeout_sec=0.05)
+            if self.received != count:
+                count, last = self.received, time.monotonic()
+
     def close(self) -> None:
         if self.closed:
             return
@@ -108,5 +135,19 @@ class RecorderNode(Node):
             f'wrote {self.received} messages to {path}: {counts}')
 
 
+_stop = threading.Event()
+
+
+def record(node: RecorderNode) -> None:
+    """Spin until SIGINT or SIGTERM, then drain what publishers sent before it."""
+    executor = SingleThreadedExecutor(context=node.context)
+    executor.add_node(node)
+    while not _stop.is_set():
+        executor.spin_once(timeout_sec=0.1)
+    node.drain(executor)
+
+
 def main(args: list[str] | None = None) -> int:
-    return run(RecorderNode, args)
+    for sig in (signal.SIGINT, signal.SIGTERM):  # from the start: a signal is never lost
+        signal.signal(sig, lambda *_: _stop.set())
+    return run(RecorderNode, args, record, signal_handlers=False)
