@@ -4,6 +4,7 @@
 #   make demo    replay the bundled bag through the node graph and score the skeleton
 #   make test    lint + the whole test suite
 #   make setup   only the set-up (.venv, pose4d_msgs built into it, pose4d_ros installed)
+#   make peer    MediaPipe Pose 0.10.21 in its own venv (.venv-peer), for `--peer mediapipe`
 
 SHELL := /bin/bash
 .SHELLFLAGS := -eu -o pipefail -c
@@ -26,10 +27,10 @@ PKG_SOURCES := setup.py setup.cfg package.xml resource/pose4d_ros \
 	$(shell find pose4d_ros config bags -type f ! -name '*.pyc' 2>/dev/null)
 MSG_SOURCES := pose4d_msgs/CMakeLists.txt pose4d_msgs/package.xml $(wildcard pose4d_msgs/msg/*.msg)
 
-.PHONY: help setup test lint demo bench sample-bag clean
+.PHONY: help setup test lint demo bench peer sample-bag clean
 
 help:
-	@echo 'make demo | make test | make setup | make lint | make bench | make sample-bag | make clean'
+	@echo 'make demo | make test | make setup | make lint | make bench | make peer | make sample-bag | make clean'
 
 setup: $(VENV)/.stamp-pkg
 
@@ -71,6 +72,18 @@ demo: setup
 bench: setup
 	$(BIN)/pose4d bench bags/sample --json out/bench.json --graph
 
+# The peer: MediaPipe Pose in a venv of its own (its numpy<2 and opencv-contrib-python clash with
+# ours); `pose4d eval/bench --peer mediapipe` run its worker there. Nodes and tests never need it.
+PEER_VENV := $(CURDIR)/.venv-peer
+peer: setup $(PEER_VENV)/.stamp
+
+$(PEER_VENV)/.stamp: requirements/peer.txt
+	test -x $(PEER_VENV)/bin/python || $(PYTHON) -m venv $(PEER_VENV)
+	$(PEER_VENV)/bin/python -m pip install --quiet -r requirements/peer.txt
+	$(PEER_VENV)/bin/python -c 'import mediapipe as mp; mp.solutions.pose.Pose(model_complexity=1).close(); print("MediaPipe", mp.__version__, "ready in $(PEER_VENV)")' \
+		2>$(PEER_VENV)/check.log || { cat $(PEER_VENV)/check.log; exit 1; }
+	touch $@
+
 # The bundled sample bag: 45 frames (1.5 s at 30 fps) of a synthetic RGB-D person (no occluder) posed by held-out
 # UTKinect motion (subject 8, waving), made by the project's own tools from ../shared/data.
 UTKINECT ?= ../shared/data/utkinect
@@ -85,4 +98,4 @@ clean:
 	rm -rf build out .pytest_cache .ruff_cache *.egg-info
 
 distclean: clean
-	rm -rf $(VENV)
+	rm -rf $(VENV) $(PEER_VENV)

@@ -16,6 +16,7 @@ from pose4d_ros.core.skeleton import PARTS_10, PARTS_14
 GROUPS_14 = ['head', 'shoulder', 'elbow', 'wrist', 'hip', 'knee', 'ankle', 'average']
 GROUPS_10 = ['head', 'shoulder', 'wrist', 'hip', 'ankle', 'average']
 METRICS = ['pck', 'pck@0.2', 'apk', 'error_px']
+METRICS_3D = METRICS + ['error_mm', 'within_10cm']  # rows with depth
 
 
 @pytest.fixture(scope='module')
@@ -55,10 +56,12 @@ def test_eval_writes_the_table_json(tiny_set: Path, tmp_path: Path, capsys) -> N
     # the rgbd model runs as the graph does: detector, + Kalman filter, + IK (elbows, knees)
     assert list(table['rows']) == ['rgbd', 'rgbd_kf', 'rgbd_kf_ik', 'rgb']
     for name, row in table['rows'].items():
-        assert list(row) == METRICS
+        metrics = METRICS if name == 'rgb' else METRICS_3D
+        assert list(row) == metrics
         groups = GROUPS_14 if name.endswith('_ik') else GROUPS_10
-        for metric in METRICS:
-            assert list(row[metric]) == groups
+        for metric in metrics:
+            assert list(row[metric]) == groups + (['average7'] if metric.startswith('pck')
+                                                  else [])
             for v in row[metric].values():
                 assert v is None or np.isfinite(v)
         assert all(0 <= row['pck'][g] <= 100 for g in groups)
@@ -114,8 +117,7 @@ def test_eval_on_an_lspet_layout_scores_elbows_and_knees(tmp_path: Path) -> None
                         '--model', str(model)]) == 0
     table = json.loads(out.read_text())
     assert table['frames'] == 3 and list(table['rows']) == ['rgb']
-    assert list(table['rows']['rgb']['pck']) == ['head', 'shoulder', 'elbow', 'wrist', 'hip',
-                                                 'knee', 'ankle', 'average']
+    assert list(table['rows']['rgb']['pck']) == GROUPS_14 + ['average7']
 
 
 @pytest.mark.parametrize(('argv', 'message'), [

@@ -24,6 +24,7 @@ from typing import Any
 import cv2
 import numpy as np
 
+from pose4d_ros.cli.eval import format_table
 from pose4d_ros.core.draw import draw_skeleton, legend
 from pose4d_ros.core.files import write_atomic, write_json
 from pose4d_ros.core.joints import JointSet
@@ -278,8 +279,8 @@ def report(bag_path: Path, result: GraphRun, args: argparse.Namespace) -> int:
                        if latency.size else None),
         'graph': table, 'offline': offline['rows'],
     }
-    print_table({'graph (live, rgbd+kf+ik)': table,
-                 **{f'offline {k}': v for k, v in offline['rows'].items()}})
+    print(format_table({'graph (live, rgbd+kf+ik)': table,
+                        **{f'offline {k}': v for k, v in offline['rows'].items()}}, frames))
     print(f'\nframes in {frames} (replayed at {result.input_rate_hz():.1f} Hz), skeletons out '
           f'{len(skeletons)}, lost {frames - len(skeletons)}')
     if latency.size:
@@ -293,17 +294,6 @@ def report(bag_path: Path, result: GraphRun, args: argparse.Namespace) -> int:
     write_json(args.out / 'results.json', results, indent=1)
     print(f'wrote {args.out / "overlay.png"} and {args.out / "results.json"}')
     return 0 if len(skeletons) else 1
-
-
-def print_table(rows: dict[str, dict[str, dict[str, float]]]) -> None:
-    groups = ['head', 'shoulder', 'elbow', 'wrist', 'hip', 'knee', 'ankle', 'average']
-    for metric in ('pck', 'pck@0.2', 'apk', 'error_px'):
-        print(f'\n{metric:<26}' + ''.join(f'{g:>9}' for g in groups))
-        for name, table in rows.items():
-            vals = table.get(metric, {})
-            print(f'{name:<26}' + ''.join(
-                f'{vals[g]:9.1f}' if g in vals and np.isfinite(vals[g]) else f'{"-":>9}'
-                for g in groups))
 
 
 def overlay_picture(bag_path: Path, stamps: list[int], skeletons: dict, truths: list,

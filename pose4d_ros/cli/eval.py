@@ -44,7 +44,8 @@ from pose4d_ros.datasets.sources import Sample, source_kind
 from pose4d_ros.models import model_path
 
 TABLE_METRICS = (('pck', 'PCK@0.1 (%)'), ('pck@0.2', 'PCK@0.2 (%)'), ('apk', 'APK (%)'),
-                 ('error_px', 'error (px)'))
+                 ('error_px', 'error (px)'), ('error_mm', '3-D median error (mm)'),
+                 ('within_10cm', '3-D within 10 cm (%)'))
 
 
 @dataclass
@@ -144,17 +145,22 @@ def score(pred: Predictions, samples: Sequence[Sample]) -> dict[str, dict[str, f
 
 
 def format_table(rows: dict[str, dict[str, dict[str, float]]], frames: int) -> str:
-    """The rows as text: one block per metric, groups as columns."""
+    """The rows as text: one block per metric (those some row has), groups as columns; '-'
+    where a row has no value, 'inf' for a median that more than half the joints miss."""
     groups = [g for g in JOINT_GROUPS if any(g in r['pck'] for r in rows.values())]
-    cols = groups + ['average']
+    cols = groups + ['average', 'average7']
+    width = max(14, *(len(name) + 2 for name in rows))
     lines = [f'{frames} frames']
     for key, title in TABLE_METRICS:
+        if not any(key in row for row in rows.values()):
+            continue
         lines.append('')
-        lines.append(f'{title:<14}' + ''.join(f'{c:>10}' for c in cols))
+        lines.append(title)
+        lines.append(' ' * width + ''.join(f'{c:>10}' for c in cols))
         for name, row in rows.items():
-            vals = row[key]
-            lines.append(f'{name:<14}' + ''.join(
-                f'{vals[c]:>10.1f}' if c in vals and np.isfinite(vals[c]) else f'{"-":>10}'
+            vals = row.get(key, {})
+            lines.append(f'{name:<{width}}' + ''.join(
+                f'{vals[c]:>10.1f}' if c in vals and not np.isnan(vals[c]) else f'{"-":>10}'
                 for c in cols))
     return '\n'.join(lines)
 

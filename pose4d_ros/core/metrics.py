@@ -8,9 +8,16 @@
   false positive. Average precision over the precision-recall curve (all points, VOC style),
   recall relative to the number of visible ground-truth joints.
 - Error: mean pixel distance to the ground truth, over the joints that were predicted.
+- 3-D (where predictions and ground truth have 3-D positions): over the same joints as PCK
+  (visible ground truth with a 3-D position), the median distance to the ground truth in mm
+  (`error_mm`) and the percentage within 10 cm (`within_10cm`). A joint without a predicted 3-D
+  position counts as infinitely far: it is never within 10 cm, and when more than half of a
+  group's joints have none, its median is infinite (null in JSON).
 
-Left and right joints are pooled into groups (`skeleton.JOINT_GROUPS`) and the average is taken
-over the groups of the paper's tables that are present.
+Left and right joints are pooled into groups (`skeleton.JOINT_GROUPS`). The PCK, APK and pixel
+error `average` is over the groups of the paper's tables present (head, shoulder, wrist, hip,
+ankle); PCK's `average7` is over all seven groups (NaN unless all seven are scored); the 3-D
+metrics' `average` is over every group present.
 """
 
 from __future__ import annotations
@@ -22,6 +29,8 @@ from numpy.typing import NDArray
 
 from pose4d_ros.core.joints import MISSING, JointSet
 from pose4d_ros.core.skeleton import JOINT_GROUPS, TABLE_GROUPS, ground_truth_name
+
+WITHIN_M = 0.10  # the 3-D hit distance of `within_10cm`, metres
 
 
 def reference_size(gt: NDArray[np.floating], visible: NDArray[np.bool_]) -> NDArray[np.float64]:
@@ -95,9 +104,11 @@ def average_precision(scores: NDArray, true_positive: NDArray[np.bool_], n_posit
 
 
 def score_groups(pred: NDArray, scores: NDArray, gt: NDArray, visible: NDArray,
-                 names: list[str] | tuple[str, ...], *, alphas: tuple[float, ...] = (0.1, 0.2)
+                 names: list[str] | tuple[str, ...], *, alphas: tuple[float, ...] = (0.1, 0.2),
+                 pred_xyz: NDArray | None = None, gt_xyz: NDArray | None = None
                  ) -> dict[str, dict[str, float]]:
-    """The paper's table for one method: PCK, APK and pixel error per joint group.
+    """The paper's table for one method: PCK, APK and pixel error per joint group, and the
+    3-D errors when `pred_xyz` and `gt_xyz` are given.
 
     Parameters
     ----------
@@ -108,14 +119,22 @@ def score_groups(pred: NDArray, scores: NDArray, gt: NDArray, visible: NDArray,
     names : J joint names (skeleton names; see `skeleton.JOINT_GROUPS`).
     alphas : PCK thresholds; the first is the main one (`pck`, `apk`), each also gives
         `pck@<alpha>`.
+    pred_xyz, gt_xyz : (F, J, 3) float metres in one frame (the camera's), NaN = unknown.
 
     Returns
     -------
-    {'pck': {group: percent, ..., 'average': percent}, 'pck@0.2': {...}, 'apk': {...},
-    'error_px': {...}} over the groups present in `names`; `average` is over the paper's
-    table groups present (head, shoulder, wrist, hip, ankle).
+    {'pck': {group: percent, ..., 'average': percent, 'average7': percent}, 'pck@0.2':
+    {...}, 'apk': {...}, 'error_px': {...}} over the groups present in `names`, and with 3-D
+    'error_mm' {group: mm, ..., 'average': mm} and 'within_10cm' {group: percent, ...,
+    'average': percent}.
     """
     _check(pred, gt, visible)
+    if (pred_xyz is None) != (gt_xyz is None):
+        raise ValueError('give both pred_xyz and gt_xyz, or neither')
+    if gt_xyz is not None and not (np.shape(pred_xyz) == np.shape(gt_xyz)
+                                   == np.shape(gt)[:2] + (3,)):
+        raise ValueError(f'pred_xyz {np.shape(pred_xyz)} and gt_xyz {np.shape(gt_xyz)} must '
+                         f'both be (F, J, 3) = {np.shape(gt)[:2] + (3,)}')
     scores = np.asarray(scores, np.float64)
     if scores.shape != np.shape(gt)[:2]:
         raise ValueError(f'scores {scores.shape} must be (F, J) = {np.shape(gt)[:2]}')
@@ -132,8 +151,10 @@ def score_groups(pred: NDArray, scores: NDArray, gt: NDArray, visible: NDArray,
         hit, counted = correct(pred, gt, visible, alpha=alpha)
         pck = {g: 100.0 * float(hit[:, idx].sum()) / max(int(counted[:, idx].sum()), 1)
                for g, idx in groups.items()}
-        table['pck' if k == 0 else f'pck@{alpha:g}'] = _with_average(pck)
+        table['pck' if k == 0 else f'pck@{alpha:g}'] = {
+            **_with_average(pck), 'average7': _mean([pck.get(g, np.nan) for g in JOINT_GROUPS])}
         if k == 0:
+            counted_main = counted
             apk = {}
             for g, idx in groups.items():
                 det = predicted[:, idx] & np.isfinite(scores[:, idx])
@@ -145,10 +166,36 @@ def score_groups(pred: NDArray, scores: NDArray, gt: NDArray, visible: NDArray,
         ok = predicted[:, idx] & np.asarray(visible, bool)[:, idx] & np.isfinite(dist[:, idx])
         err[g] = float(dist[:, idx][ok].mean()) if ok.any() else float('nan')
     table['error_px'] = _with_average(err)
-    # main alpha first for readers: pck, pck@0.2, apk, error_px
+    if gt_xyz is not None:
+        table.update(_errors_3d(np.asarray(pred_xyz, np.float64), np.asarray(gt_xyz, np.float64),
+                                counted_main, groups))
+    # main alpha first for readers: pck, pck@0.2, apk, error_px, error_mm, within_10cm
     if len(alphas) > 1:
         table = {'pck': table['pck'], **{k: v for k, v in table.items() if k != 'pck'}}
     return table
+
+
+def _errors_3d(pred_xyz: NDArray[np.float64], gt_xyz: NDArray[np.float64],
+               counted: NDArray[np.bool_], groups: dict[str, list[int]]
+               ) -> dict[str, dict[str, float]]:
+    """`error_mm` and `within_10cm` per group (see the module docstring)."""
+    scored = counted & np.isfinite(gt_xyz).all(axis=2)
+    dist = np.linalg.norm(pred_xyz - gt_xyz, axis=2)
+    dist[~np.isfinite(dist)] = np.inf  # no predicted 3-D position: never close enough
+    error_mm, within = {}, {}
+    for g, idx in groups.items():
+        d = dist[:, idx][scored[:, idx]]
+        error_mm[g] = 1e3 * float(np.median(d)) if d.size else float('nan')
+        within[g] = 100.0 * float(np.mean(d <= WITHIN_M)) if d.size else float('nan')
+    scored_groups = [g for g in groups if not np.isnan(error_mm[g])]
+    return {'error_mm': {**error_mm, 'average': _mean([error_mm[g] for g in scored_groups])},
+            'within_10cm': {**within, 'average': _mean([within[g] for g in scored_groups])}}
+
+
+def _mean(values: list[float]) -> float:
+    """The mean, NaN if any value is NaN (a group not scored) or there is none; an infinite
+    value makes it infinite."""
+    return float(np.mean(values)) if values and not np.isnan(values).any() else float('nan')
 
 
 def _with_average(values: dict[str, float]) -> dict[str, float]:
@@ -174,19 +221,25 @@ def score_joint_sets(predictions: list[JointSet | None], truths: list[JointSet],
         `left_hand`).
     names : the joints to score (predicted names).
     image_size : (width, height); ground-truth joints outside the image are not visible.
+
+    The 3-D errors are scored when the ground truth has 3-D positions and the predictions
+    have any (a row without 3-D output, such as the RGB-only baseline, has none).
     """
     if len(predictions) != len(truths):
         raise ValueError(f'{len(predictions)} predictions for {len(truths)} frames')
     f, j = len(truths), len(names)
     pred = np.full((f, j, 2), np.nan)
+    pred_xyz = np.full((f, j, 3), np.nan)
     scores = np.full((f, j), np.nan)
     gt = np.full((f, j, 2), np.nan)
+    gt_xyz = np.full((f, j, 3), np.nan)
     visible = np.zeros((f, j), bool)
     for k, (p, t) in enumerate(zip(predictions, truths, strict=True)):
         for i, name in enumerate(names):
             ti = t.get(ground_truth_name(name))
             if ti is not None:
                 gt[k, i] = t.uv[ti]
+                gt_xyz[k, i] = t.xyz[ti]
                 u, v = t.uv[ti]
                 visible[k, i] = bool(t.confidence[ti] > 0) and bool(np.isfinite(t.uv[ti]).all())
                 if image_size is not None:
@@ -195,5 +248,9 @@ def score_joint_sets(predictions: list[JointSet | None], truths: list[JointSet],
             pi = p.get(name) if p is not None else None
             if pi is not None and p.source[pi] != MISSING:
                 pred[k, i] = p.uv[pi]
+                pred_xyz[k, i] = p.xyz[pi]
                 scores[k, i] = p.confidence[pi]
-    return score_groups(pred, scores, gt, visible, names, alphas=alphas)
+    with_3d = np.isfinite(gt_xyz).any() and np.isfinite(pred_xyz).any()
+    return score_groups(pred, scores, gt, visible, names, alphas=alphas,
+                        pred_xyz=pred_xyz if with_3d else None,
+                        gt_xyz=gt_xyz if with_3d else None)

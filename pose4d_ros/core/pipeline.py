@@ -36,6 +36,10 @@ from pose4d_ros.core.kinematics import IkConfig, IkFlag, LimbLengths, infer_midd
 from pose4d_ros.core.skeleton import LIMBS, PARTS_10, SKELETON_14, PartTree
 from pose4d_ros.core.slqe import ConstantVelocityTracker, CvConfig, SlqeConfig, SlqeTracker
 
+# Half-size of the window of the robust depth look-up that lifts a detected joint to 3-D, pixels
+# (the detector's default; `pose4d_ros.peer` lifts MediaPipe's joints with it too)
+DEPTH_RADIUS_PX = 3
+
 
 def _valid_xyz(xyz: NDArray[np.float64]) -> NDArray[np.bool_]:
     """Finite and in front of the camera."""
@@ -84,7 +88,7 @@ class DetectorStage:
     """
 
     def __init__(self, model: PartModel, *, search: SearchConfig | None = None,
-                 depth_radius_px: int = 3, min_confidence: float = 0.0) -> None:
+                 depth_radius_px: int = DEPTH_RADIUS_PX, min_confidence: float = 0.0) -> None:
         if depth_radius_px < 0:
             raise ValueError(f'depth_radius_px must be >= 0, got {depth_radius_px}')
         if not 0.0 <= min_confidence <= 1.0:
