@@ -318,7 +318,7 @@ def test_config_is_frozen() -> None:
 @pytest.mark.shared_data
 @pytest.mark.skipif(not UTKINECT.is_dir(), reason=f'{UTKINECT} not present')
 def test_rendered_people_in_furnished_rooms() -> None:
-    from pose4d_ros.datasets import synth_video
+    from pose4d_ros.synth import video as synth_video
 
     scores = []
     for name in ('s07_e01', 's08_e02'):

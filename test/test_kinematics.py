@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 from numpy.testing import assert_allclose
 
+from pose4d_ros.cli._motion_eval import splat_capsules
 from pose4d_ros.core.camera import cad60_intrinsics, robust_depth
 from pose4d_ros.core.kinematics import (
     DEFAULT_LIMB_LENGTHS_M,
@@ -23,7 +24,6 @@ from pose4d_ros.core.kinematics import (
     middle_joint_circle,
     solve_limb,
 )
-from pose4d_ros.core.motion_eval import splat_capsules
 from pose4d_ros.core.skeleton import PARTS_10
 
 K = cad60_intrinsics()

@@ -16,7 +16,8 @@ def frames(request):
     """Three rendered frames of a person in a room (real UTKinect motion when available)."""
     from conftest import SHARED_DATA
 
-    from pose4d_ros.datasets import synth, utkinect
+    from pose4d_ros.datasets import utkinect
+    from pose4d_ros.synth import render as synth
 
     rng = np.random.default_rng(3)
     body = synth.random_body(rng)

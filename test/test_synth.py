@@ -17,10 +17,12 @@ from numpy.testing import assert_allclose, assert_array_equal
 from pose4d_ros.cli.main import main as pose4d_main
 from pose4d_ros.core.camera import cad60_intrinsics, project
 from pose4d_ros.core.skeleton import CAD60_JOINTS
-from pose4d_ros.datasets import cad60, synth, synth_video
-from pose4d_ros.datasets.synth_kinect import KinectModel, kinect_depth
-from pose4d_ros.datasets.synth_raycast import projector_shadow
+from pose4d_ros.datasets import cad60
 from pose4d_ros.datasets.utkinect import UTKINECT_JOINTS
+from pose4d_ros.synth import render as synth
+from pose4d_ros.synth import video as synth_video
+from pose4d_ros.synth.kinect import KinectModel, kinect_depth
+from pose4d_ros.synth.raycast import projector_shadow
 
 UTKINECT = Path(__file__).resolve().parents[2] / 'shared' / 'data' / 'utkinect'
 K = cad60_intrinsics()

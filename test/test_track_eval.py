@@ -1,4 +1,4 @@
-"""Offline evaluation of tracker and IK on motion (core/motion_eval.py, `pose4d track-eval`)."""
+"""Offline evaluation of tracker and IK on motion (cli/_motion_eval.py, `pose4d track-eval`)."""
 
 from __future__ import annotations
 
@@ -10,8 +10,8 @@ import numpy as np
 import pytest
 from numpy.testing import assert_allclose
 
+from pose4d_ros.cli import _motion_eval as me
 from pose4d_ros.cli.main import main
-from pose4d_ros.core import motion_eval as me
 from pose4d_ros.core.camera import cad60_intrinsics
 from pose4d_ros.core.kinematics import IkConfig
 from pose4d_ros.core.slqe import CvConfig, SlqeConfig

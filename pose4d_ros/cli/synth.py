@@ -1,7 +1,7 @@
 """`pose4d synth`: render synthetic RGB-D people in CAD-60's on-disk format.
 
 People are posed by real Kinect motion (UTKinect takes), each video a window of a take on a new
-random body in a new random room (see `pose4d_ros.datasets.synth_video`). Output: one `dataN/`
+random body in a new random room (see `pose4d_ros.synth.video`). Output: one `dataN/`
 per UTKinect subject N, each with `activityLabel.txt` and its videos (`<id>.txt`,
 `<id>/RGB_<k>.png`, `<id>/Depth_<k>.png`, plus `<id>/Mask_<k>.png`, the person mask), and a
 `synth.json` at the top recording the command's parameters and every video's source. The set
@@ -113,15 +113,17 @@ def run(args: argparse.Namespace) -> int:
     # heavy imports here, so that `pose4d --help` stays fast
     from tqdm import tqdm
 
-    from pose4d_ros.datasets import cad60, synth, synth_video
+    from pose4d_ros.datasets import cad60
     from pose4d_ros.datasets.utkinect import list_takes
+    from pose4d_ros.synth import video
+    from pose4d_ros.synth.render import Body
 
     _check(args)
     available = [p.name[len('joints_'):-len('.txt')] for p in list_takes(args.utkinect)]
     names = parse_takes(args.takes, available)
     intrinsics = cad60_intrinsics(args.width, args.height)
-    motions = synth_video.load_takes(args.utkinect, names)
-    plans = [plan for m in motions for plan in synth_video.plan_videos(
+    motions = video.load_takes(args.utkinect, names)
+    plans = [plan for m in motions for plan in video.plan_videos(
         m, seed=args.seed, videos=args.videos_per_take, frames=args.frames, stride=args.stride,
         start_s=args.start)]
     by_take = {m.name: m for m in motions}
@@ -133,7 +135,7 @@ def run(args: argparse.Namespace) -> int:
     n_bytes = 0
     try:
         labels: dict[int, dict[str, str]] = {}
-        bodies: dict[int, synth.Body] = {}
+        bodies: dict[int, Body] = {}
         records = []
         with tqdm(total=total, unit='frame', desc='pose4d synth', disable=args.quiet,
                   file=sys.stderr) as bar:
@@ -141,14 +143,14 @@ def run(args: argparse.Namespace) -> int:
                 body = None
                 if args.body_per == 'subject':
                     if plan.subject not in bodies:
-                        bodies[plan.subject] = synth_video.subject_body(args.seed, plan.subject)
+                        bodies[plan.subject] = video.subject_body(args.seed, plan.subject)
                     body = bodies[plan.subject]
-                job = synth_video.prepare_video(plan, by_take[plan.take], intrinsics,
+                job = video.prepare_video(plan, by_take[plan.take], intrinsics,
                                                 body=body, occluder_prob=args.occluders,
                                                 kinect_noise=not args.no_noise)
                 person_dir = tmp / f'data{plan.subject}'
                 person_dir.mkdir(exist_ok=True)
-                n_bytes += synth_video.write_video(job, person_dir, progress=bar.update)
+                n_bytes += video.write_video(job, person_dir, progress=bar.update)
                 labels.setdefault(plan.subject, {})[plan.video_id] = plan.activity
                 records.append({
                     'video': f'data{plan.subject}/{plan.video_id}', 'take': plan.take,

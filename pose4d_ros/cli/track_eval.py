@@ -19,7 +19,7 @@ from dataclasses import replace
 from pathlib import Path
 
 from pose4d_ros import __version__
-from pose4d_ros.core import motion_eval as me
+from pose4d_ros.cli import _motion_eval as me
 from pose4d_ros.core.files import write_json
 from pose4d_ros.core.kinematics import IkConfig
 from pose4d_ros.core.slqe import CvConfig, SlqeConfig
@@ -187,13 +187,9 @@ def _run_ik(args: argparse.Namespace, train: list, test: list, say) -> dict:
     out['config'] = me.config_dict(config)
     out['prior_shrink'] = shrink
     shrunk = replace(config, prior_shrink=shrink)
-    renderer = None
-    if not args.no_render:
-        try:
-            renderer = {name: me.synth_renderer(segs, seed=args.seed)
-                        for name, segs in (('train', train), ('test', test))}
-        except ImportError as exc:  # the renderer is optional for this evaluation
-            say(f'synthetic renderer unavailable ({exc}); skipping that variant')
+    renderer = None if args.no_render else {
+        name: me.synth_renderer(segs, seed=args.seed)
+        for name, segs in (('train', train), ('test', test))}
     for name, segs in (('train', train), ('test', test)):
         rows: dict = {}
         for mode in ('take', 'fixed'):

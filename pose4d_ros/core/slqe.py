@@ -85,7 +85,7 @@ class SlqeConfig:
     The defaults of `coupling`, `process_noise`, `measurement_noise_px`, `gate_chi2` and
     `output` were tuned on real motion (UTKinect subjects s01-s06 at 30 fps, 320x240, detector-
     like corruption: 3 px noise, 10 % outliers 20-60 px away, 5 % dropouts; see
-    `core.motion_eval.tune_tracking`).
+    `cli._motion_eval.tune_tracking`).
 
     Attributes
     ----------

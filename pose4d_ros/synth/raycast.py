@@ -74,7 +74,7 @@ def raycast_boxes(fx: float, fy: float, cx: float, cy: float, height: int, width
     rots : (N, 3, 3) float64; row k = the box's local axis k in the optical frame.
     halves : (N, 3) float64 half sizes along the local axes, metres.
     mats : (N,) int64 material index.
-    tiles, scale : materials (see synth_textures.Materials).
+    tiles, scale : materials (see textures.Materials).
     depth : (H, W) float32 out, z metres (inf = nothing hit).
     normal : (H, W, 3) float32 out, unit normal facing the camera.
     albedo : (H, W, 3) float32 out.

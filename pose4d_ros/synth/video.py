@@ -4,7 +4,7 @@ A take is resampled to 30 fps (`utkinect.resample`) and moved into a floor frame
 the plane through the lower foot joint of each frame (robust least squares), which removes the
 recording camera's height and tilt; the lower foot is then put on it in every frame. A
 video is a window of a take (every `stride`-th frame), posed by that motion on a fresh random
-body (`synth.random_body`) in a fresh random room (`synth.random_scene`): the walk keeps its
+body (`render.random_body`) in a fresh random room (`render.random_scene`): the walk keeps its
 shape and its heading towards the camera but is turned by up to +-25 degrees and moved so that
 the person stands 2.4-3.4 m from the camera, clear of the furniture and behind any occluder.
 Windows in which the person sits get a chair under the hips. The light's strength drifts
@@ -26,10 +26,11 @@ import numpy as np
 from numpy.typing import NDArray
 
 from pose4d_ros.core.camera import Intrinsics
-from pose4d_ros.datasets import cad60, synth
-from pose4d_ros.datasets import synth_textures as tex
-from pose4d_ros.datasets.synth import HC, LAN, LFT, RAN, RFT, Body, Rendered, Scene
+from pose4d_ros.datasets import cad60
 from pose4d_ros.datasets.utkinect import read_actions, read_take, resample, to_optical
+from pose4d_ros.synth import render
+from pose4d_ros.synth import textures as tex
+from pose4d_ros.synth.render import HC, LAN, LFT, RAN, RFT, Body, Rendered, Scene
 
 FPS = 30.0
 SIT_ACTIONS = ('sitDown', 'standUp')
@@ -201,7 +202,7 @@ def video_rng(plan: VideoPlan, what: int) -> np.random.Generator:
 
 def subject_body(seed: int, subject: int) -> Body:
     """One body for all videos of a subject (`pose4d synth --body-per subject`)."""
-    return synth.random_body(np.random.default_rng([seed, subject, 0, 0, 0]))
+    return render.random_body(np.random.default_rng([seed, subject, 0, 0, 0]))
 
 
 @dataclass(frozen=True, eq=False)
@@ -221,9 +222,9 @@ def prepare_video(plan: VideoPlan, motion: TakeMotion, intrinsics: Intrinsics, *
                   body: Body | None = None, occluder_prob: float = 0.3,
                   kinect_noise: bool = True) -> VideoJob:
     """Draw the body (unless given) and the room, place the motion, add a chair if needed."""
-    body = body if body is not None else synth.random_body(video_rng(plan, 1))
+    body = body if body is not None else render.random_body(video_rng(plan, 1))
     rng = video_rng(plan, 2)
-    scene = synth.random_scene(rng, intrinsics, occluder_prob=occluder_prob)
+    scene = render.random_scene(rng, intrinsics, occluder_prob=occluder_prob)
     room = motion.joints[plan.indices].copy()
     # The lower foot joint sits a shoe's radius above the floor in every frame: Kinect's foot
     # joints scatter by centimetres (decimetres when mis-tracked) about the fitted floor, and
@@ -247,7 +248,7 @@ def place_in_room(joints: NDArray[np.float64], scene: Scene, rng: np.random.Gene
 
     The motion is turned about the vertical through its mean hip position by up to 25 degrees
     and moved to a random spot 2.4-3.4 m ahead; the spot that keeps the hips inside
-    `synth.PERSON_ZONE`, 0.35 m clear of furniture and 0.45 m behind any occluder in the most
+    `render.PERSON_ZONE`, 0.35 m clear of furniture and 0.45 m behind any occluder in the most
     frames wins (the first that does so in all frames).
 
     Parameters
@@ -262,7 +263,7 @@ def place_in_room(joints: NDArray[np.float64], scene: Scene, rng: np.random.Gene
     centre = hips.mean(axis=0)
     furniture = scene.footprints(('furniture',))
     occluders = scene.footprints(('occluder',))
-    x0, x1, y0, y1 = synth.PERSON_ZONE
+    x0, x1, y0, y1 = render.PERSON_ZONE
     best = None
     for _ in range(tries):
         yaw = np.deg2rad(rng.uniform(-25.0, 25.0))
@@ -295,22 +296,22 @@ def _add_seat(scene: Scene, room: NDArray[np.float64], body: Body, standing_hip:
     k = int(np.argmin(room[:, HC, 2]))
     if room[k, HC, 2] > SEAT_HIP_FRACTION * standing_hip:
         return scene
-    j = synth.retarget(room[k], body, up=np.array([0.0, 0.0, 1.0]))
-    knees = 0.5 * (j[synth.LKN, :2] + j[synth.RKN, :2])
+    j = render.retarget(room[k], body, up=np.array([0.0, 0.0, 1.0]))
+    knees = 0.5 * (j[render.LKN, :2] + j[render.RKN, :2])
     fwd = knees - j[HC, :2]
     if np.linalg.norm(fwd) < 0.05:  # knees above the hips: fall back on the trunk's front
-        fwd = synth.body_frame(j)[2][:2]
+        fwd = render.body_frame(j)[2][:2]
     fwd = fwd / max(float(np.linalg.norm(fwd)), 1e-6)
     yaw = float(np.arctan2(-fwd[0], fwd[1]))  # the chair's local +y = its front = fwd
-    # the pelvis ellipsoid hangs 1.5 cm below the hip centre (synth.body_primitives)
+    # the pelvis ellipsoid hangs 1.5 cm below the hip centre (render.body_primitives)
     seat_top = float(np.clip(j[HC, 2] - 0.015 - 0.9 * body.pelvis_axes[1], 0.3, 0.6))
     pos = j[HC, :2] - 0.05 * fwd
     tile, scale, _ = tex.furniture_tile(rng, str(rng.choice(['wood', 'metal', 'fabric'])))
     mat = len(scene.materials)
-    parts = synth._table((float(pos[0]), float(pos[1])), (0.22, 0.22), seat_top, mat, yaw,
+    parts = render._table((float(pos[0]), float(pos[1])), (0.22, 0.22), seat_top, mat, yaw,
                          'furniture')
     back = pos - 0.2 * fwd  # the backrest stands behind the seat
-    parts.append(synth.Box((float(back[0]), float(back[1]), seat_top + 0.22),
+    parts.append(render.Box((float(back[0]), float(back[1]), seat_top + 0.22),
                            (0.22, 0.02, 0.22), mat, yaw, 'furniture'))
     return scene.with_boxes(parts, (('seat', tile, scale),))
 
@@ -320,7 +321,7 @@ def render_video(job: VideoJob) -> Iterator[tuple[int, Rendered]]:
     rng = video_rng(job.plan, 3)
     for k, pose, gain in zip(job.plan.frame_numbers, job.poses, job.gains, strict=True):
         scene = job.scene.with_light(gain=float(gain))
-        yield int(k), synth.render(pose, job.body, scene, job.intrinsics, rng=rng,
+        yield int(k), render.render(pose, job.body, scene, job.intrinsics, rng=rng,
                                    kinect_noise=job.kinect_noise)
 
 
@@ -337,7 +338,7 @@ def write_video(job: VideoJob, person_dir: str | Path, *,
     joints_mm, rots = [], []
     for k, frame in render_video(job):
         cad60.write_frame(frame_dir, k, frame.rgb, frame.depth_mm, frame.mask)
-        jm, rot = synth.cad60_ground_truth(frame.joints)
+        jm, rot = render.cad60_ground_truth(frame.joints)
         joints_mm.append(jm)
         rots.append(rot)
         if progress is not None:

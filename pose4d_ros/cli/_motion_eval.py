@@ -29,7 +29,7 @@ from pathlib import Path
 import numpy as np
 from numpy.typing import NDArray
 
-from pose4d_ros.core.camera import Intrinsics, cad60_intrinsics, project
+from pose4d_ros.core.camera import Intrinsics, cad60_intrinsics, depth_to_metres, project
 from pose4d_ros.core.kinematics import (
     IkConfig,
     IkFlag,
@@ -54,6 +54,8 @@ from pose4d_ros.datasets.utkinect import (
     resample,
     to_optical,
 )
+from pose4d_ros.synth.kinect import KinectModel
+from pose4d_ros.synth.render import PARENTS, random_body, render
 
 # Index of each UTKinect joint by name.
 _UT = {n: i for i, n in enumerate(UTKINECT_JOINTS)}
@@ -434,16 +436,6 @@ SPLAT_BONES: tuple[tuple[str, str, float], ...] = (
 )
 
 
-def kinect_depth_noise_m(z: NDArray[np.floating]) -> NDArray[np.float64]:
-    """Axial noise (standard deviation, metres) of a Kinect v1 at depth z (metres).
-
-    Nguyen, Izadi and Lovell, "Modeling Kinect sensor noise for improved 3D reconstruction and
-    tracking", 3DIMPVT 2012: ``0.0012 + 0.0019 (z - 0.4)^2``.
-    """
-    z = np.asarray(z, dtype=np.float64)
-    return 0.0012 + 0.0019 * (z - 0.4) ** 2
-
-
 def splat_capsules(ends: NDArray[np.floating], radii: NDArray[np.floating],
                    intrinsics: Intrinsics, *, step_m: float = 0.01,
                    rng: np.random.Generator | None = None) -> NDArray[np.float32]:
@@ -459,7 +451,8 @@ def splat_capsules(ends: NDArray[np.floating], radii: NDArray[np.floating],
     radii : (K,) float metres.
     intrinsics : the camera.
     step_m : spacing of the spheres, metres.
-    rng : if given, Kinect v1 axial noise (`kinect_depth_noise_m`) is added.
+    rng : if given, the renderer's Kinect v1 axial noise (`KinectModel.axial_noise_m`) is
+        added.
 
     Returns
     -------
@@ -507,7 +500,7 @@ def splat_capsules(ends: NDArray[np.floating], radii: NDArray[np.floating],
     out = np.where(np.isfinite(zbuf), zbuf, np.nan).reshape(h, w)
     if rng is not None:
         hit = np.isfinite(out)
-        out[hit] += rng.normal(0.0, 1.0, int(hit.sum())) * kinect_depth_noise_m(out[hit])
+        out[hit] += rng.normal(0.0, 1.0, int(hit.sum())) * KinectModel().axial_noise_m(out[hit])
     return out.astype(np.float32)
 
 
@@ -659,8 +652,6 @@ IkFrame = tuple[str, NDArray | None, NDArray | None, NDArray[np.float64]]
 
 def take_bones(segments: Sequence[Segment]) -> dict[str, NDArray[np.float64]]:
     """Median length of the bone ending at each Kinect joint, per take: (20,) metres."""
-    from pose4d_ros.datasets.synth import PARENTS
-
     by_take: dict[str, list[NDArray]] = {}
     for seg in segments:
         by_take.setdefault(seg.name.partition('/')[0], []).append(seg.joints)
@@ -680,23 +671,18 @@ def synth_renderer(segments: Sequence[Segment], *, seed: int = 0,
                    ) -> tuple[Callable, dict[str, dict[str, tuple]]]:
     """A renderer for `ik_frames(depth='render')` and the bone lengths of what it renders.
 
-    One random body per take (`datasets.synth.random_body`, seeded by `seed` and the take)
+    One random body per take (`synth.render.random_body`, seeded by `seed` and the take)
     with the take's real median bone lengths; each frame is the real pose retargeted to it and
     rendered alone (no room) with the Kinect v1 depth model. The rendered joints, not the
     recorded ones, are the truth of that depth image; the returned lengths (per take, per limb)
     are that body's bones, i.e. what `LimbLengths` learns from the take's rendered frames.
     """
-    from dataclasses import replace as dc_replace
-
-    from pose4d_ros.core.camera import depth_to_metres
-    from pose4d_ros.datasets.synth import random_body, render
-
     intrinsics = intrinsics or cad60_intrinsics()
     bodies = {}
     lengths: dict[str, dict[str, tuple]] = {}
     for take, bones in take_bones(segments).items():
         rng = np.random.default_rng([seed, int(take[1:3]), int(take[5:7]), 7])
-        bodies[take] = dc_replace(random_body(rng), bones=bones)
+        bodies[take] = replace(random_body(rng), bones=bones)
         lengths[take] = {limb: (float(bones[_UT[m]]), float(bones[_UT[b]]))
                          for limb, (_, m, b) in LIMB_JOINTS.items()}
 

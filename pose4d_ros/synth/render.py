@@ -8,8 +8,8 @@ every bone's direction and setting its length to the body's (`retarget`). A room
 textured oriented boxes (floor, walls, ceiling, skirting, door, pictures, furniture, sometimes
 an occluder between camera and person) seen by a camera at 0.85-1.35 m, pitched down a little,
 lit by a directional light plus ambient (`random_scene`). `render` ray-casts the body into the
-room's depth buffer (numba, `synth_raycast`), shades it Lambertian + ambient, and turns the
-exact depth into a Kinect v1 measurement (`synth_kinect`: projector shadows, disparity
+room's depth buffer (numba, `raycast`), shades it Lambertian + ambient, and turns the
+exact depth into a Kinect v1 measurement (`kinect`: projector shadows, disparity
 quantisation, noise growing with z^2, holes at edges and beyond range).
 
 Frames. Poses and rendered joints are metres in the camera optical frame (x right, y down,
@@ -30,10 +30,10 @@ import numpy as np
 from numpy.typing import NDArray
 
 from pose4d_ros.core.camera import Intrinsics
-from pose4d_ros.datasets import synth_textures as tex
-from pose4d_ros.datasets.synth_kinect import KinectModel, ideal_depth, kinect_depth
-from pose4d_ros.datasets.synth_raycast import raycast_body, raycast_boxes, shade
 from pose4d_ros.datasets.utkinect import UTKINECT_JOINTS
+from pose4d_ros.synth import textures as tex
+from pose4d_ros.synth.kinect import KinectModel, ideal_depth, kinect_depth
+from pose4d_ros.synth.raycast import raycast_body, raycast_boxes, shade
 
 # --------------------------------------------------------------------------------------------
 # The Kinect v1 skeleton
@@ -161,7 +161,7 @@ def random_body(rng: np.random.Generator) -> Body:
                     tex.jitter_colour(rng, tex.SHOE_COLOURS[rng.integers(len(tex.SHOE_COLOURS))]),
                     0.05)
     mb.add('shoes', shoe, 0.2)
-    # the head ellipsoid's surface is exactly one tile (see `synth_raycast`: s = angle * rx,
+    # the head ellipsoid's surface is exactly one tile (see `raycast`: s = angle * rx,
     # t = (y + 1) * ry)
     mb.add('face', tex.face_tile(rng, skin, hair), (2 * np.pi * head[0], 2 * head[1]))
     return Body(
@@ -229,7 +229,7 @@ def body_frame(joints: NDArray[np.float64]) -> tuple[NDArray[np.float64], ...]:
 
 @dataclass(frozen=True)
 class Primitives:
-    """A body as ray-casting primitives (optical frame, metres); see `synth_raycast`."""
+    """A body as ray-casting primitives (optical frame, metres); see `raycast`."""
 
     cap_a: NDArray[np.float64]
     cap_b: NDArray[np.float64]

@@ -4,7 +4,7 @@ Applied to the renderer's exact depth z (metres along the optical axis), in this
 
 1. Projector shadow: the infrared projector sits `baseline_m` (7.5 cm) beside the camera, so
    surfaces it cannot light have no reading: a band `f b (1/z_near - 1/z_far)` pixels wide
-   beside the left of foreground edges (`synth_raycast.projector_shadow`).
+   beside the left of foreground edges (`raycast.projector_shadow`).
 2. Axial noise growing with z^2: sigma_z = 1.2 mm + 1.9 mm (z - 0.4)^2 (Nguyen, Izadi and Lovell,
    "Modeling Kinect sensor noise for improved 3D reconstruction and tracking", 3DIMPVT 2012),
    part of it spatially correlated (the sensor matches 9x9 blocks, so neighbours err together).
@@ -26,7 +26,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from pose4d_ros.core.camera import Intrinsics
-from pose4d_ros.datasets.synth_raycast import projector_shadow
+from pose4d_ros.synth.raycast import projector_shadow
 
 
 @dataclass(frozen=True)
@@ -62,6 +62,10 @@ class KinectModel:
     grazing_cos: float = 0.2
     speckle: float = 0.002
 
+    def axial_noise_m(self, z: NDArray[np.floating]) -> NDArray[np.floating]:
+        """Standard deviation of the axial noise at depth z (metres), metres."""
+        return self.noise_a_m + self.noise_b * (z - 0.4) ** 2
+
 
 def kinect_depth(depth_m: NDArray[np.float32], normal: NDArray[np.float32],
                  intrinsics: Intrinsics, rng: np.random.Generator, *,
@@ -95,7 +99,7 @@ def kinect_depth(depth_m: NDArray[np.float32], normal: NDArray[np.float32],
                               float(intrinsics.fx * m.baseline_m))
 
     # noise, as a fraction of sigma: correlated (smooth, upsampled) plus white
-    sigma = m.noise_a_m + m.noise_b * (zc - 0.4) ** 2
+    sigma = m.axial_noise_m(zc)
     coarse = rng.standard_normal((max(h // 6, 2), max(w // 6, 2))).astype(np.float32)
     smooth = cv2.resize(coarse, (w, h), interpolation=cv2.INTER_LINEAR)
     smooth /= max(float(smooth.std()), 1e-6)
