@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import fcntl
 import os
+import shlex
 import sys
 import tempfile
 from pathlib import Path
@@ -63,3 +64,21 @@ def ros():
         yield peer
     finally:
         peer.close()
+
+
+@pytest.fixture
+def fake_peer(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> list[str]:
+    """A stand-in for the MediaPipe worker (test/peer_fake_worker.py; no MediaPipe needed).
+
+    Returns the command that starts it, and makes it the peer that `--peer mediapipe` starts:
+    POSE4D_PEER_PYTHON becomes a script that runs it, whatever the arguments.
+    """
+    from pose4d_ros.peer import worker
+
+    command = [sys.executable, str(Path(__file__).with_name('peer_fake_worker.py')),
+               worker.__file__]
+    python = tmp_path / 'peer_python'
+    python.write_text('#!/bin/sh\nexec ' + ' '.join(shlex.quote(c) for c in command) + '\n')
+    python.chmod(0o755)
+    monkeypatch.setenv('POSE4D_PEER_PYTHON', str(python))
+    return command

@@ -57,7 +57,8 @@ def test_eval_writes_the_table_json(tiny_set: Path, tmp_path: Path, capsys) -> N
     assert list(table['rows']) == ['rgbd', 'rgbd_kf', 'rgbd_kf_ik', 'rgb']
     for name, row in table['rows'].items():
         metrics = METRICS if name == 'rgb' else METRICS_3D
-        assert list(row) == metrics
+        assert list(row) == metrics + ['cpu_ms']
+        assert 0 < row['cpu_ms']['p50'] <= row['cpu_ms']['p95']
         groups = GROUPS_14 if name.endswith('_ik') else GROUPS_10
         for metric in metrics:
             assert list(row[metric]) == groups + (['average7'] if metric.startswith('pck')
@@ -88,10 +89,13 @@ def test_train_then_eval_and_bench(tiny_set: Path, tmp_path: Path, capsys) -> No
     bench = tmp_path / 'bench.json'
     assert pose4d_main(['bench', str(tiny_set), '--json', str(bench), '--model', str(model),
                         '--frames', '4', '--warmup', '2']) == 0
-    stages = json.loads(bench.read_text())['stages_ms']
-    assert list(stages) == ['foreground', 'detector', 'tracker', 'ik']
-    for st in stages.values():
-        assert 0 < st['p50'] <= st['p95']
+    timings = json.loads(bench.read_text())
+    for clock in ('stages_ms', 'wall_ms'):
+        stages = timings[clock]
+        assert list(stages) == ['foreground', 'detector', 'tracker', 'ik', 'total']
+        for st in stages.values():
+            assert 0 < st['p50'] <= st['p95']
+        assert stages['total']['p50'] >= stages['detector']['p50']
     text = capsys.readouterr().out
     assert 'cores' in text and 'BLAS' in text
 
@@ -132,3 +136,52 @@ def test_errors_name_the_file_and_exit_2(tiny_set: Path, tmp_path: Path, capsys,
     args = [a.format(set=tiny_set, tmp=tmp_path) for a in argv]
     assert pose4d_main(args) == 2
     assert message in capsys.readouterr().err
+
+
+def test_eval_and_bench_with_the_peer_score_it_on_the_same_frames(tiny_set: Path, tmp_path: Path,
+                                                                  fake_peer, capsys) -> None:
+    rgbd = tmp_path / 'rgbd.npz'
+    save_model(random_model(PARTS_10, 'rgbd', 0), rgbd)
+    out = tmp_path / 'table.json'
+    assert pose4d_main(['eval', str(tiny_set), '--json', str(out), '--model', str(rgbd),
+                        '--peer', 'mediapipe']) == 0
+    table = json.loads(out.read_text())
+    assert table['frames'] == 8 and table['peer'] == 'fake 1.0'
+    assert list(table['rows']) == ['rgbd', 'rgbd_kf', 'rgbd_kf_ik', 'mediapipe']
+    for row in table['rows'].values():
+        assert list(row) == METRICS_3D + ['cpu_ms']
+        assert 0 <= row['cpu_ms']['p50'] <= row['cpu_ms']['p95']
+    assert list(table['rows']['mediapipe']['pck']) == GROUPS_14 + ['average7']
+    assert 'mediapipe' in capsys.readouterr().out
+    bench = tmp_path / 'bench.json'
+    assert pose4d_main(['bench', str(tiny_set), '--json', str(bench), '--model', str(rgbd),
+                        '--frames', '4', '--warmup', '2', '--peer', 'mediapipe']) == 0
+    timings = json.loads(bench.read_text())
+    assert timings['peer'] == 'fake 1.0'
+    assert 0 < timings['peer_ms']['p50'] <= timings['peer_ms']['p95']
+    assert 0 < timings['peer_wall_ms']['p50']
+    assert timings['ratio_to_peer'] == pytest.approx(
+        timings['stages_ms']['total']['p50'] / timings['peer_ms']['p50'], rel=1e-2)
+
+
+def test_the_peer_starts_a_new_video_where_the_tracker_starts_a_new_track(tiny_set: Path,
+                                                                          fake_peer) -> None:
+    from pose4d_ros.cli._pipeline_eval import run_peer
+    from pose4d_ros.datasets.cad60_bag import cad60_frames
+    from pose4d_ros.peer import MediaPipePeer
+
+    with MediaPipePeer(fake_peer) as peer:
+        run = run_peer(cad60_frames(tiny_set), peer)
+    # the stand-in says 1.0 on the first frame of a video: two videos of four frames
+    first = [bool(p.confidence[0] == 1.0) for p in run.preds['mediapipe']]
+    assert first == [True, False, False, False] * 2
+
+
+def test_without_the_peer_venv_eval_says_make_peer_in_one_line(tiny_set: Path, tmp_path: Path,
+                                                               monkeypatch, capsys) -> None:
+    monkeypatch.setenv('POSE4D_PEER_PYTHON', str(tmp_path / 'no-venv' / 'python'))
+    for verb in ('eval', 'bench'):
+        assert pose4d_main([verb, str(tiny_set), '--json', str(tmp_path / 't.json'),
+                            '--peer', 'mediapipe']) == 2
+        err = capsys.readouterr().err
+        assert 'make peer' in err and err.count('\n') == 1, err

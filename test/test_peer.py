@@ -14,9 +14,7 @@ from pose4d_ros import peer
 from pose4d_ros.core import joints as cj
 from pose4d_ros.core.camera import backproject, cad60_intrinsics, robust_depth
 from pose4d_ros.core.skeleton import SKELETON_14, ground_truth_name
-from pose4d_ros.peer import worker
 
-FAKE = [sys.executable, str(Path(__file__).with_name('peer_fake_worker.py')), worker.__file__]
 REPO = Path(__file__).resolve().parents[1]
 
 
@@ -43,12 +41,12 @@ def test_mapping_takes_the_ears_midpoint_and_the_limb_landmarks() -> None:
         peer.joints_from_landmarks(lm[:17])
 
 
-def test_fake_worker_round_trip_lifts_with_the_detectors_depth_look_up() -> None:
+def test_fake_worker_round_trip_lifts_with_the_detectors_depth_look_up(fake_peer) -> None:
     intr = cad60_intrinsics()
     rng = np.random.default_rng(0)
     depth = rng.uniform(1.5, 3.0, (240, 320)).astype(np.float32)
     depth[rng.random(depth.shape) < 0.2] = np.nan
-    with peer.MediaPipePeer(FAKE) as p:
+    with peer.MediaPipePeer() as p:  # the stand-in, through POSE4D_PEER_PYTHON
         assert p.description == 'fake 1.0'
         first = p.step(frame(40), depth, intr, new_video=True)
         second = p.step(frame(41), depth, intr)
@@ -70,8 +68,8 @@ def test_fake_worker_round_trip_lifts_with_the_detectors_depth_look_up() -> None
     assert_allclose(wide[:, 0], 639.0 - np.arange(33))
 
 
-def test_without_depth_the_joints_have_no_3d() -> None:
-    with peer.MediaPipePeer(FAKE) as p:
+def test_without_depth_the_joints_have_no_3d(fake_peer) -> None:
+    with peer.MediaPipePeer(fake_peer) as p:
         js = p.step(frame(40), None, None)
     assert np.isfinite(js.uv).all() and np.isnan(js.xyz).all()
 

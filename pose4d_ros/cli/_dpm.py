@@ -45,6 +45,15 @@ def load_samples(sources: list[str], *, frame_range: str | None, stride: int,
     return samples
 
 
+def ms_stats(ms: Iterable[float]) -> dict[str, float | None]:
+    """p50 and p95 of per-frame times in ms (None for none)."""
+    a = np.asarray(list(ms), np.float64)
+    if not a.size:
+        return {'p50': None, 'p95': None}
+    return {'p50': round(float(np.percentile(a, 50)), 3),
+            'p95': round(float(np.percentile(a, 95)), 3)}
+
+
 def git_commit() -> str:
     try:
         root = Path(__file__).resolve().parents[2]

@@ -1,12 +1,23 @@
 """`pose4d bench`: time per stage on real frames, and the node graph's throughput and latency.
 
     pose4d bench SOURCE --json FILE [--model rgbd_10] [--frames N] [--warmup W] [--graph]
+                 [--peer mediapipe]
 
 Each frame goes through the stages as the live pipeline runs them (`core.pipeline`): the
 foreground stage's mask on the depth image (`core.foreground.segment`), the part detector on the
 masked frame (`DetectorStage`: `core.dpm.infer.Detector.detect` and the 3-D lift), the SLQE
-tracker and the IK (`TrackerStage`, `IkStage`). The p50 and p95 of each stage's wall time are
-taken over the frames after `--warmup` (numba compilation and caches).
+tracker and the IK (`TrackerStage`, `IkStage`). The p50 and p95 of each stage's CPU time (this
+process's, `time.process_time`: `stages_ms`) and wall time (`wall_ms`), and of their sum over
+the four stages (`total`: one frame through all of them), are taken over the frames after
+`--warmup` (numba compilation and caches).
+
+With `--peer mediapipe` (`make peer`), MediaPipe Pose then runs on the same frames in the same
+run (its own warm-up first), as a user tracking a video would run it (video mode, one video):
+`peer_ms` is its worker process's CPU time per frame (every thread of it) plus the 3-D look-up
+(`pose4d_ros.peer`), `peer_wall_ms` the wall time of a frame's round trip to the worker, and
+`ratio_to_peer` = `stages_ms.total.p50 / peer_ms.p50`. CPU time makes the ratio a ratio of
+cost that holds on any machine; pin the whole command to one core (`taskset -c 0 pose4d bench
+...`) to compare on one core, as a robot's busy computer would give each.
 
 With `--graph` (SOURCE a bag), the bag is then replayed at `--rate` through the node graph, one
 process per stage as `ros2 run` starts them (`nodes`), and through the one-process `pipeline`
@@ -19,12 +30,13 @@ BLAS is set to `--blas-threads` (1 by default, the measured best; see `core.dpm.
 from __future__ import annotations
 
 import argparse
+import os
 import time
 from pathlib import Path
 
 import numpy as np
 
-from pose4d_ros.cli._dpm import load_samples, machine, progress
+from pose4d_ros.cli._dpm import load_samples, machine, ms_stats, progress
 from pose4d_ros.cli.eval import default_models
 from pose4d_ros.core.camera import cad60_intrinsics
 from pose4d_ros.core.dpm.infer import SearchConfig
@@ -33,6 +45,7 @@ from pose4d_ros.core.dpm.threads import set_blas_threads
 from pose4d_ros.core.files import write_json
 from pose4d_ros.datasets.sources import source_kind
 from pose4d_ros.models import model_path
+from pose4d_ros.peer import PEERS, MediaPipePeer
 
 
 def add_parser(subparsers: argparse._SubParsersAction) -> None:
@@ -50,6 +63,8 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument('--levels', type=int, default=SearchConfig.n_levels,
                    help='pyramid levels searched around the depth-predicted scale (1-3)')
     p.add_argument('--blas-threads', type=int, default=1, help='OpenBLAS threads')
+    p.add_argument('--peer', choices=PEERS,
+                   help='also time the peer on the same frames (needs `make peer`)')
     p.add_argument('--graph', action='store_true',
                    help='also replay SOURCE (a bag) through the node graph and the pipeline node')
     p.add_argument('--rate', type=float, default=1.0, help='replay rate of --graph')
@@ -58,71 +73,102 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     p.set_defaults(func=run)
 
 
-def _stats(ms: list[float]) -> dict[str, float | None]:
-    if not ms:
-        return {'p50': None, 'p95': None}
-    a = np.asarray(ms)
-    return {'p50': round(float(np.percentile(a, 50)), 3),
-            'p95': round(float(np.percentile(a, 95)), 3)}
-
-
 def run(args: argparse.Namespace) -> int:
     if args.frames < 1 or args.warmup < 0:
         raise ValueError(f'--frames must be >= 1 and --warmup >= 0, got {args.frames}, '
                          f'{args.warmup}')
     from pose4d_ros.core.foreground import apply_mask, segment
-    from pose4d_ros.core.pipeline import DetectorStage, IkStage, TrackerStage
+    from pose4d_ros.core.pipeline import STAGES, DetectorStage, IkStage, TrackerStage
 
     threads = set_blas_threads(args.blas_threads)
     kind = source_kind(args.source)
     model = load_model(model_path(args.model or default_models(kind)[0]))
-    samples = load_samples([args.source], frame_range=args.frame_range, stride=1,
-                           max_frames=args.frames + args.warmup, seed=0)
-    use_depth = model.channels == 'rgbd'
-    if use_depth and all(s.depth_m is None for s in samples):
-        raise ValueError(f'{args.source}: no depth images for the rgbd model')
-    stage = DetectorStage(model, search=SearchConfig(n_levels=args.levels))
-    tracker, ik = TrackerStage(), IkStage()
-    ms: dict[str, list[float]] = {k: [] for k in ('foreground', 'detector', 'tracker', 'ik')}
-    for i, s in enumerate(progress(samples, 'bench')):
-        if i == min(args.warmup, len(samples) - 1):
-            threads = set_blas_threads(args.blas_threads)  # also the libraries loaded since
-        h, w = s.color.shape[:2]
-        intr = s.intrinsics or cad60_intrinsics(w, h)
-        t = [time.perf_counter()]
-        color, depth, mask = s.color, s.depth_m if use_depth else None, None
-        if depth is not None:
-            fg = segment(depth, intr)
-            mask = fg.mask
-            color, depth = apply_mask(color, depth, mask)
-        t.append(time.perf_counter())
-        parts = stage.step(color, depth, intr, mask=mask)
-        t.append(time.perf_counter())
-        tracked = tracker.step(parts, i / 30.0, intr)  # the subset is no sequence: timing only
-        t.append(time.perf_counter())
-        ik.step(tracked, depth, intr)
-        t.append(time.perf_counter())
-        if i >= args.warmup:
-            for k, name in enumerate(ms):
-                if name != 'foreground' or depth is not None:
-                    ms[name].append((t[k + 1] - t[k]) * 1e3)
+    peer = MediaPipePeer() if args.peer else None  # without its venv, stop before any work
+    try:
+        samples = load_samples([args.source], frame_range=args.frame_range, stride=1,
+                               max_frames=args.frames + args.warmup, seed=0)
+        use_depth = model.channels == 'rgbd'
+        if use_depth and all(s.depth_m is None for s in samples):
+            raise ValueError(f'{args.source}: no depth images for the rgbd model')
+        stage = DetectorStage(model, search=SearchConfig(n_levels=args.levels))
+        tracker, ik = TrackerStage(), IkStage()
+        # per clock: each stage's ms per frame, and their sum (one frame through all four)
+        ms = {clock: {k: [] for k in (*STAGES, 'total')} for clock in ('cpu', 'wall')}
+        for i, s in enumerate(progress(samples, 'bench')):
+            if i == min(args.warmup, len(samples) - 1):
+                threads = set_blas_threads(args.blas_threads)  # also the libraries loaded since
+            h, w = s.color.shape[:2]
+            intr = s.intrinsics or cad60_intrinsics(w, h)
+            t = [_now()]
+            color, depth, mask = s.color, s.depth_m if use_depth else None, None
+            if depth is not None:
+                fg = segment(depth, intr)
+                mask = fg.mask
+                color, depth = apply_mask(color, depth, mask)
+            t.append(_now())
+            parts = stage.step(color, depth, intr, mask=mask)
+            t.append(_now())
+            tracked = tracker.step(parts, i / 30.0, intr)  # a subset is no sequence: timing
+            t.append(_now())
+            ik.step(tracked, depth, intr)
+            t.append(_now())
+            if i >= args.warmup:
+                for c, clock in enumerate(ms.values()):
+                    per_stage = [(t[k + 1][c] - t[k][c]) * 1e3 for k in range(len(STAGES))]
+                    for name, v in zip(STAGES, per_stage, strict=True):
+                        if name != 'foreground' or depth is not None:
+                            clock[name].append(v)
+                    clock['total'].append(sum(per_stage))
+        if peer is not None:
+            peer_cpu, peer_wall = time_peer(peer, samples, args.warmup)
+    finally:
+        if peer is not None:
+            peer.close()
     m = machine()
     h, w = samples[0].color.shape[:2]
-    print(f"machine: {m['cores']} cores, {m['cpu']}, load average {m['load_average']}")
+    print(f"machine: {m['cores']} cores, {m['cpu']}, load average {m['load_average']}, "
+          f"this process may use CPUs {sorted(os.sched_getaffinity(0))}")
     print(f"threads: numba {m['numba_threads']} (no parallel kernels), BLAS {m['blas_threads']}"
           f" (set to {args.blas_threads}: {', '.join(f'{v}' for v in threads.values())})")
     print(f'model: {model.channels}, {model.n_parts} parts x {model.n_types} types; '
-          f'{len(ms["detector"])} frames of {w}x{h} after {args.warmup} warm-up')
-    out: dict = {'stages_ms': {name: _stats(v) for name, v in ms.items()}}
-    for stage, st in out['stages_ms'].items():
-        if st['p50'] is None:
-            print(f'{stage:<12} -')
-        else:
-            print(f"{stage:<12} p50 {st['p50']:8.2f} ms   p95 {st['p95']:8.2f} ms")
+          f'{len(ms["cpu"]["detector"])} frames of {w}x{h} after {args.warmup} warm-up')
+    out: dict = {'stages_ms': {k: ms_stats(v) for k, v in ms['cpu'].items()},
+                 'wall_ms': {k: ms_stats(v) for k, v in ms['wall'].items()}}
+    lines = {k: (out['stages_ms'][k], out['wall_ms'][k]) for k in out['stages_ms']}
+    if peer is not None:
+        out['peer'] = peer.description
+        out['peer_ms'], out['peer_wall_ms'] = ms_stats(peer_cpu), ms_stats(peer_wall)
+        out['ratio_to_peer'] = round(out['stages_ms']['total']['p50']
+                                     / out['peer_ms']['p50'], 3)
+        lines[peer.name] = (out['peer_ms'], out['peer_wall_ms'])
+    print(f'{"ms per frame":<12} {"CPU p50":>9} {"CPU p95":>9} {"wall p50":>9} {"wall p95":>9}')
+    for name, stats in lines.items():
+        print(f'{name:<12} ' + ' '.join(f'{v:9.2f}' if v is not None else f'{"-":>9}'
+                                        for st in stats for v in (st['p50'], st['p95'])))
+    if peer is not None:
+        print(f"ours / {peer.name} (CPU p50): {out['ratio_to_peer']:.3f} ({out['peer']})")
     if args.graph:
         out['graph'] = graph_bench(Path(args.source), args)
     write_json(args.json, out)
     return 0
+
+
+def _now() -> tuple[float, float]:
+    """(this process's CPU time, wall time), seconds."""
+    return time.process_time(), time.perf_counter()
+
+
+def time_peer(peer: MediaPipePeer, samples: list, warmup: int
+              ) -> tuple[list[float], list[float]]:
+    """The peer's CPU and wall ms per frame after `warmup` frames, the frames one video."""
+    cpu, wall = [], []
+    for i, s in enumerate(progress(samples, peer.name)):
+        start = time.perf_counter()
+        peer.step(s.color, s.depth_m, s.intrinsics, new_video=i == 0)
+        if i >= warmup:
+            wall.append((time.perf_counter() - start) * 1e3)
+            cpu.append(peer.last_cpu_s * 1e3)
+    return cpu, wall
 
 
 def graph_bench(bag_path: Path, args: argparse.Namespace) -> dict:
@@ -142,7 +188,7 @@ def graph_bench(bag_path: Path, args: argparse.Namespace) -> dict:
                      'frames_out': len(r.left),
                      'input_rate_hz': round(r.input_rate_hz(), 2),
                      'output_rate_hz': round(out_rate, 2) if out_rate else None,
-                     'latency_ms': _stats(lat.tolist()),
+                     'latency_ms': ms_stats(lat.tolist()),
                      'cpu_ms_per_frame': {exe: round(t * 1e3 / max(r.frames, 1), 2)
                                           for exe, t in r.cpu_s.items()}}
         st = out[name]

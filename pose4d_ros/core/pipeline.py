@@ -20,6 +20,7 @@ offline evaluation and a live run of the graph give the same answers on the same
 from __future__ import annotations
 
 import math
+import time
 from collections.abc import Mapping
 from dataclasses import dataclass
 
@@ -284,9 +285,14 @@ class IkStage:
                         score=score, track_id=tracked.track_id)
 
 
+# The stages of `FramePipeline.step`, in order (the keys of `FrameResult.cpu_s`)
+STAGES = ('foreground', 'detector', 'tracker', 'ik')
+
+
 @dataclass(frozen=True)
 class FrameResult:
-    """Everything one frame produced, stage by stage."""
+    """Everything one frame produced, stage by stage, and each stage's CPU time (`cpu_s`:
+    seconds of this process's CPU, `time.process_time`, per name of `STAGES`)."""
 
     foreground: ForegroundResult
     color_masked: NDArray[np.uint8]
@@ -294,6 +300,7 @@ class FrameResult:
     parts: JointSet
     tracked: JointSet
     skeleton: JointSet
+    cpu_s: dict[str, float]
 
 
 class FramePipeline:
@@ -324,15 +331,21 @@ class FramePipeline:
         if color.shape[:2] != depth_m.shape:
             raise ValueError(f'colour is {color.shape[1]}x{color.shape[0]} but depth is '
                              f'{depth_m.shape[1]}x{depth_m.shape[0]}')
+        clock = [time.process_time()]
         fg = segment(depth_m, intrinsics, config=self.foreground_config,
                      previous=self.previous if self.temporal else None)
         self.previous = fg if fg.found else None
         color_m, depth_mm = apply_mask(color, depth_m, fg.mask)
+        clock.append(time.process_time())
         # the detector sees what the detector node receives: the masked frame and the mask
         parts = self.detector.step(color_m, depth_mm, intrinsics, mask=fg.mask)
+        clock.append(time.process_time())
         tracked = self.tracker.step(parts, stamp_s, intrinsics)
+        clock.append(time.process_time())
         skeleton = self.ik.step(tracked, depth_mm, intrinsics)
-        return FrameResult(fg, color_m, depth_mm, parts, tracked, skeleton)
+        clock.append(time.process_time())
+        cpu_s = {stage: clock[k + 1] - clock[k] for k, stage in enumerate(STAGES)}
+        return FrameResult(fg, color_m, depth_mm, parts, tracked, skeleton, cpu_s)
 
     def warm_up(self, intrinsics: Intrinsics) -> None:
         """Compile the kernels on a synthetic frame, then forget it (`warm_up_frame`)."""

@@ -20,6 +20,7 @@ import os
 import subprocess
 import sys
 import tempfile
+import time
 from collections.abc import Sequence
 from pathlib import Path
 
@@ -91,9 +92,13 @@ class MediaPipePeer:
 
     Attributes
     ----------
+    name : the row's name in `pose4d eval`.
     description : what the worker said it runs (e.g. 'mediapipe 0.10.21 pose ...').
-    last_cpu_s : the worker's CPU time for the last frame, seconds.
+    last_cpu_s : CPU seconds of the last frame: the worker's (every thread of it) and, for
+        `step`, this thread's for the mapping and 3-D look-up.
     """
+
+    name = 'mediapipe'
 
     def __init__(self, command: Sequence[str] | None = None, *,
                  depth_radius_px: int = DEPTH_RADIUS_PX) -> None:
@@ -177,9 +182,12 @@ class MediaPipePeer:
         lm = self.landmarks(color, new_video=new_video)
         if lm is None:
             return JointSet.missing(NAMES)
+        start = time.thread_time()
         uv, conf = joints_from_landmarks(lm)
         xyz = None
         if depth_m is not None and intrinsics is not None:
             z = robust_depth(depth_m, uv, radius=self.depth_radius_px)
             xyz = backproject(uv, z, intrinsics)
-        return JointSet(NAMES, uv, xyz, confidence=conf, score=float(conf.mean()))
+        joints = JointSet(NAMES, uv, xyz, confidence=conf, score=float(conf.mean()))
+        self.last_cpu_s += time.thread_time() - start
+        return joints
