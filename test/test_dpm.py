@@ -12,7 +12,8 @@ from numpy.testing import assert_allclose, assert_array_equal
 from pose4d_ros.core.dpm import Detector, PartModel, SearchConfig, load_model, save_model
 from pose4d_ros.core.dpm.dt import dt1d, dt2d
 from pose4d_ros.core.dpm.infer import backtrack, best_roots, im2col, score_level, tree_dp
-from pose4d_ros.core.dpm.train import _dcd, _Examples, _margins, kmeans
+from pose4d_ros.core.dpm.solver import Examples, dcd, margins
+from pose4d_ros.core.dpm.train import kmeans
 from pose4d_ros.core.hog import feature_pyramid
 from pose4d_ros.core.skeleton import PARTS_10
 
@@ -299,7 +300,7 @@ def test_dual_coordinate_descent_reaches_the_svm_optimum() -> None:
     rng = np.random.default_rng(0)
     p_n, dim, k = 3, 6, 2
     size = p_n * k * dim + p_n * k * 4 + p_n * k * k
-    ex = _Examples(80, p_n, dim)
+    ex = Examples(80, p_n, dim)
     n_pos = 20
     for i in range(60):
         t = rng.integers(0, k, p_n)
@@ -327,7 +328,7 @@ def test_dual_coordinate_descent_reaches_the_svm_optimum() -> None:
     c = 0.5
     cost = np.full(ex.n, c)
     for epoch in range(200):
-        _dcd(w, *arr, alpha, cost, lb_idx, lb_val, beta, 10, epoch)
+        dcd(w, *arr, alpha, cost, lb_idx, lb_val, beta, 10, epoch)
     # w consistency
     dense = np.zeros((ex.n, size))
     for i in range(ex.n):
@@ -342,7 +343,7 @@ def test_dual_coordinate_descent_reaches_the_svm_optimum() -> None:
     assert_allclose(w, rebuilt, atol=1e-8)
     assert w[lb_idx[0]] >= lb_val[0] - 1e-9
     # optimality: the duality gap of 1/2|w - w0|^2 + C sum hinge closes
-    marg = _margins(w, *arr[:7], arr[8])
+    marg = margins(w, *arr[:7], arr[8])
     assert_allclose(marg, arr[6] * (dense @ w), atol=1e-8)
     u = w - w0
     primal = 0.5 * u @ u + c * np.maximum(0, arr[7] - marg).sum()

@@ -43,8 +43,8 @@ from pose4d_ros.cli._pipeline_eval import evaluate_peer, evaluate_source
 from pose4d_ros.core.camera import cad60_intrinsics
 from pose4d_ros.core.dpm.infer import Detector, SearchConfig
 from pose4d_ros.core.dpm.model import PartModel, load_model
+from pose4d_ros.core.dpm.samples import part_joints
 from pose4d_ros.core.dpm.threads import set_blas_threads
-from pose4d_ros.core.dpm.train import part_joints
 from pose4d_ros.core.files import write_json
 from pose4d_ros.core.joints import MISSING
 from pose4d_ros.core.metrics import score_groups

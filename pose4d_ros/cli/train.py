@@ -24,15 +24,15 @@ import numpy as np
 
 from pose4d_ros.cli._dpm import git_commit, load_samples, log, machine, progress
 from pose4d_ros.core.dpm.model import save_model
-from pose4d_ros.core.dpm.threads import set_blas_threads
-from pose4d_ros.core.dpm.train import (
+from pose4d_ros.core.dpm.samples import (
     Negative,
     TrainConfig,
     background_crops,
     part_joints,
     person_scale,
-    train,
 )
+from pose4d_ros.core.dpm.threads import set_blas_threads
+from pose4d_ros.core.dpm.train import train
 from pose4d_ros.datasets.sources import Sample
 
 

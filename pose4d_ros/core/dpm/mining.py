@@ -1,0 +1,136 @@
+"""Hard-negative mining (`train`, step 4): the current model's poses that violate a
+constraint, in background images and, by loss-augmented inference, in the labelled frames.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterable, Sequence
+
+import numpy as np
+from numpy.typing import NDArray
+
+from pose4d_ros.core.dpm.infer import (
+    Detector,
+    LevelResult,
+    SearchPlan,
+    backtrack,
+    best_roots,
+    model_arrays,
+    score_level,
+    tree_dp,
+)
+from pose4d_ros.core.dpm.model import PartModel
+from pose4d_ros.core.dpm.samples import (
+    Negative,
+    Positive,
+    Progress,
+    TrainConfig,
+    frame_of,
+    level_of,
+)
+from pose4d_ros.core.dpm.solver import Examples, Layout, Whitening, dot, pose_blocks, whitened
+
+
+def mine_background(model: PartModel, negatives: list[Negative], ex: Examples, lay: Layout,
+                     cfg: TrainConfig, white: Whitening, room: int,
+                     progress: Progress | None, round_: int) -> int:
+    """Add poses scoring above -1 in background images (at most `room`); returns how many."""
+    det = Detector(model)
+    arrays = det._arrays
+    _, parents, springs, anchors, bias = arrays
+    lo, hi = model.scale_range_px
+    n_lev = max(int(np.ceil(np.log2(hi / lo) * cfg.levels_per_octave)) + 1, 1)
+    scales = tuple(cfg.canonical_scale_px / (lo * (hi / lo) ** (i / max(n_lev - 1, 1)))
+                   for i in range(n_lev))
+    seen = set(ex.keys)
+    added = 0
+    it: Iterable = enumerate(negatives)
+    if progress is not None:
+        it = progress(it, f'round {round_}: background', len(negatives))
+    for j, neg in it:
+        h, w = neg.color.shape[:2]
+        plan = SearchPlan(0, 0, w, h, scales, False)
+        found = []
+        for li, level in enumerate(det.pyramid(neg.color, neg.depth_m, plan)):
+            res = score_level(level, model, arrays)
+            if res is None:
+                continue
+            roots = best_roots(res, cfg.negatives_per_image, -1.0, min_dist=2)
+            if len(roots) == 0:
+                continue
+            parts, local = backtrack(roots, parents, res.resp, res.ix, res.iy, res.ik,
+                                     springs, anchors, bias)
+            for k in range(len(roots)):
+                found.append((float(local[k].sum()), li, level, parts[k]))
+        found.sort(key=lambda f: -f[0])
+        for _score, li, level, parts in found[:cfg.negatives_per_image]:
+            key = ('neg', j, li, *parts.ravel().tolist())
+            if key in seen:
+                continue
+            blocks = pose_blocks(level.feat, parts, parents, anchors, lay, cfg.filter_cells,
+                                  cfg.bias_feature)
+            if not ex.add(whitened(blocks, white), -1.0, 1.0, -1, key):
+                return added
+            seen.add(key)
+            added += 1
+            if added >= room:
+                return added
+    return added
+
+
+def mine_structural(model: PartModel, pos: list[Positive], samples: Sequence,
+                     types: NDArray[np.int64], w: NDArray[np.float64], ex: Examples,
+                     lay: Layout, cfg: TrainConfig, white: Whitening, room: int,
+                     progress: Progress | None, round_: int) -> int:
+    """Add violated margin-rescaling constraints from the labelled frames: the poses that
+    maximise score + loss (exact, the loss decomposes over parts) and whose score is not at
+    least their loss below the labelled pose's. Returns how many were added."""
+    arrays = model_arrays(model)
+    _, parents, springs, anchors, bias = arrays
+    tree = cfg.tree
+    p_n = lay.n_parts
+    unit = 2.0 / p_n
+    seen = set(ex.keys)
+    added = 0
+    arr = ex.arrays()
+    it: Iterable = enumerate(pos)
+    if progress is not None:
+        it = progress(it, f'round {round_}: poses', len(pos))
+    for i, p in it:
+        color, depth, mask, _ = frame_of(samples[p.sample], tree.names, cfg, p.flipped)
+        level = level_of(color, depth, mask, p.box, p.level_scale, cfg)
+        res = score_level(level, model, arrays)
+        if res is None:
+            continue
+        ny, nx = res.resp.shape[2:]
+        yy, xx = np.mgrid[0:ny, 0:nx]
+        far = np.hypot(yy[None] - p.cells[:, 0, None, None],
+                       xx[None] - p.cells[:, 1, None, None]) > p.tau     # (P, ny, nx)
+        aug = res.resp + (unit * far).astype(np.float32)[:, None]
+        root, ix, iy, ik, _ = tree_dp(aug, parents, springs, anchors, bias)
+        aug_res = LevelResult(level, aug, root, ix, iy, ik)
+        roots = best_roots(aug_res, cfg.structural_per_positive, min_dist=2)
+        if len(roots) == 0:
+            continue
+        poses, local = backtrack(roots, parents, aug, ix, iy, ik, springs, anchors, bias)
+        gt_score = float(dot(w, *arr[:6], arr[8], i))
+        for k in range(len(roots)):
+            wrong = far[np.arange(p_n), poses[k, :, 1], poses[k, :, 2]]
+            loss = unit * float(wrong.sum())
+            if loss <= 0:
+                continue
+            score = float(local[k].sum()) - loss
+            if gt_score - score >= loss - 1e-6:
+                continue
+            key = ('pose', i, *poses[k].ravel().tolist())
+            if key in seen:
+                continue
+            blocks = pose_blocks(level.feat, poses[k], parents, anchors, lay,
+                                  cfg.filter_cells, cfg.bias_feature)
+            if not ex.add(whitened(blocks, white, -1.0), 1.0, loss, i, key):
+                return added
+            seen.add(key)
+            added += 1
+            if added >= room:
+                return added
+    return added
