@@ -1,4 +1,4 @@
-"""DH chains and elbow/knee inference (core/kinematics.py)."""
+"""Elbow/knee inference (core/kinematics.py)."""
 
 from __future__ import annotations
 
@@ -17,10 +17,7 @@ from pose4d_ros.core.kinematics import (
     LimbLengths,
     body_frame,
     circle_points,
-    dh_transform,
-    forward_kinematics,
     infer_middle_joints,
-    limb_angles,
     middle_joint_circle,
     solve_limb,
 )
@@ -30,70 +27,24 @@ K = cad60_intrinsics()
 UPPER, LOWER = 0.28, 0.25
 
 
-def rot(axis: str, a: float) -> np.ndarray:
-    c, s = math.cos(a), math.sin(a)
-    m = {'x': [[1, 0, 0], [0, c, -s], [0, s, c]], 'z': [[c, -s, 0], [s, c, 0], [0, 0, 1]]}[axis]
-    out = np.eye(4)
-    out[:3, :3] = m
-    return out
-
-
-def trans(x: float, y: float, z: float) -> np.ndarray:
-    out = np.eye(4)
-    out[:3, 3] = [x, y, z]
-    return out
-
-
-def random_base(rng: np.random.Generator, origin) -> np.ndarray:
-    q, _ = np.linalg.qr(rng.normal(size=(3, 3)))
-    if np.linalg.det(q) < 0:
-        q[:, 0] *= -1
-    base = np.eye(4)
-    base[:3, :3] = q
-    base[:3, 3] = origin
-    return base
-
-
-def random_angles(rng: np.random.Generator) -> np.ndarray:
-    return rng.uniform([-math.pi, 0.2, -math.pi, 0.35], [math.pi, math.pi - 0.2, math.pi, 2.6])
-
-
-def test_dh_transform_is_rz_tz_tx_rx() -> None:
-    rng = np.random.default_rng(0)
-    for theta, d, a, alpha in rng.uniform(-2, 2, (5, 4)):
-        expect = rot('z', theta) @ trans(0, 0, d) @ trans(a, 0, 0) @ rot('x', alpha)
-        assert_allclose(dh_transform(theta, d, a, alpha), expect, atol=1e-12)
-
-
-def test_forward_kinematics_bones_and_bend() -> None:
-    rng = np.random.default_rng(0)
-    for _ in range(20):
-        q = random_angles(rng)
-        base = random_base(rng, rng.uniform(-1, 1, 3))
-        root, mid, end = forward_kinematics(q, UPPER, LOWER, base)
-        assert_allclose(root, base[:3, 3], atol=1e-12)
-        assert_allclose(np.linalg.norm(mid - root), UPPER, rtol=1e-12)
-        assert_allclose(np.linalg.norm(end - mid), LOWER, rtol=1e-12)
-        cos_bend = (mid - root) @ (end - mid) / (UPPER * LOWER)
-        assert_allclose(cos_bend, math.cos(q[3]), atol=1e-12)  # q4 = 0 is a straight limb
-
-
-def test_limb_angles_round_trip() -> None:
-    rng = np.random.default_rng(1)
-    for _ in range(20):
-        q = random_angles(rng)
-        base = random_base(rng, rng.uniform(-1, 1, 3))
-        joints = forward_kinematics(q, UPPER, LOWER, base)
-        q2 = limb_angles(*joints, base[:3, :3])
-        assert_allclose(forward_kinematics(q2, UPPER, LOWER, base), joints, atol=1e-9)
-        assert_allclose(q2, q, atol=1e-9)
+def random_limb(rng: np.random.Generator, root, upper: float = UPPER, lower: float = LOWER
+                ) -> np.ndarray:
+    """Root, middle and end (3, 3) of a limb with random bone directions, bent by 0.35-2.6 rad
+    (the angle between the two bones: 0 = straight)."""
+    root = np.asarray(root, float)
+    d1 = rng.normal(size=3)
+    d1 /= np.linalg.norm(d1)
+    side = np.cross(d1, rng.normal(size=3))
+    side /= np.linalg.norm(side)
+    bend = rng.uniform(0.35, 2.6)
+    mid = root + upper * d1
+    return np.stack([root, mid, mid + lower * (math.cos(bend) * d1 + math.sin(bend) * side)])
 
 
 def test_ik_returns_a_point_on_the_true_circle() -> None:
     rng = np.random.default_rng(2)
     for _ in range(30):
-        q = random_angles(rng)
-        root, mid, end = forward_kinematics(q, UPPER, LOWER, random_base(rng, [0, 0, 2.5]))
+        root, mid, end = random_limb(rng, [0, 0, 2.5])
         circle = middle_joint_circle(root, end, UPPER, LOWER)
         # The true middle joint is on it ...
         assert_allclose(np.linalg.norm(mid - circle.centre), circle.radius, atol=1e-9)
@@ -123,8 +74,7 @@ def arm_scene(rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray, np.ndar
     """A bent arm beside a torso, in front of the camera; returns root, middle, end, depth."""
     shoulder = np.array([0.15, -0.25, 2.2])
     while True:
-        root, mid, end = forward_kinematics(random_angles(rng), UPPER, LOWER,
-                                            trans(*shoulder))
+        root, mid, end = random_limb(rng, shoulder)
         # Keep the arm beside the torso (no self-occlusion by it) and the bend clear.
         bend = math.acos(np.clip((mid - root) @ (end - mid) / (UPPER * LOWER), -1, 1))
         if mid[0] > shoulder[0] - 0.05 and end[0] > shoulder[0] - 0.1 and 0.6 < bend < 2.2:
@@ -291,8 +241,7 @@ def test_limb_lengths_learn_and_fall_back() -> None:
     lengths = LimbLengths(min_samples=10)
     assert lengths.lengths('left_arm') == DEFAULT_LIMB_LENGTHS_M['left_arm']
     for _ in range(50):  # a 14-part detector sees the elbow: bone lengths ~ (0.3, 0.2)
-        q = random_angles(rng)
-        root, mid, end = forward_kinematics(q, 0.3, 0.2, random_base(rng, [0, 0, 2]))
+        root, mid, end = random_limb(rng, [0, 0, 2], 0.3, 0.2)
         noise = rng.normal(0, 0.005, (3, 3))
         lengths.observe('left_arm', root + noise[0], mid + noise[1], end + noise[2])
     assert_allclose(lengths.lengths('left_arm'), (0.3, 0.2), atol=0.005)

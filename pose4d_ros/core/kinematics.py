@@ -1,25 +1,14 @@
-"""Denavit-Hartenberg limb chains and the inverse kinematics of elbows and knees.
+"""Inverse kinematics of elbows and knees (the paper's Denavit-Hartenberg limbs).
 
 After Martinez Berti, Sanchez Salmeron and Ricolfe Viala, "4-Dimensional deformation part model
 for pose estimation using Kalman filter constraints", eqs. (17)-(24). The reduced part model
 detects shoulders, wrists, hips and ankles; elbows and knees are completed here, in 3-D, in the
 camera optical frame (x right, y down, z forward, metres).
 
-Chains (eq. 17 and the products after it)
------------------------------------------
-Each limb (2 arms, 2 legs) is a DH chain: three revolute joints at the root (shoulder / hip),
-one at the middle (elbow / knee), then a fixed link to the end (wrist / ankle)::
-
-    i   theta_i   d_i     a_i   alpha_i
-    1   q1        0       0     -pi/2
-    2   q2        0       0     +pi/2
-    3   q3        upper   0     -pi/2
-    4   q4        0       0     +pi/2
-    5   0         lower   0      0
-
-with the standard transform ``T_i = Rz(theta_i) Tz(d_i) Tx(a_i) Rx(alpha_i)`` (eq. 17). The
-upper bone points along ``z_2`` (azimuth q1, polar angle q2 in the base frame), q3 turns the
-limb about it and q4 is the bend (0 = straight): the angle between the two bones' directions.
+The paper writes each limb (2 arms, 2 legs) as a DH chain (eq. 17): three revolute joints at
+the root (shoulder / hip), one at the middle (elbow / knee), then a fixed link to the end
+(wrist / ankle). Completing the middle joint needs only that chain's geometry: two bones of
+fixed lengths joined at the middle joint.
 
 Inverse kinematics (eqs. 18-24)
 -------------------------------
@@ -72,102 +61,6 @@ class IkFlag(IntEnum):
     UNREACHABLE = 2    # |end - root| out of reach: on the straight line, low confidence
     MISSING = 3        # root, end or a length unknown: NaN
     BEHIND_CAMERA = 4  # root or end with z <= 0: NaN
-
-
-# ---------------------------------------------------------------------------------------------
-# Denavit-Hartenberg chains (eq. 17)
-
-
-def dh_transform(theta: float, d: float, a: float, alpha: float) -> NDArray[np.float64]:
-    """The standard DH transform ``Rz(theta) Tz(d) Tx(a) Rx(alpha)`` (eq. 17), (4, 4)."""
-    ct, st, ca, sa = math.cos(theta), math.sin(theta), math.cos(alpha), math.sin(alpha)
-    return np.array([
-        [ct, -st * ca, st * sa, a * ct],
-        [st, ct * ca, -ct * sa, a * st],
-        [0.0, sa, ca, d],
-        [0.0, 0.0, 0.0, 1.0],
-    ])
-
-
-@dataclass(frozen=True)
-class DhLink:
-    """One row of a DH table: joint angle offset (radians), d, a (metres), alpha (radians)."""
-
-    d: float
-    a: float
-    alpha: float
-    revolute: bool = True
-
-
-def limb_chain(upper: float, lower: float) -> tuple[DhLink, ...]:
-    """The DH table of an arm or leg: 3 root joints, 1 middle joint, a fixed end link."""
-    if not (upper > 0 and lower > 0):
-        raise ValueError(f'bone lengths must be positive metres, got {upper}, {lower}')
-    h = math.pi / 2
-    return (DhLink(0.0, 0.0, -h), DhLink(0.0, 0.0, h), DhLink(upper, 0.0, -h),
-            DhLink(0.0, 0.0, h), DhLink(lower, 0.0, 0.0, revolute=False))
-
-
-def forward_kinematics(angles: Sequence[float] | NDArray[np.floating], upper: float,
-                       lower: float, base: NDArray[np.floating] | None = None
-                       ) -> NDArray[np.float64]:
-    """Positions of root, middle and end joints of a limb (the product of eq. 17's transforms).
-
-    Parameters
-    ----------
-    angles : (4,) radians, (q1, q2, q3) at the root, q4 at the middle joint (0 = straight).
-    upper, lower : bone lengths, metres.
-    base : (4, 4) pose of the root frame in the camera frame (rotation + the root's position);
-        identity if None.
-
-    Returns
-    -------
-    (3, 3) float64 metres: rows root, middle, end.
-    """
-    q = np.asarray(angles, dtype=np.float64).reshape(-1)
-    if q.shape != (4,):
-        raise ValueError(f'angles must have 4 values, got {q.shape}')
-    t = np.eye(4) if base is None else np.asarray(base, dtype=np.float64)
-    if t.shape != (4, 4):
-        raise ValueError(f'base must be a (4, 4) transform, got {t.shape}')
-    origins = [t[:3, 3].copy()]
-    for i, link in enumerate(limb_chain(upper, lower)):
-        theta = q[i] if link.revolute else 0.0
-        t = t @ dh_transform(theta, link.d, link.a, link.alpha)
-        origins.append(t[:3, 3].copy())
-    # Frame 3's origin is the middle joint, frame 5's the end (frames 1, 2 sit at the root).
-    return np.stack([origins[0], origins[3], origins[5]])
-
-
-def limb_angles(root: NDArray[np.floating], middle: NDArray[np.floating],
-                end: NDArray[np.floating], base_rotation: NDArray[np.floating] | None = None
-                ) -> NDArray[np.float64]:
-    """The DH joint angles (q1..q4) of a limb whose three joints are given (inverse of FK).
-
-    Parameters
-    ----------
-    root, middle, end : (3,) metres, camera frame.
-    base_rotation : (3, 3) rotation of the root frame in the camera frame; identity if None.
-
-    Returns
-    -------
-    (4,) radians; q2 and q4 in [0, pi].
-    """
-    rot = np.eye(3) if base_rotation is None else np.asarray(base_rotation, dtype=np.float64)
-    up = rot.T @ (np.asarray(middle, float) - np.asarray(root, float))
-    lo = rot.T @ (np.asarray(end, float) - np.asarray(middle, float))
-    z2 = up / np.linalg.norm(up)
-    # z2 = (cos q1 sin q2, sin q1 sin q2, cos q2) in the base frame.
-    q2 = math.acos(float(np.clip(z2[2], -1.0, 1.0)))
-    q1 = math.atan2(float(z2[1]), float(z2[0])) if math.sin(q2) > 1e-12 else 0.0
-    f2 = np.eye(4)
-    for theta, link in zip((q1, q2), limb_chain(1.0, 1.0)[:2], strict=True):
-        f2 = f2 @ dh_transform(theta, link.d, link.a, link.alpha)
-    # The lower bone in frame 2: (cos q3 sin q4, sin q3 sin q4, cos q4).
-    d2 = f2[:3, :3].T @ (lo / np.linalg.norm(lo))
-    q4 = math.acos(float(np.clip(d2[2], -1.0, 1.0)))
-    q3 = math.atan2(float(d2[1]), float(d2[0])) if math.sin(q4) > 1e-12 else 0.0
-    return np.array([q1, q2, q3, q4])
 
 
 # ---------------------------------------------------------------------------------------------

@@ -183,11 +183,6 @@ def world_to_optical(joints_mm: NDArray[np.floating]) -> NDArray[np.float64]:
     return np.asarray(joints_mm, dtype=np.float64) * np.array([1e-3, -1e-3, 1e-3])
 
 
-def optical_to_world(points_m: NDArray[np.floating]) -> NDArray[np.float64]:
-    """Optical-frame metres -> OpenNI world millimetres; the inverse of `world_to_optical`."""
-    return np.asarray(points_m, dtype=np.float64) * np.array([1e3, -1e3, 1e3])
-
-
 def project_perspective(joints_mm: NDArray[np.floating],
                         intrinsics: Intrinsics | None = None) -> NDArray[np.float64]:
     """The OpenNI perspective model: `u = cx + fx x / z`, `v = cy - fy y / z`.

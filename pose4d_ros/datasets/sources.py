@@ -45,19 +45,6 @@ class Sample:
     key: str = ''
     extra: dict = field(default_factory=dict)
 
-    def joints(self, names: tuple[str, ...] | list[str]) -> tuple[NDArray[np.float64],
-                                                                   NDArray[np.bool_]]:
-        """(len(names), 2) pixels and (len(names),) visibility of the named joints (NaN / False
-        for joints the source does not have)."""
-        uv = np.full((len(names), 2), np.nan)
-        vis = np.zeros(len(names), bool)
-        for i, n in enumerate(names):
-            if n in self.names:
-                j = self.names.index(n)
-                uv[i] = self.joints_uv[j]
-                vis[i] = bool(self.visible[j]) and bool(np.isfinite(self.joints_uv[j]).all())
-        return uv, vis
-
 
 def parse_range(text: str | None) -> tuple[int, int] | None:
     """'A-B' -> (A, B) inclusive; None stays None."""

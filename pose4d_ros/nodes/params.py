@@ -1,9 +1,9 @@
 """Declared, described and validated node parameters.
 
 Each node lists its parameters once as `Param` specs; `declare` declares them with a
-`ParameterDescriptor` (description, range, read-only), validates the start-up values and returns
-them, and refuses bad runtime changes of the writable ones with a message that names the
-parameter, the value and the rule. `config/<node>.yaml` holds the same defaults (a test checks).
+`ParameterDescriptor` (description, range, read-only) and validates the start-up values, refusing
+a bad one with a message that names the parameter, the value and the rule, and returns them.
+`config/<node>.yaml` holds the same defaults (a test checks).
 """
 
 from __future__ import annotations
@@ -17,10 +17,8 @@ from rcl_interfaces.msg import (
     FloatingPointRange,
     IntegerRange,
     ParameterDescriptor,
-    SetParametersResult,
 )
 from rclpy.node import Node
-from rclpy.parameter import Parameter
 
 Value = bool | int | float | str | list[str]
 
@@ -34,8 +32,7 @@ class Param:
     """One node parameter.
 
     `range` is inclusive (numbers); `choices` restricts strings; `check` is an extra rule that
-    returns an error text or None. Read-only parameters are read once at start-up; the others
-    may change at runtime (validated).
+    returns an error text or None. Parameters are read-only: read once at start-up.
     """
 
     name: str
@@ -43,14 +40,13 @@ class Param:
     description: str
     range: tuple[float, float] | None = None
     choices: tuple[str, ...] | None = None
-    read_only: bool = True
     check: Callable[[Any], str | None] | None = None
 
     def descriptor(self) -> ParameterDescriptor:
         text = self.description
         if self.choices:
             text += f' One of: {", ".join(self.choices)}.'
-        d = ParameterDescriptor(description=text, read_only=self.read_only)
+        d = ParameterDescriptor(description=text, read_only=True)
         if self.range is not None:
             lo, hi = self.range
             if isinstance(self.default, bool):
@@ -75,16 +71,13 @@ class Param:
         return None
 
 
-def declare(node: Node, params: Sequence[Param],
-            on_change: Callable[[dict[str, Any]], None] | None = None) -> dict[str, Any]:
+def declare(node: Node, params: Sequence[Param]) -> dict[str, Any]:
     """Declare and validate `params` on `node`; return {name: value}.
 
     Raises ParameterError for a start-up value that breaks a rule (rclpy's own type and range
-    checks raise their exceptions, which `common.run` reports the same way). Runtime changes of
-    writable parameters are validated; accepted ones are passed to `on_change`.
+    checks raise their exceptions, which `common.run` reports the same way).
     """
     values: dict[str, Any] = {}
-    specs = {p.name: p for p in params}
     for p in params:
         try:
             param = node.declare_parameter(p.name, p.default, p.descriptor())
@@ -97,23 +90,6 @@ def declare(node: Node, params: Sequence[Param],
         if problem:
             raise ParameterError(f'parameter {p.name}: {problem}')
         values[p.name] = value
-
-    def _on_set(changes: list[Parameter]) -> SetParametersResult:
-        accepted: dict[str, Any] = {}
-        for change in changes:
-            spec = specs.get(change.name)
-            if spec is None:
-                continue
-            problem = spec.validate(change.value)
-            if problem:
-                return SetParametersResult(successful=False,
-                                           reason=f'parameter {change.name}: {problem}')
-            accepted[change.name] = change.value
-        if accepted and on_change is not None:
-            on_change(accepted)
-        return SetParametersResult(successful=True)
-
-    node.add_on_set_parameters_callback(_on_set)
     return values
 
 

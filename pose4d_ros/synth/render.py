@@ -372,10 +372,6 @@ class Scene:
         p = np.asarray(points_room, dtype=np.float64)
         return (p - self.cam_pos) @ self.room_to_cam.T
 
-    def to_room(self, points_optical: NDArray[np.floating]) -> NDArray[np.float64]:
-        """(..., 3) optical frame -> room frame, metres."""
-        return np.asarray(points_optical, dtype=np.float64) @ self.room_to_cam + self.cam_pos
-
     def footprints(self, kinds: tuple[str, ...] = ('furniture', 'occluder')
                    ) -> NDArray[np.float64]:
         """(K, 4) floor rectangles (xmin, xmax, ymin, ymax) of the boxes of `kinds`."""
