@@ -364,3 +364,44 @@ def test_a_sitting_window_gets_a_chair_under_the_hips() -> None:
     hip = synth.retarget(sit, body, up=np.array([0.0, 0.0, 1.0]))[0, 2]
     assert_allclose(seat.center[2] + seat.half[2], np.clip(hip - 0.015 - 0.9 *
                     body.pelvis_axes[1], 0.3, 0.6), atol=1e-9)
+
+
+@pytest.mark.parametrize(('stature', 'distance', 'turn'), [(1.4, 1.2, 0.0), (2.0, 4.5, 90.0),
+                                                           (1.7, 3.0, 45.0)])
+def test_staging_puts_the_body_where_asked(stature: float, distance: float, turn: float) -> None:
+    rng = np.random.default_rng(3)
+    staging = synth_video.Staging(stature_m=(stature, stature), distance_m=(distance, distance),
+                                  turn_deg=(turn, turn))
+    body = synth.random_body(rng, stature_m=staging.stature_m)
+    assert body.stature_m == stature
+    scene = synth.random_scene(rng, K, occluder_prob=0.0, person_zone=staging.person_zone)
+    assert max(b.center[1] for b in scene.boxes if b.kind == 'wall') > distance + 0.3
+    # a person facing the camera (-Y in the room): the left shoulder on the camera's right (+X)
+    floor = np.zeros((2, 20, 3))
+    floor[:, :, 2] = 1.0
+    floor[:, J['left_shoulder'], 0], floor[:, J['right_shoulder'], 0] = 0.2, -0.2
+    placed = synth_video.place_in_room(floor, scene, rng, staging=staging)
+    assert_allclose(placed[:, J['hip_center'], 1], distance)
+    across = placed[0, J['left_shoulder'], :2] - placed[0, J['right_shoulder'], :2]
+    # turned by `turn` degrees: at 90 the right shoulder is the nearer one (right side shown)
+    assert_allclose(np.degrees(np.arctan2(across[1], across[0])), turn, atol=1e-6)
+
+
+@pytest.mark.parametrize('bad', [{'stature_m': (1.9, 1.5)}, {'distance_m': (0.1, 2.0)},
+                                 {'turn_deg': (0.0, 200.0)}])
+def test_staging_refuses_bad_ranges(bad: dict) -> None:
+    with pytest.raises(ValueError, match=next(iter(bad))):
+        synth_video.Staging(**bad)
+
+
+def test_pose4d_synth_staging_options(tmp_path: Path) -> None:
+    ut = tmp_path / 'ut'
+    write_utkinect(ut, frames=40)
+    out = tmp_path / 'set'
+    assert pose4d_main(['synth', '--utkinect', str(ut), '--out', str(out), '--takes', 's01_e01',
+                        '--frames', '2', '--stature', '1.8', '1.8', '--distance', '3.5', '3.5',
+                        '--turn', '45', '45', '--quiet']) == 0
+    info = json.loads((out / 'synth.json').read_text())
+    assert info['stature_m'] == [1.8, 1.8] and info['turn_deg'] == [45.0, 45.0]
+    video = info['videos'][0]
+    assert video['stature_m'] == 1.8 and 3.2 < video['distance_m'] < 3.8

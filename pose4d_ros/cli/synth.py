@@ -48,6 +48,15 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
                    help='windows per take, spread evenly from --start to the end')
     p.add_argument('--body-per', choices=('video', 'subject'), default='video',
                    help='a new random body for every video, or one per UTKinect subject')
+    # defaults: `synth.video.Staging` (imported in `run`, to keep `pose4d --help` fast)
+    p.add_argument('--stature', type=float, nargs=2, metavar=('LO', 'HI'), default=None,
+                   help="bodies' standing heights, metres, drawn uniformly (default: 1.52 1.95)")
+    p.add_argument('--distance', type=float, nargs=2, metavar=('LO', 'HI'), default=None,
+                   help="the person's distance from the camera, metres, drawn uniformly "
+                        '(default: 2.4 3.4)')
+    p.add_argument('--turn', type=float, nargs=2, metavar=('LO', 'HI'), default=None,
+                   help='turn of the motion about the vertical, degrees, drawn uniformly: 0 '
+                        'faces the camera, 90 shows the right side (default: -25 25)')
     p.add_argument('--occluders', type=float, default=0.3,
                    help='probability of furniture between camera and person')
     p.add_argument('--width', type=int, default=320, help='image width (CAD-60: 320)')
@@ -111,14 +120,20 @@ def _check(args: argparse.Namespace) -> None:
 
 def run(args: argparse.Namespace) -> int:
     # heavy imports here, so that `pose4d --help` stays fast
+    import numpy as np
     from tqdm import tqdm
 
     from pose4d_ros.datasets import cad60
     from pose4d_ros.datasets.utkinect import list_takes
     from pose4d_ros.synth import video
-    from pose4d_ros.synth.render import Body
+    from pose4d_ros.synth.render import HC, Body
 
     _check(args)
+    default = video.Staging()
+    staging = video.Staging(
+        stature_m=tuple(args.stature or default.stature_m),
+        distance_m=tuple(args.distance or default.distance_m),
+        turn_deg=tuple(args.turn or default.turn_deg))
     available = [p.name[len('joints_'):-len('.txt')] for p in list_takes(args.utkinect)]
     names = parse_takes(args.takes, available)
     intrinsics = cad60_intrinsics(args.width, args.height)
@@ -143,11 +158,12 @@ def run(args: argparse.Namespace) -> int:
                 body = None
                 if args.body_per == 'subject':
                     if plan.subject not in bodies:
-                        bodies[plan.subject] = video.subject_body(args.seed, plan.subject)
+                        bodies[plan.subject] = video.subject_body(
+                            args.seed, plan.subject, stature_m=staging.stature_m)
                     body = bodies[plan.subject]
                 job = video.prepare_video(plan, by_take[plan.take], intrinsics,
-                                                body=body, occluder_prob=args.occluders,
-                                                kinect_noise=not args.no_noise)
+                                          body=body, occluder_prob=args.occluders,
+                                          kinect_noise=not args.no_noise, staging=staging)
                 person_dir = tmp / f'data{plan.subject}'
                 person_dir.mkdir(exist_ok=True)
                 n_bytes += video.write_video(job, person_dir, progress=bar.update)
@@ -157,6 +173,7 @@ def run(args: argparse.Namespace) -> int:
                     'activity': plan.activity, 'start_frame_30fps': plan.start,
                     'stride': plan.stride, 'frames': plan.n_frames,
                     'stature_m': round(job.body.stature_m, 3),
+                    'distance_m': round(float(np.median(job.poses[:, HC, 2])), 3),
                     'occluder': any(b.kind == 'occluder' for b in job.scene.boxes),
                     'camera_height_m': round(job.scene.cam_height_m, 3),
                 })
@@ -168,6 +185,8 @@ def run(args: argparse.Namespace) -> int:
             'seed': args.seed, 'takes': names, 'frames': args.frames, 'stride': args.stride,
             'start_s': args.start, 'videos_per_take': args.videos_per_take,
             'body_per': args.body_per, 'occluders': args.occluders,
+            'stature_m': list(staging.stature_m), 'distance_m': list(staging.distance_m),
+            'turn_deg': list(staging.turn_deg),
             'size': [args.width, args.height], 'kinect_noise': not args.no_noise,
             'videos': records,
         }

@@ -61,6 +61,8 @@ REF_BONES: NDArray[np.float64] = np.array([
     0.105, 0.475, 0.372, 0.090,
 ])
 REF_STATURE_M = 1.72
+# The statures of `random_body` unless told otherwise, metres.
+STATURE_M = (1.52, 1.95)
 
 # Bone directions of a person standing upright facing the camera (optical frame), used only
 # when a pose gives no direction (coincident or missing joints).
@@ -116,10 +118,12 @@ class Body:
     bald: bool
 
 
-def random_body(rng: np.random.Generator) -> Body:
-    """A random person: stature 1.52-1.95 m, proportions jittered per body part, a build from
-    slim to heavy, skin tone, hair and clothes (colours, patterns, sleeves, shorts)."""
-    stature = float(rng.uniform(1.52, 1.95))
+def random_body(rng: np.random.Generator, *,
+                stature_m: tuple[float, float] = STATURE_M) -> Body:
+    """A random person: stature drawn uniformly from `stature_m` (metres), proportions
+    jittered per body part, a build from slim to heavy, skin tone, hair and clothes (colours,
+    patterns, sleeves, shorts)."""
+    stature = float(rng.uniform(*stature_m))
     s = stature / REF_STATURE_M
     build = float(rng.uniform(0.85, 1.3))  # girth factor
     f_trunk, f_head, f_shoulder, f_arm, f_leg, f_hip = rng.normal(
@@ -470,7 +474,8 @@ def _build_scene(intrinsics: Intrinsics, cam_height: float, room_to_cam: NDArray
                  bg_ids=ids, bg_dropout=dropout.astype(np.float32))
 
 
-# The region where `pose4d synth` puts people: room-frame X and Y ranges, metres.
+# The region where `pose4d synth` puts people by default (2.4-3.4 m away): room-frame X and Y
+# ranges, metres.
 PERSON_ZONE = (-1.1, 1.1, 2.2, 3.7)
 
 
@@ -482,14 +487,16 @@ def _overlaps(rect: tuple[float, float, float, float],
 
 
 def random_scene(rng: np.random.Generator, intrinsics: Intrinsics, *,
-                 occluder_prob: float = 0.3) -> Scene:
+                 occluder_prob: float = 0.3,
+                 person_zone: tuple[float, float, float, float] = PERSON_ZONE) -> Scene:
     """A random furnished room seen by a Kinect-like camera.
 
     The camera stands 0.85-1.35 m high, aimed at a point 1.0-1.1 m high 3 m away (pitch about
     -6 to +8 degrees), looking at a back wall
-    3.7-5.5 m away (partly beyond the sensor's range, as in real rooms); side walls are 1.7-3 m
-    to either side. Furniture (tables, cabinets, shelves, chairs, sofas, counters) stands along
-    the walls outside `PERSON_ZONE`; with probability `occluder_prob` a low object stands
+    3.7-5.5 m away (partly beyond the sensor's range, as in real rooms; further by as much as
+    `person_zone` reaches beyond `PERSON_ZONE`); side walls are 1.7-3 m to either side.
+    Furniture (tables, cabinets, shelves, chairs, sofas, counters) stands along the walls
+    outside `person_zone`; with probability `occluder_prob` a low object stands
     between the camera and that zone (1.2-1.65 m away), hiding a person's legs. Walls, floor and
     furniture are textured from real photographs; the light's direction, colour and strength
     vary.
@@ -499,6 +506,7 @@ def random_scene(rng: np.random.Generator, intrinsics: Intrinsics, *,
     rng : the random source (the scene is a deterministic function of its state).
     intrinsics : the camera the room is pre-rendered for.
     occluder_prob : probability of an occluding object in front of the person zone.
+    person_zone : room-frame (x0, x1, y0, y1) metres kept free for the person.
     """
     mb = tex.MaterialBuilder()
     cam_h = float(rng.uniform(0.85, 1.35))
@@ -510,7 +518,7 @@ def random_scene(rng: np.random.Generator, intrinsics: Intrinsics, *,
     roll = np.deg2rad(rng.normal(0.0, 0.8))
     room_to_cam = camera_rotation(pitch, yaw, roll)
 
-    back = float(rng.uniform(3.7, 5.5))
+    back = float(rng.uniform(3.7, 5.5)) + max(person_zone[3] - PERSON_ZONE[3], 0.0)
     xl = -float(rng.uniform(1.7, 3.0))
     xr = float(rng.uniform(1.7, 3.0))
     ceil = float(rng.uniform(2.5, 2.9))
@@ -575,7 +583,7 @@ def random_scene(rng: np.random.Generator, intrinsics: Intrinsics, *,
             if new is None:
                 break
             rect, parts = new
-            if not _overlaps(rect, taken) and not _overlaps(rect, [_zone_rect()], 0.0):
+            if not _overlaps(rect, taken) and not _overlaps(rect, [person_zone], 0.0):
                 taken.append(rect)
                 boxes.extend(parts)
                 break
@@ -596,10 +604,6 @@ def random_scene(rng: np.random.Generator, intrinsics: Intrinsics, *,
     return _build_scene(intrinsics, cam_h, room_to_cam, tuple(boxes), mb.build(), light_room,
                         float(rng.uniform(0.3, 0.55)), float(rng.uniform(0.45, 0.75)), colour,
                         floor_index=0)
-
-
-def _zone_rect() -> tuple[float, float, float, float]:
-    return PERSON_ZONE
 
 
 def _table(center, half_top, height, mat, yaw=0.0, kind='furniture') -> list[Box]:

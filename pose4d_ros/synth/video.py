@@ -6,7 +6,8 @@ recording camera's height and tilt; the lower foot is then put on it in every fr
 video is a window of a take (every `stride`-th frame), posed by that motion on a fresh random
 body (`render.random_body`) in a fresh random room (`render.random_scene`): the walk keeps its
 shape and its heading towards the camera but is turned by up to +-25 degrees and moved so that
-the person stands 2.4-3.4 m from the camera, clear of the furniture and behind any occluder.
+the person stands 2.4-3.4 m from the camera, clear of the furniture and behind any occluder
+(`Staging` sets other statures, distances and turns: a person seen from the side, or near).
 Windows in which the person sits get a chair under the hips. The light's strength drifts
 slowly during a video (auto-exposure).
 
@@ -35,6 +36,38 @@ from pose4d_ros.synth.render import HC, LAN, LFT, RAN, RFT, Body, Rendered, Scen
 FPS = 30.0
 SIT_ACTIONS = ('sitDown', 'standUp')
 SEAT_HIP_FRACTION = 0.88  # sitting: hip centre below this fraction of its standing height
+
+
+@dataclass(frozen=True)
+class Staging:
+    """Who stands where: each video draws its body's stature, its distance and its turn
+    uniformly from these ranges (equal ends fix a value).
+
+    Attributes
+    ----------
+    stature_m : (lo, hi) the body's standing height, metres.
+    distance_m : (lo, hi) the mean hip position's distance ahead of the camera, metres.
+    turn_deg : (lo, hi) the turn of the motion about the vertical, degrees: 0 = as recorded
+        (UTKinect's subjects face the Kinect), 90 = the person's left side towards the camera.
+    """
+
+    stature_m: tuple[float, float] = render.STATURE_M
+    distance_m: tuple[float, float] = (2.4, 3.4)
+    turn_deg: tuple[float, float] = (-25.0, 25.0)
+
+    def __post_init__(self) -> None:
+        for name, (lo, hi), bounds in (('stature_m', self.stature_m, (1.0, 2.3)),
+                                       ('distance_m', self.distance_m, (0.8, 6.0)),
+                                       ('turn_deg', self.turn_deg, (-180.0, 180.0))):
+            if not bounds[0] <= lo <= hi <= bounds[1]:
+                raise ValueError(f'{name} must be lo <= hi within {bounds[0]:g}-{bounds[1]:g}, '
+                                 f'got {lo:g}-{hi:g}')
+
+    @property
+    def person_zone(self) -> tuple[float, float, float, float]:
+        """The room's free zone for the person's hips (`render.PERSON_ZONE` by default)."""
+        x0, x1, y0, y1 = render.PERSON_ZONE
+        return (x0, x1, self.distance_m[0] - 0.2, self.distance_m[1] + 0.3)
 
 
 @dataclass(frozen=True)
@@ -200,9 +233,11 @@ def video_rng(plan: VideoPlan, what: int) -> np.random.Generator:
     return np.random.default_rng([plan.seed, plan.subject, plan.take_no, plan.window, what])
 
 
-def subject_body(seed: int, subject: int) -> Body:
+def subject_body(seed: int, subject: int, *,
+                 stature_m: tuple[float, float] = render.STATURE_M) -> Body:
     """One body for all videos of a subject (`pose4d synth --body-per subject`)."""
-    return render.random_body(np.random.default_rng([seed, subject, 0, 0, 0]))
+    return render.random_body(np.random.default_rng([seed, subject, 0, 0, 0]),
+                              stature_m=stature_m)
 
 
 @dataclass(frozen=True, eq=False)
@@ -220,18 +255,20 @@ class VideoJob:
 
 def prepare_video(plan: VideoPlan, motion: TakeMotion, intrinsics: Intrinsics, *,
                   body: Body | None = None, occluder_prob: float = 0.3,
-                  kinect_noise: bool = True) -> VideoJob:
+                  kinect_noise: bool = True, staging: Staging = Staging()) -> VideoJob:
     """Draw the body (unless given) and the room, place the motion, add a chair if needed."""
-    body = body if body is not None else render.random_body(video_rng(plan, 1))
+    if body is None:
+        body = render.random_body(video_rng(plan, 1), stature_m=staging.stature_m)
     rng = video_rng(plan, 2)
-    scene = render.random_scene(rng, intrinsics, occluder_prob=occluder_prob)
+    scene = render.random_scene(rng, intrinsics, occluder_prob=occluder_prob,
+                                person_zone=staging.person_zone)
     room = motion.joints[plan.indices].copy()
     # The lower foot joint sits a shoe's radius above the floor in every frame: Kinect's foot
     # joints scatter by centimetres (decimetres when mis-tracked) about the fitted floor, and
     # nobody jumps in UTKinect.
     low = room[:, [LAN, LFT, RAN, RFT], 2].min(axis=1)
     room[..., 2] += (body.radii['foot'] - low)[:, None]
-    room = place_in_room(room, scene, rng)
+    room = place_in_room(room, scene, rng, staging=staging)
     window_actions = [a for a, (a0, b) in motion.actions.items()
                       if a0 <= plan.indices[-1] and b >= plan.indices[0]]
     if any(a in SIT_ACTIONS for a in window_actions):
@@ -243,13 +280,13 @@ def prepare_video(plan: VideoPlan, motion: TakeMotion, intrinsics: Intrinsics, *
 
 
 def place_in_room(joints: NDArray[np.float64], scene: Scene, rng: np.random.Generator, *,
-                  tries: int = 80) -> NDArray[np.float64]:
+                  staging: Staging = Staging(), tries: int = 80) -> NDArray[np.float64]:
     """Turn and move a window of floor-frame motion into the room's person zone.
 
-    The motion is turned about the vertical through its mean hip position by up to 25 degrees
-    and moved to a random spot 2.4-3.4 m ahead; the spot that keeps the hips inside
-    `render.PERSON_ZONE`, 0.35 m clear of furniture and 0.45 m behind any occluder in the most
-    frames wins (the first that does so in all frames).
+    The motion is turned about the vertical through its mean hip position by an angle drawn
+    from `staging.turn_deg` and moved to a random spot `staging.distance_m` ahead; the spot
+    that keeps the hips inside `staging.person_zone`, 0.35 m clear of furniture and 0.45 m
+    behind any occluder in the most frames wins (the first that does so in all frames).
 
     Parameters
     ----------
@@ -263,11 +300,11 @@ def place_in_room(joints: NDArray[np.float64], scene: Scene, rng: np.random.Gene
     centre = hips.mean(axis=0)
     furniture = scene.footprints(('furniture',))
     occluders = scene.footprints(('occluder',))
-    x0, x1, y0, y1 = render.PERSON_ZONE
+    x0, x1, y0, y1 = staging.person_zone
     best = None
     for _ in range(tries):
-        yaw = np.deg2rad(rng.uniform(-25.0, 25.0))
-        target = np.array([rng.uniform(-0.5, 0.5), rng.uniform(2.4, 3.4)])
+        yaw = np.deg2rad(rng.uniform(*staging.turn_deg))
+        target = np.array([rng.uniform(-0.5, 0.5), rng.uniform(*staging.distance_m)])
         c, s = np.cos(yaw), np.sin(yaw)
         rot = np.array([[c, -s], [s, c]])
         p = (hips - centre) @ rot.T + target
