@@ -10,7 +10,7 @@ from pose4d_ros.core import joints as cj
 from pose4d_ros.core.camera import backproject, cad60_intrinsics, project
 from pose4d_ros.core.joints import JointSet
 from pose4d_ros.core.pipeline import IkStage, TrackerStage, limb_bones, reorder
-from pose4d_ros.core.skeleton import PARTS_10, SKELETON_14
+from pose4d_ros.core.skeleton import PARTS_10, PARTS_14, SKELETON_14
 
 INTR = cad60_intrinsics()
 
@@ -70,6 +70,30 @@ def test_tracker_coasts_through_dropouts_and_restarts_after_a_gap():
     assert np.isfinite(out.xyz[i]).all() and out.xyz[i, 2] == pytest.approx(2.35)
     out = stage.step(_parts(), 20.0, INTR)  # 10 s later: the track was lost, a new one starts
     assert out.track_id == 2
+
+
+def test_tracker_follows_the_parts_it_gets_ten_or_fourteen():
+    stage = TrackerStage()
+    assert stage.step(_parts(), 1.0, INTR).names == PARTS_10.names
+    names = PARTS_14.names
+    xyz = np.array([BODY[n] for n in names])
+    out = stage.step(JointSet(names, project(xyz, INTR), xyz, confidence=np.full(14, 0.9)),
+                     1.0 + 1 / 30, INTR)
+    assert out.names == names and out.track_id == 2  # a new filter, a new track
+    assert (out.source == cj.DETECTED).all()
+    assert_allclose(out.xyz, xyz, atol=1e-9)
+
+
+def test_a_part_coasting_off_the_image_is_lost():
+    stage = TrackerStage()
+    i = PARTS_10.index('left_ankle')
+    for k in range(12):  # the ankle runs down the image at 3 m/s
+        stage.step(_parts(offset=np.where(np.arange(10)[:, None] == i, [0, 0.1 * k, 0], 0)),
+                   5.0 + k / 30, INTR)
+    outs = [stage.step(_parts(drop=('left_ankle',)), 5.4 + k / 30, INTR) for k in range(30)]
+    v = [o.uv[i, 1] for o in outs if o.source[i] == cj.TRACKED]
+    assert v and max(v) <= 2 * INTR.height  # predicted on or near the image, then lost
+    assert outs[-1].source[i] == cj.MISSING and np.isnan(outs[-1].uv[i]).all()
 
 
 def test_tracker_with_no_detection_gives_missing_not_nan_as_valid():

@@ -95,6 +95,24 @@ MAX_JOINTS = 64
 _MAX_PIXEL = 1e5
 
 
+def _pixel_bounds(intrinsics: Intrinsics | None) -> tuple[NDArray, NDArray, str]:
+    """(lo, hi) of the pixels accepted as on or near the image, and the rule in words."""
+    if intrinsics is None:
+        return (np.array([-_MAX_PIXEL] * 2), np.array([_MAX_PIXEL] * 2),
+                f'within +-{_MAX_PIXEL:g} px')
+    size = np.array([intrinsics.width, intrinsics.height], np.float64)
+    return (-size, 2 * size, f'on or near the {intrinsics.width}x{intrinsics.height} image '
+                             f'({-size[0]:g}..{2 * size[0]:g}, {-size[1]:g}..{2 * size[1]:g})')
+
+
+def near_image(uv: NDArray[np.floating], intrinsics: Intrinsics | None) -> NDArray[np.bool_]:
+    """(N,) which pixels (N, 2) are on the image or within one image size of it (within
+    +-1e5 px without intrinsics): the pixels `check_joints` accepts. NaN is not near."""
+    lo, hi, _ = _pixel_bounds(intrinsics)
+    with np.errstate(invalid='ignore'):
+        return ((uv >= lo) & (uv <= hi)).all(axis=-1)
+
+
 def check_joints(joints: JointSet, intrinsics: Intrinsics | None = None) -> None:
     """Refuse joints that no camera could have seen (ValueError naming the joint and value).
 
@@ -118,14 +136,7 @@ def check_joints(joints: JointSet, intrinsics: Intrinsics | None = None) -> None
             raise ValueError(f'joint {names[i]!r}: {what}, got {values[i].tolist()}')
 
     uv = joints.uv
-    if intrinsics is None:
-        lo, hi = np.array([-_MAX_PIXEL] * 2), np.array([_MAX_PIXEL] * 2)
-        where = f'within +-{_MAX_PIXEL:g} px'
-    else:
-        size = np.array([intrinsics.width, intrinsics.height], np.float64)
-        lo, hi = -size, 2 * size
-        where = (f'on or near the {intrinsics.width}x{intrinsics.height} image '
-                 f'({-size[0]:g}..{hi[0]:g}, {-size[1]:g}..{hi[1]:g})')
+    lo, hi, where = _pixel_bounds(intrinsics)
     with np.errstate(invalid='ignore'):
         first_bad(uv, np.isnan(uv) | ((uv >= lo) & (uv <= hi)), f'pixel must be NaN or {where}')
         xyz = joints.xyz

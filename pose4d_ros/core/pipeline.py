@@ -22,7 +22,7 @@ from __future__ import annotations
 import math
 import time
 from collections.abc import Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 from numpy.typing import NDArray
@@ -34,7 +34,7 @@ from pose4d_ros.core.dpm.model import PartModel
 from pose4d_ros.core.foreground import ForegroundConfig, ForegroundResult, apply_mask, segment
 from pose4d_ros.core.joints import JointSet
 from pose4d_ros.core.kinematics import IkConfig, IkFlag, LimbLengths, infer_middle_joints
-from pose4d_ros.core.skeleton import LIMBS, PARTS_10, SKELETON_14, PartTree
+from pose4d_ros.core.skeleton import LIMBS, PARTS_10, SKELETON_14, PartTree, tree_for
 from pose4d_ros.core.slqe import ConstantVelocityTracker, CvConfig, SlqeConfig, SlqeTracker
 
 # Half-size of the window of the robust depth look-up that lifts a detected joint to 3-D, pixels
@@ -143,23 +143,32 @@ class TrackerStage:
     ----------
     kind : 'slqe' (the paper's filter) or 'cv' (plain per-part constant velocity, comparison).
     slqe, cv : their configurations.
-    tree : the part tree (default: the 10-part model).
+    tree : the part tree; None = the tree of the parts received (`skeleton.tree_for`: the
+        10-part model's, or the 14-part model's once elbows and knees come; a change of tree
+        starts a new track).
     depth_std_m : standard deviation put on a tracked part's depth in its covariance, metres.
     """
 
     def __init__(self, *, kind: str = 'slqe', slqe: SlqeConfig | None = None,
-                 cv: CvConfig | None = None, tree: PartTree = PARTS_10,
+                 cv: CvConfig | None = None, tree: PartTree | None = None,
                  depth_std_m: float = 0.05) -> None:
         if kind not in ('slqe', 'cv'):
             raise ValueError(f"tracker kind must be 'slqe' or 'cv', got {kind!r}")
         if not depth_std_m >= 0:
             raise ValueError(f'depth_std_m must be >= 0, got {depth_std_m}')
         self.kind = kind
-        self.tree = tree
+        self.slqe_config = slqe or SlqeConfig()
+        self.cv_config = cv or CvConfig()
+        self.fixed_tree = tree
         self.depth_std_m = depth_std_m
-        self.filter: SlqeTracker = (SlqeTracker(slqe or SlqeConfig(), tree) if kind == 'slqe'
-                                    else ConstantVelocityTracker(cv or CvConfig(), tree))
         self.track_id = 0
+        self._use(tree or PARTS_10)
+
+    def _use(self, tree: PartTree) -> None:
+        """A new filter (no track) on `tree`."""
+        self.tree = tree
+        self.filter: SlqeTracker = (SlqeTracker(self.slqe_config, tree) if self.kind == 'slqe'
+                                    else ConstantVelocityTracker(self.cv_config, tree))
         self.depth = np.full(len(tree), np.nan)
 
     def reset(self) -> None:
@@ -175,7 +184,10 @@ class TrackerStage:
         ValueError (and the track untouched) for parts no camera could have seen
         (`joints.check_joints`) or none of which the tree has.
         """
-        check_known(parts, self.tree.names, intrinsics)
+        tree = self.fixed_tree or tree_for(parts.names)
+        check_known(parts, tree.names, intrinsics)
+        if tree is not self.tree:
+            self._use(tree)
         parts = reorder(parts, self.tree.names)
         state = self.filter.state
         cfg = self.filter.config
@@ -190,6 +202,13 @@ class TrackerStage:
             self.track_id += 1
         measured = detected & _valid_xyz(parts.xyz)
         self.depth[measured] = parts.xyz[measured, 2]
+        # a part predicted off the image (coasting away) is lost: no stage takes such pixels
+        lost = (out.source != cj.MISSING) & ~cj.near_image(out.positions, intrinsics)
+        if lost.any():
+            out = replace(out, positions=np.where(lost[:, None], np.nan, out.positions),
+                          covariances=np.where(lost[:, None, None], np.nan, out.covariances),
+                          confidence=np.where(lost, 0, out.confidence).astype(np.float32),
+                          source=np.where(lost, cj.MISSING, out.source).astype(np.uint8))
         missing = out.source == cj.MISSING
         self.depth[missing] = np.nan
         xyz = np.full((len(self.tree), 3), np.nan)

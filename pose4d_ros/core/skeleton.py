@@ -138,6 +138,13 @@ PARTS_14 = _tree(
 PART_TREES: dict[str, PartTree] = {'10': PARTS_10, '14': PARTS_14}
 
 
+def tree_for(names: tuple[str, ...] | list[str]) -> PartTree:
+    """The smallest part tree holding every one of `names` that it can (the 10-part tree for
+    its own parts or fewer, the 14-part tree once elbows or knees are among them)."""
+    given = set(names)
+    return max(PART_TREES.values(), key=lambda t: (len(given & set(t.names)), -len(t)))
+
+
 def group_of(name: str) -> str | None:
     """The table group of a joint name (`'left_wrist'` -> `'wrist'`), None if not scored."""
     for group, members in JOINT_GROUPS.items():

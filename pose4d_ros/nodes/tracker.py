@@ -1,11 +1,11 @@
 """`tracker`: SLQE Kalman tracking of the detected parts (eqs. 6-16 of the paper).
 
 Subscriptions
-    pose4d/parts (pose4d_msgs/JointArray, 10 parts, DETECTED or MISSING)
+    pose4d/parts (pose4d_msgs/JointArray, the detector's 10 or 14 parts, DETECTED or MISSING)
     camera/color/camera_info (sensor_msgs/CameraInfo; the latest, for 3-D positions)
 Publications
-    pose4d/parts/tracked (pose4d_msgs/JointArray, 10 parts: DETECTED / TRACKED / MISSING, with
-    the input header), /diagnostics
+    pose4d/parts/tracked (pose4d_msgs/JointArray, the same parts: DETECTED / TRACKED / MISSING,
+    with the input header), /diagnostics
 Parameters (config/tracker.yaml)
     tracker.kind, tracker.coupling, tracker.process_noise, tracker.measurement_noise_px,
     tracker.gate_chi2, tracker.max_missed_frames, tracker.max_dt_s, tracker.depth_std_m
