@@ -136,3 +136,33 @@ class RosPeer:
         self.executor.shutdown()
         self.node.destroy_node()
         rclpy.try_shutdown(context=self.context)
+
+
+def check_tf(skeletons: list, tf_messages: list, prefix: str = 'pose4d') -> int:
+    """Check /tf against the skeletons: for each skeleton message, one TFMessage of its stamp
+    with one transform per located joint (not MISSING, finite 3-D), from the skeleton's frame
+    to `<prefix>/<track_id>/<joint>` at the joint's position. Returns the transforms seen."""
+    import math
+
+    from pose4d_ros.core.joints import MISSING
+    from pose4d_ros.nodes.convert import stamp_to_ns
+
+    by_stamp = {stamp_to_ns(m.transforms[0].header.stamp): m for m in tf_messages}
+    seen = 0
+    for skeleton in skeletons:
+        stamp = stamp_to_ns(skeleton.header.stamp)
+        located = {f'{prefix}/{skeleton.track_id}/{j.name}': j for j in skeleton.joints
+                   if j.source != MISSING and all(math.isfinite(c) for c in
+                                                  (j.position.x, j.position.y, j.position.z))}
+        assert located, f'skeleton at {stamp} ns has no located joint'
+        transforms = by_stamp[stamp].transforms
+        assert sorted(t.child_frame_id for t in transforms) == sorted(located)
+        for t in transforms:
+            assert t.header == skeleton.header
+            j = located[t.child_frame_id]
+            assert (t.transform.translation.x, t.transform.translation.y,
+                    t.transform.translation.z) == (j.position.x, j.position.y, j.position.z)
+            r = t.transform.rotation
+            assert (r.x, r.y, r.z, r.w) == (0.0, 0.0, 0.0, 1.0)
+        seen += len(transforms)
+    return seen

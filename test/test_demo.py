@@ -25,6 +25,9 @@ def test_demo_runs_the_graph_and_scores_it(tmp_path):
     assert 0 < results['skeletons_out'] <= 45
     assert results['frames_lost'] == 45 - results['skeletons_out']
     assert results['latency_ms']['n'] == results['skeletons_out']
+    # every skeleton's located joints on /tf, stamped like it (read back from the recorded bag)
+    assert results['tf']['matching'] == results['skeletons_out']
+    assert results['tf']['transforms'] >= 10 * results['skeletons_out']
     scores = {'pck', 'pck@0.2', 'apk', 'error_px', 'error_mm', 'within_10cm'}
     assert set(results['graph']) == scores
     for table in results['offline'].values():

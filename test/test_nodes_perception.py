@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from harness import start
+from harness import check_tf, start
 
 from pose4d_ros.core.camera import cad60_intrinsics
 
@@ -171,6 +171,7 @@ def test_pipeline_node_publishes_the_skeleton_and_survives_a_bad_frame(ros, fram
     from diagnostic_msgs.msg import DiagnosticArray
     from pose4d_msgs.msg import JointArray
     from std_msgs.msg import Header
+    from tf2_msgs.msg import TFMessage
 
     from pose4d_ros.core.skeleton import SKELETON_14
     from pose4d_ros.nodes import qos
@@ -185,10 +186,12 @@ def test_pipeline_node_publishes_the_skeleton_and_survives_a_bad_frame(ros, fram
     try:
         pubs = _camera_publishers(ros)
         skeletons = ros.collect(JointArray, 'pose4d/skeleton', qos.OUTPUT_QOS)
+        tf = ros.collect(TFMessage, '/tf', qos.TF_QOS)
         diagnostics = ros.collect(DiagnosticArray, '/diagnostics')
         for pub in pubs:
             ros.wait_for_subscribers(pub, timeout=30.0)
         ros.wait_for_publishers('pose4d/skeleton', timeout=30.0)
+        ros.wait_for_publishers('/tf')
         headers = [Header(stamp=ns_to_stamp(10**18 + k * 33_333_334), frame_id='cam')
                    for k in range(len(frames))]
         _send_until_answered(ros, pubs, frames[:1], headers[:1], skeletons)
@@ -207,8 +210,10 @@ def test_pipeline_node_publishes_the_skeleton_and_survives_a_bad_frame(ros, fram
         ros.spin_until(lambda: any(kv.key == 'bad_inputs' and int(kv.value) >= 1
                                    for d in diagnostics for s in d.status for kv in s.values),
                        5.0, 'the bad frame counted on /diagnostics')
+        ros.spin_until(lambda: len(tf) >= len(skeletons), 5.0, 'the joints on /tf')
     finally:
         assert node.stop() == 0, node.output()
+    assert check_tf(skeletons, tf) >= len(skeletons)  # the skeletons' joints, on /tf
     answers = {m.header.stamp.nanosec: m for m in skeletons}
     assert sorted(answers) == sorted(h.stamp.nanosec for h in headers)
     for r, header in zip(frames, headers, strict=True):

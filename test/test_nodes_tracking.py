@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from harness import start
+from harness import check_tf, start
 from test_pipeline_stages import BODY, INTR
 
 from pose4d_ros.core import joints as cj
@@ -81,43 +81,55 @@ def test_tracker_node(ros, info_pub, tmp_path):
 
 @pytest.mark.parametrize('use_depth', [False, True])
 def test_ik_node(ros, info_pub, tmp_path, use_depth):
+    """The skeleton, its markers, and its joints on /tf (read back and checked against the
+    skeleton message; the last frame lacks a wrist, so its elbow cannot be inferred either)."""
     from pose4d_msgs.msg import JointArray
     from sensor_msgs.msg import Image
+    from tf2_msgs.msg import TFMessage
     from visualization_msgs.msg import MarkerArray
 
     from pose4d_ros.nodes import qos
     from pose4d_ros.nodes.convert import array_to_image, intrinsics_to_msg, joints_from_msg
 
-    node = start('ik', {'ik.use_depth': use_depth}, log_dir=tmp_path)
+    prefix = 'people' if use_depth else 'pose4d'  # a prefix of our choice, and the default
+    node = start('ik', {'ik.use_depth': use_depth, 'tf.prefix': prefix} if use_depth
+                 else {'ik.use_depth': use_depth}, log_dir=tmp_path)
     try:
         pub = ros.node.create_publisher(JointArray, 'pose4d/parts/tracked', qos.OUTPUT_QOS)
         depth_pub = ros.node.create_publisher(Image, 'pose4d/foreground/depth', qos.OUTPUT_QOS)
         got = ros.collect(JointArray, 'pose4d/skeleton', qos.OUTPUT_QOS)
         markers = ros.collect(MarkerArray, 'pose4d/skeleton/markers', qos.OUTPUT_QOS)
+        tf = ros.collect(TFMessage, '/tf', qos.TF_QOS)
         ros.wait_for_subscribers(pub)
         ros.wait_for_subscribers(info_pub)
         if use_depth:
             ros.wait_for_subscribers(depth_pub)
         ros.wait_for_publishers('pose4d/skeleton')
+        ros.wait_for_publishers('/tf')
         depth = np.full((INTR.height, INTR.width), 2500, np.uint16)
         headers = [_header(k) for k in range(5)]
         info_pub.publish(intrinsics_to_msg(INTR, headers[0]))  # the camera is known first
         ros.spin_for(0.3)
-        for header in headers:
+        for k, header in enumerate(headers):
             info_pub.publish(intrinsics_to_msg(INTR, header))
             ros.spin_for(0.01)
-            pub.publish(_parts_msg(0, header))
+            pub.publish(_parts_msg(0, header, missing=('left_wrist',) if k == 4 else ()))
             if use_depth:
                 depth_pub.publish(array_to_image(depth, '16UC1', header))
             ros.spin_for(0.02)
-        ros.spin_until(lambda: len(got) == 5 and len(markers) == 5, 10, '5 skeletons')
+        ros.spin_until(lambda: len(got) == 5 and len(markers) == 5 and len(tf) == 5, 10,
+                       '5 skeletons, their markers and transforms')
     finally:
         assert node.stop() == 0, node.output()
     assert [m.header for m in got] == headers
-    skeleton = joints_from_msg(got[-1])
+    assert check_tf(got, tf, prefix) == 4 * 14 + 12
+    assert {t.child_frame_id for t in tf[0].transforms} == {
+        f'{prefix}/{got[0].track_id}/{name}' for name in SKELETON_14}
+    skeleton = joints_from_msg(got[-2])
     assert skeleton.names == SKELETON_14
     for name in ('left_elbow', 'right_elbow', 'left_knee', 'right_knee'):
         i = SKELETON_14.index(name)
         assert skeleton.source[i] == cj.INFERRED and np.isfinite(skeleton.xyz[i]).all()
     assert markers[-1].markers[0].header == headers[-1]
-    assert len(markers[-1].markers[0].points) == 14
+    assert len(markers[-2].markers[0].points) == 14
+    assert len(markers[-1].markers[0].points) == 12

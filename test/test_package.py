@@ -47,6 +47,26 @@ def test_pose4d_msgs_is_an_interface_package():
     assert get_resource('packages', 'pose4d_msgs')
 
 
+def test_tf2_msgs_is_the_standard_interface():
+    """/tf's TFMessage, the environment's or built by `make setup` from ros_wheels/tf2_msgs:
+    its type hash is ROS 2 Jazzy's, so it speaks with any ROS install's tf2_msgs."""
+    import json
+
+    from ament_index_python.packages import get_package_share_directory
+    from geometry_msgs.msg import TransformStamped
+    from rclpy.serialization import deserialize_message, serialize_message
+    from rosbags.typesys import Stores, get_typestore
+    from tf2_msgs.msg import TFMessage
+
+    share = Path(get_package_share_directory('tf2_msgs'))
+    hashes = json.loads((share / 'msg' / 'TFMessage.json').read_text())['type_hashes']
+    ours = {h['type_name']: h['hash_string'] for h in hashes}['tf2_msgs/msg/TFMessage']
+    assert ours == get_typestore(Stores.ROS2_JAZZY).hash_rihs01('tf2_msgs/msg/TFMessage')
+    msg = TFMessage(transforms=[TransformStamped(child_frame_id='pose4d/1/head')])
+    msg.transforms[0].transform.translation.z = 2.5
+    assert deserialize_message(serialize_message(msg), TFMessage) == msg
+
+
 def test_pose4d_command_help_and_version():
     out = subprocess.run([str(executable('pose4d')), '--version'], capture_output=True,
                          text=True, check=True)

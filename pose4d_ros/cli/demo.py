@@ -4,8 +4,8 @@ Replays the bundled sample bag (synthetic RGB-D person, held-out real motion) at
 node graph, each stage its own process started exactly as `ros2 run` starts it (no launch
 files): replay -> foreground -> detector -> tracker -> ik, and a recorder. Then it scores the
 recorded /pose4d/skeleton against the bag's ground truth, runs the same core offline over the
-same bag (what `pose4d eval` does) for comparison, and writes out/overlay.png and
-out/results.json.
+same bag (what `pose4d eval` does) for comparison, checks the joints the graph put on /tf
+against the skeletons, and writes out/overlay.png and out/results.json.
 """
 
 from __future__ import annotations
@@ -27,14 +27,14 @@ import numpy as np
 from pose4d_ros.cli.eval import format_table
 from pose4d_ros.core.draw import draw_skeleton, legend
 from pose4d_ros.core.files import write_atomic, write_json
-from pose4d_ros.core.joints import JointSet
+from pose4d_ros.core.joints import MISSING, JointSet
 from pose4d_ros.core.metrics import score_joint_sets
 from pose4d_ros.core.pipeline import limb_bones
 from pose4d_ros.core.skeleton import SKELETON_14
 from pose4d_ros.datasets import bag, cad60_bag
 
 STAGES = ('foreground', 'detector', 'tracker', 'ik')
-RECORDED = ('pose4d/skeleton', 'pose4d/parts', 'pose4d/parts/tracked')
+RECORDED = ('pose4d/skeleton', 'pose4d/parts', 'pose4d/parts/tracked', '/tf')
 # topic -> subscribers that must be connected before the bag plays
 PIPELINE_CONNECTIONS = {
     'camera/color/image_raw': 1, 'camera/depth/image_raw': 1, 'pose4d/skeleton': 2}
@@ -131,7 +131,7 @@ class GraphRun:
 
     Attributes
     ----------
-    recorded : the bag the recorder wrote (skeleton, parts, tracked parts).
+    recorded : the bag the recorder wrote (skeleton, parts, tracked parts, /tf).
     frames : colour frames in the replayed bag.
     entered : {stamp: monotonic s} when each frame's camera_info reached this process.
     left : {stamp: monotonic s} when each frame's skeleton reached this process.
@@ -277,6 +277,7 @@ def report(bag_path: Path, result: GraphRun, args: argparse.Namespace) -> int:
         'latency_ms': ({'p50': float(np.percentile(latency, 50)),
                         'p95': float(np.percentile(latency, 95)), 'n': int(latency.size)}
                        if latency.size else None),
+        'tf': tf_per_skeleton(result.recorded, skeletons),
         'graph': table, 'offline': offline['rows'],
     }
     print(format_table({'graph (live, rgbd+kf+ik)': table,
@@ -286,6 +287,9 @@ def report(bag_path: Path, result: GraphRun, args: argparse.Namespace) -> int:
     if latency.size:
         print(f'latency colour frame -> /pose4d/skeleton: p50 {results["latency_ms"]["p50"]:.1f}'
               f' ms, p95 {results["latency_ms"]["p95"]:.1f} ms (n = {latency.size})')
+    tf = results['tf']
+    print(f'/tf: {tf["transforms"]} transforms, one per located joint, stamped like the '
+          f'skeleton, for {tf["matching"]} of {tf["skeletons"]} skeletons')
     overlay = overlay_picture(bag_path, stamps, skeletons, truths)
     ok, png = cv2.imencode('.png', overlay[:, :, ::-1])
     if not ok:
@@ -294,6 +298,27 @@ def report(bag_path: Path, result: GraphRun, args: argparse.Namespace) -> int:
     write_json(args.out / 'results.json', results, indent=1)
     print(f'wrote {args.out / "overlay.png"} and {args.out / "results.json"}')
     return 0 if len(skeletons) else 1
+
+
+def tf_per_skeleton(recorded: Path, skeletons: dict[int, tuple[int, Any]], *,
+                    prefix: str = 'pose4d') -> dict[str, int]:
+    """The recorded /tf against the recorded skeletons: `matching` counts the skeletons whose
+    stamp has exactly one transform per located joint (`<prefix>/<track>/<joint>`) on /tf."""
+    from pose4d_ros.nodes.convert import joint_frame
+
+    frames: dict[int, list[str]] = {}
+    for m in bag.read_messages(recorded, ['/tf']):
+        for t in bag.deserialize(m).transforms:
+            frames.setdefault(bag.stamp_ns(t), []).append(t.child_frame_id)
+    matching = 0
+    for stamp, (_, msg) in skeletons.items():
+        joints = bag.joint_set(msg)
+        located = (joints.source != MISSING) & np.isfinite(joints.xyz).all(axis=1)
+        want = [joint_frame(prefix, joints.track_id, name)
+                for name, ok in zip(joints.names, located, strict=True) if ok]
+        matching += sorted(frames.get(stamp, [])) == sorted(want)
+    return {'skeletons': len(skeletons), 'matching': matching,
+            'transforms': sum(len(f) for f in frames.values())}
 
 
 def overlay_picture(bag_path: Path, stamps: list[int], skeletons: dict, truths: list,

@@ -4,7 +4,7 @@
   uint8; depth per REP-118: `16UC1`/`mono16` millimetres or `32FC1` metres, 0/NaN = no reading,
   returned in the core's convention (float32 metres, NaN = no reading) by `depth_from_msg`.
 - `sensor_msgs/CameraInfo` <-> `core.camera.Intrinsics`.
-- `pose4d_msgs/JointArray` <-> `core.joints.JointSet`.
+- `pose4d_msgs/JointArray` <-> `core.joints.JointSet`; a JointSet -> `tf2_msgs/TFMessage`.
 - Stamps: `builtin_interfaces/Time` <-> integer nanoseconds.
 """
 
@@ -16,11 +16,12 @@ import sys
 
 import numpy as np
 from builtin_interfaces.msg import Duration, Time
-from geometry_msgs.msg import Point
+from geometry_msgs.msg import Point, Quaternion, Transform, TransformStamped, Vector3
 from numpy.typing import NDArray
 from pose4d_msgs.msg import Joint, JointArray
 from sensor_msgs.msg import CameraInfo, Image, PointCloud2, PointField
 from std_msgs.msg import ColorRGBA, Header
+from tf2_msgs.msg import TFMessage
 from visualization_msgs.msg import Marker, MarkerArray
 
 from pose4d_ros.core.camera import Intrinsics, depth_to_metres
@@ -129,6 +130,27 @@ def joints_from_msg(msg: JointArray) -> JointSet:
                     confidence=np.array([j.confidence for j in js], dtype=np.float32),
                     source=np.array([j.source for j in js], dtype=np.uint8), covariance=cov,
                     score=float(msg.score), track_id=int(msg.track_id))
+
+
+def joint_frame(prefix: str, track_id: int, name: str) -> str:
+    """The TF frame of a tracked person's joint: `<prefix>/<track_id>/<name>`."""
+    return f'{prefix}/{track_id}/{name}' if prefix else f'{track_id}/{name}'
+
+
+def joints_to_tf(joints: JointSet, header: Header, prefix: str) -> TFMessage:
+    """One transform per joint with a known 3-D position (not MISSING, finite), from the
+    image's frame (`header.frame_id`) to `joint_frame(prefix, track_id, name)`, stamped with
+    `header.stamp`; the joint's position is the translation, the rotation is the identity."""
+    located = (joints.source != MISSING) & np.isfinite(joints.xyz).all(axis=1)
+    out = []
+    for i in np.flatnonzero(located):
+        x, y, z = (float(c) for c in joints.xyz[i])
+        out.append(TransformStamped(
+            header=header,
+            child_frame_id=joint_frame(prefix, int(joints.track_id), joints.names[i]),
+            transform=Transform(translation=Vector3(x=x, y=y, z=z),
+                                rotation=Quaternion(w=1.0))))
+    return TFMessage(transforms=out)
 
 
 def message_type(name: str) -> type:

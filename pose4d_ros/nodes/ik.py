@@ -12,10 +12,13 @@ Subscriptions
 Publications
     pose4d/skeleton (pose4d_msgs/JointArray, 14 joints, input header)
     pose4d/skeleton/markers (visualization_msgs/MarkerArray, joints and bones by source)
+    /tf (tf2_msgs/TFMessage: each located joint as the frame <tf.prefix>/<track_id>/<joint>
+    in the image's frame, stamped like the skeleton; when tf.publish)
     /diagnostics
 Parameters (config/ik.yaml)
     ik.use_depth, ik.learn_lengths, ik.upper_arm_length_m, ik.forearm_length_m,
-    ik.thigh_length_m, ik.shin_length_m, ik.depth_slop_s, ik.marker_lifetime_s
+    ik.thigh_length_m, ik.shin_length_m, ik.depth_slop_s, ik.marker_lifetime_s, tf.publish,
+    tf.prefix
 """
 
 from __future__ import annotations
@@ -26,8 +29,11 @@ from typing import Any
 from pose4d_msgs.msg import JointArray
 from rclpy.node import Node
 from sensor_msgs.msg import Image
+from std_msgs.msg import Header
+from tf2_msgs.msg import TFMessage
 from visualization_msgs.msg import MarkerArray
 
+from pose4d_ros.core.joints import JointSet
 from pose4d_ros.core.kinematics import DEFAULT_LIMB_LENGTHS_M
 from pose4d_ros.core.pipeline import IkStage, limb_bones
 from pose4d_ros.nodes import qos
@@ -36,10 +42,18 @@ from pose4d_ros.nodes.convert import (
     depth_from_msg,
     joints_from_msg,
     joints_to_msg,
+    joints_to_tf,
     skeleton_markers,
     stamp_to_ns,
 )
 from pose4d_ros.nodes.params import Param, declare
+
+
+def _frame_prefix(value: str) -> str | None:
+    if value.startswith('/') or value.endswith('/') or any(c.isspace() for c in value):
+        return f'{value!r}: a TF frame name has no leading or trailing / and no spaces'
+    return None
+
 
 _ARM, _LEG = DEFAULT_LIMB_LENGTHS_M['left_arm'], DEFAULT_LIMB_LENGTHS_M['left_leg']
 PARAMS = (
@@ -56,6 +70,9 @@ PARAMS = (
           'seconds (0 = the same stamp).', range=(0.0, 1.0)),
     Param('ik.marker_lifetime_s', 0.5, 'Lifetime of the RViz markers, seconds.',
           range=(0.0, 60.0)),
+    Param('tf.publish', True, 'Publish each located joint of the skeleton on /tf.'),
+    Param('tf.prefix', 'pose4d', 'First part of the joints\' TF frame names, '
+          '<prefix>/<track_id>/<joint>.', check=_frame_prefix),
 )
 
 
@@ -67,6 +84,33 @@ def ik_stage(p: dict[str, Any]) -> IkStage:
     return IkStage(lengths=fixed, learn=p['ik.learn_lengths'], use_depth=p['ik.use_depth'])
 
 
+class SkeletonOutputs:
+    """The skeleton's publications, the same in the ik and pipeline nodes: pose4d/skeleton,
+    its RViz markers and its joints on /tf."""
+
+    def __init__(self, node: Node, p: dict[str, Any]) -> None:
+        self.bones = limb_bones()
+        self.skeleton = node.create_publisher(JointArray, 'pose4d/skeleton', qos.OUTPUT_QOS)
+        self.markers = node.create_publisher(MarkerArray, 'pose4d/skeleton/markers',
+                                             qos.OUTPUT_QOS)
+        self.tf = node.create_publisher(TFMessage, '/tf', qos.TF_QOS)
+        self.configure(p)
+
+    def configure(self, p: dict[str, Any]) -> None:
+        self.marker_lifetime_s = p['ik.marker_lifetime_s']
+        self.publish_tf = p['tf.publish']
+        self.tf_prefix = p['tf.prefix']
+
+    def publish(self, skeleton: JointSet, header: Header) -> None:
+        self.skeleton.publish(joints_to_msg(skeleton, header))
+        self.markers.publish(skeleton_markers(skeleton, self.bones, header,
+                                              lifetime_s=self.marker_lifetime_s))
+        if self.publish_tf:
+            frames = joints_to_tf(skeleton, header, self.tf_prefix)
+            if frames.transforms:
+                self.tf.publish(frames)
+
+
 class IkNode(Node):
     """Completes the tracked parts to a 14-joint skeleton; see the module docstring."""
 
@@ -74,13 +118,9 @@ class IkNode(Node):
         super().__init__('ik')
         p = declare(self, PARAMS)
         self.stage = ik_stage(p)
-        self.marker_lifetime_s = p['ik.marker_lifetime_s']
-        self.bones = limb_bones()
         self.monitor = StageMonitor(self, 'ik')
         self.camera = LatestIntrinsics(self, self.monitor)
-        self.pub = self.create_publisher(JointArray, 'pose4d/skeleton', qos.OUTPUT_QOS)
-        self.markers = self.create_publisher(MarkerArray, 'pose4d/skeleton/markers',
-                                             qos.OUTPUT_QOS)
+        self.outputs = SkeletonOutputs(self, p)
         if self.stage.use_depth:
             self.inputs = PairedInputs(
                 self, [(JointArray, 'pose4d/parts/tracked', qos.OUTPUT_QOS),
@@ -93,7 +133,7 @@ class IkNode(Node):
         self.get_logger().info(
             f'completing {self.resolve_topic_name("pose4d/parts/tracked")} -> '
             f'{self.resolve_topic_name("pose4d/skeleton")} (depth: {self.stage.use_depth}, '
-            f'learn lengths: {p["ik.learn_lengths"]})')
+            f'learn lengths: {p["ik.learn_lengths"]}, joints on /tf: {p["tf.publish"]})')
 
     def process(self, msg: JointArray, depth_msg: Image | None) -> None:
         t0 = time.perf_counter()
@@ -104,9 +144,7 @@ class IkNode(Node):
         except ValueError as exc:
             self.monitor.bad_input(f'frame at {stamp} ns refused: {exc}')
             return
-        self.pub.publish(joints_to_msg(skeleton, msg.header))
-        self.markers.publish(skeleton_markers(skeleton, self.bones, msg.header,
-                                              lifetime_s=self.marker_lifetime_s))
+        self.outputs.publish(skeleton, msg.header)
         self.monitor.frame(stamp, time.perf_counter() - t0)
 
 

@@ -10,7 +10,8 @@ Subscriptions
     camera/color/image_raw, camera/depth/image_raw (sensor_msgs/Image),
     camera/color/camera_info (sensor_msgs/CameraInfo)
 Publications (all with the colour image's header)
-    pose4d/skeleton (pose4d_msgs/JointArray, 14 joints), pose4d/skeleton/markers,
+    pose4d/skeleton (pose4d_msgs/JointArray, 14 joints), pose4d/skeleton/markers, /tf (the
+    joints, as the ik node publishes them),
     pose4d/parts, pose4d/parts/tracked (JointArray, 10 parts),
     pose4d/foreground/{mask,color,depth} (if pipeline.publish_foreground), /diagnostics
 Parameters (config/pipeline.yaml)
@@ -25,10 +26,9 @@ from typing import Any
 from pose4d_msgs.msg import JointArray
 from rclpy.node import Node
 from sensor_msgs.msg import Image
-from visualization_msgs.msg import MarkerArray
 
 from pose4d_ros.core.camera import cad60_intrinsics
-from pose4d_ros.core.pipeline import FramePipeline, limb_bones
+from pose4d_ros.core.pipeline import FramePipeline
 from pose4d_ros.nodes import detector, foreground, ik, qos, tracker
 from pose4d_ros.nodes.common import PairedInputs, StageMonitor, run
 from pose4d_ros.nodes.convert import (
@@ -36,7 +36,6 @@ from pose4d_ros.nodes.convert import (
     depth_from_msg,
     intrinsics_from_msg,
     joints_to_msg,
-    skeleton_markers,
     stamp_to_ns,
 )
 from pose4d_ros.nodes.params import Param, declare
@@ -60,13 +59,10 @@ class PipelineNode(Node):
             temporal=p['foreground.temporal'])
         self.pipeline.warm_up(cad60_intrinsics())  # compile before the first camera frame
         self.publish_foreground = p['pipeline.publish_foreground']
-        self.marker_lifetime_s = p['ik.marker_lifetime_s']
-        self.bones = limb_bones()
         self.monitor = StageMonitor(self, 'pipeline')
+        self.outputs = ik.SkeletonOutputs(self, p)
         pub = self.create_publisher
         self.pubs = {
-            'skeleton': pub(JointArray, 'pose4d/skeleton', qos.OUTPUT_QOS),
-            'markers': pub(MarkerArray, 'pose4d/skeleton/markers', qos.OUTPUT_QOS),
             'parts': pub(JointArray, 'pose4d/parts', qos.OUTPUT_QOS),
             'tracked': pub(JointArray, 'pose4d/parts/tracked', qos.OUTPUT_QOS),
         }
@@ -91,9 +87,7 @@ class PipelineNode(Node):
             self.monitor.bad_input(f'frame at {stamp} ns refused: {exc}')
             return
         header = color_msg.header
-        self.pubs['skeleton'].publish(joints_to_msg(out.skeleton, header))
-        self.pubs['markers'].publish(skeleton_markers(out.skeleton, self.bones, header,
-                                                      lifetime_s=self.marker_lifetime_s))
+        self.outputs.publish(out.skeleton, header)
         self.pubs['parts'].publish(joints_to_msg(out.parts, header))
         self.pubs['tracked'].publish(joints_to_msg(out.tracked, header))
         if self.publish_foreground:

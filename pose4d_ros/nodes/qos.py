@@ -3,6 +3,7 @@
 - Camera inputs: the sensor-data profile (best effort, keep last 5). A best-effort subscription
   matches both reliable and best-effort publishers, so any driver (or the bag replay) connects.
 - Our outputs: reliable, keep last 10.
+- /tf: reliable, keep last 100 (tf2_ros's broadcaster profile).
 - Bags: the QoS a topic was recorded with is offered again on replay.
 """
 
@@ -21,6 +22,8 @@ from rclpy.qos import (
 SENSOR_QOS: QoSProfile = qos_profile_sensor_data
 OUTPUT_QOS = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE,
                         durability=DurabilityPolicy.VOLATILE, history=HistoryPolicy.KEEP_LAST)
+TF_QOS = QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE,
+                    durability=DurabilityPolicy.VOLATILE, history=HistoryPolicy.KEEP_LAST)
 
 def _duration(t: object) -> Duration | None:
     sec, nsec = int(t.sec), int(t.nsec)
