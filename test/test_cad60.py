@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 from numpy.testing import assert_allclose, assert_array_equal
 
-from pose4d_ros.core.camera import cad60_intrinsics, project
+from pose4d_ros.core.camera import cad60_intrinsics, depth_to_millimetres, project
 from pose4d_ros.core.skeleton import CAD60_JOINTS
 from pose4d_ros.datasets import cad60
 
@@ -86,19 +86,25 @@ def test_lost_joint_projects_to_nan() -> None:
     assert np.all(np.isnan(cad60.project_affine(np.zeros((1, 3)))))
 
 
-def test_list_videos_and_iter_frames() -> None:
+def test_list_videos_and_read_frames() -> None:
     for root in (FIXTURE, FIXTURE / 'data1'):
         videos = cad60.list_videos(root)
         assert [(v.person, v.video_id, v.activity) for v in videos] == \
             [('data1', VIDEO_ID, 'drinking water')]
-    frames = list(cad60.iter_frames(videos[0]))
-    assert [f.frame for f in frames] == [1, 2]
+    frames = list(cad60.read_frames(FIXTURE))
+    assert [Path(f.key).name for f in frames] == ['RGB_1.png', 'RGB_2.png']
+    assert frames[1].stamp_ns - frames[0].stamp_ns == cad60.FRAME_PERIOD_NS
     f = frames[0]
-    assert f.rgb.dtype == np.uint8 and f.rgb.shape == (240, 320, 3)
-    assert f.depth_mm.dtype == np.uint16 and f.depth_mm.shape == (240, 320)
-    assert tuple(f.rgb[0, 0]) == (200, 190, 170)  # RGB order, not OpenCV's BGR
-    assert f.depth_mm[100, 150] == 2501 and f.depth_mm[100, 5] == 0
+    assert f.video == f'data1/{VIDEO_ID}' and f.intrinsics == cad60_intrinsics()
+    assert f.color.dtype == np.uint8 and f.color.shape == (240, 320, 3)
+    assert f.depth_m.dtype == np.float32 and f.depth_m.shape == (240, 320)
+    assert tuple(f.color[0, 0]) == (200, 190, 170)  # RGB order, not OpenCV's BGR
+    assert depth_to_millimetres(f.depth_m)[100, 150] == 2501 and np.isnan(f.depth_m[100, 5])
     assert f.mask is None
+    skeleton = cad60.read_skeleton(videos[0].skeleton_path)
+    assert f.truth.names == CAD60_JOINTS
+    assert_allclose(f.truth.uv, skeleton.pixels()[0])
+    assert_allclose(f.truth.xyz, skeleton.joints_optical()[0])
 
 
 def test_skeleton_write_read_roundtrip(tmp_path: Path) -> None:
@@ -143,12 +149,10 @@ def test_frame_writers_roundtrip_and_mask_is_ignored(tmp_path: Path) -> None:
         cad60.write_frame(person / '0000000007', k, rgb, depth, mask)
     video = cad60.list_videos(tmp_path)[0]
     assert (video.person, video.video_id, video.activity) == ('data3', '0000000007', 'walk')
-    frames = list(cad60.iter_frames(video))
-    assert_array_equal(frames[1].rgb, rgb)
-    assert_array_equal(frames[1].depth_mm, depth)
-    assert frames[1].mask is None
-    with_mask = list(cad60.iter_frames(video, with_mask=True))
-    assert_array_equal(with_mask[0].mask, mask)
+    frames = list(cad60.read_frames(tmp_path))
+    assert_array_equal(frames[1].color, rgb)
+    assert_array_equal(depth_to_millimetres(frames[1].depth_m), depth)
+    assert_array_equal(frames[0].mask, mask)
     assert not any(p.name.endswith('.tmp') for p in (person / '0000000007').iterdir())
 
 
@@ -187,14 +191,16 @@ def test_missing_end_and_data_after_end(person_dir: Path) -> None:
 def test_missing_png(person_dir: Path) -> None:
     (person_dir / VIDEO_ID / 'Depth_2.png').unlink()
     video = cad60.list_videos(person_dir)[0]
-    frames = cad60.iter_frames(video)
+    frames = cad60.read_frames(person_dir)
     next(frames)
     with pytest.raises(ValueError, match='Depth_2.png: image file not found'):
         next(frames)
     with pytest.raises(ValueError, match='RGB_9.png: image file not found'):
         cad60.load_frame(video.frame_dir, 9)
-    with pytest.raises(ValueError, match='Mask_1.png: image file not found'):
-        next(cad60.iter_frames(video, with_mask=True))
+    shutil.copy(video.frame_dir / 'Depth_1.png', video.frame_dir / 'Depth_2.png')
+    cad60.write_mask(video.frame_dir / 'Mask_1.png', np.ones((240, 320), bool))
+    with pytest.raises(ValueError, match='Mask_2.png: image file not found'):
+        list(cad60.read_frames(person_dir))
 
 
 def test_8bit_depth_is_refused(person_dir: Path) -> None:

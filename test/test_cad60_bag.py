@@ -11,7 +11,7 @@ from conftest import REPO
 from harness import executable, start
 from numpy.testing import assert_allclose
 
-from pose4d_ros.core.camera import cad60_intrinsics, project
+from pose4d_ros.core.camera import cad60_intrinsics, depth_to_millimetres, project
 from pose4d_ros.datasets import bag, cad60, cad60_bag
 
 FIXTURE = REPO / 'test' / 'data' / 'cad60_fixture'
@@ -33,7 +33,7 @@ def test_converter_writes_the_driver_topics_and_ground_truth(tmp_path, storage):
         cad60_bag.SKELETON_TOPIC: 2}
     video = cad60.list_videos(FIXTURE)[0]
     skeleton = cad60.read_skeleton(video.skeleton_path)
-    frames = list(cad60.iter_frames(video))
+    frames = list(cad60.read_frames(FIXTURE))
     msgs = {}
     for m in bag.read_messages(out):
         msgs.setdefault(m.topic, []).append((m.timestamp_ns, bag.deserialize(m)))
@@ -43,13 +43,14 @@ def test_converter_writes_the_driver_topics_and_ground_truth(tmp_path, storage):
         for t, msg in items:
             assert msg.header.stamp.sec * 10**9 + msg.header.stamp.nanosec == t
             assert msg.header.frame_id == cad60_bag.FRAME_ID
-    assert stamps[1] - stamps[0] == cad60_bag.FRAME_PERIOD_NS * int(np.diff(skeleton.frames)[0])
+    assert stamps == [f.stamp_ns for f in frames]
+    assert stamps[1] - stamps[0] == cad60.FRAME_PERIOD_NS * int(np.diff(skeleton.frames)[0])
     for (_, color), (_, depth), frame in zip(msgs[cad60_bag.COLOR_TOPIC],
                                              msgs[cad60_bag.DEPTH_TOPIC], frames, strict=True):
         assert color.encoding == 'rgb8' and depth.encoding == '16UC1'
-        assert np.array_equal(color.data.reshape(frame.rgb.shape), frame.rgb)
-        assert np.array_equal(depth.data.view('<u2').reshape(frame.depth_mm.shape),
-                              frame.depth_mm)
+        assert np.array_equal(color.data.reshape(frame.color.shape), frame.color)
+        assert np.array_equal(depth.data.view('<u2').reshape(frame.depth_m.shape),
+                              depth_to_millimetres(frame.depth_m))
     info_msg = msgs[cad60_bag.INFO_TOPIC][0][1]
     intr = cad60_intrinsics()
     assert_allclose(info_msg.k, intr.k.ravel())

@@ -7,7 +7,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from test_synth import write_utkinect
+from helpers import write_utkinect
 
 from pose4d_ros.cli.main import main as pose4d_main
 from pose4d_ros.core.dpm import PartModel, load_model, save_model
@@ -166,14 +166,14 @@ def test_eval_and_bench_with_the_peer_score_it_on_the_same_frames(tiny_set: Path
 
 def test_the_peer_starts_a_new_video_where_the_tracker_starts_a_new_track(tiny_set: Path,
                                                                           fake_peer) -> None:
-    from pose4d_ros.cli._pipeline_eval import run_peer
-    from pose4d_ros.datasets.cad60_bag import cad60_frames
+    from pose4d_ros.cli._pipeline_eval import peer_rows
+    from pose4d_ros.datasets.cad60 import read_frames
     from pose4d_ros.peer import MediaPipePeer
 
     with MediaPipePeer(fake_peer) as peer:
-        run = run_peer(cad60_frames(tiny_set), peer)
+        row = peer_rows(read_frames(tiny_set), peer)['mediapipe']
     # the stand-in says 1.0 on the first frame of a video: two videos of four frames
-    first = [bool(p.confidence[0] == 1.0) for p in run.preds['mediapipe']]
+    first = [bool(p.confidence[0] == 1.0) for p in row.preds]
     assert first == [True, False, False, False] * 2
 
 

@@ -43,9 +43,12 @@ def test_hand_made_file_reads_back(tmp_path: Path) -> None:
     assert_allclose(uv[0], j[:, :2, 0])
     assert not vis[1, 4] and np.isnan(uv[1, 4]).all()
     assert vis.sum() == 3 * 14 - 1
-    samples = list(lspet.lspet_samples(tmp_path, 2, 3))
-    assert [s.color.shape for s in samples] == [(42, 30, 3), (43, 30, 3)]
-    assert samples[0].depth_m is None and samples[0].names == lspet.LSPET_JOINTS
+    frames = list(lspet.read_frames(tmp_path, 2, 3))
+    assert [f.color.shape for f in frames] == [(42, 30, 3), (43, 30, 3)]
+    assert frames[0].depth_m is None and frames[0].truth.names == lspet.LSPET_JOINTS
+    uv, _, labelled = frames[0].truth.labelled(lspet.LSPET_JOINTS)
+    assert_array_equal(labelled, vis[1])
+    assert_allclose(uv[labelled], j[:, :2, 1][vis[1]])
     assert source_kind(tmp_path) == 'lspet'
     assert len(list(open_source(tmp_path, frame_range=(1, 3)))) == 3
 
@@ -63,12 +66,12 @@ def test_bad_files_and_ranges(tmp_path: Path) -> None:
     good = tmp_path / 'good'
     write_lspet(good, np.ones((14, 3, 2)), 2)
     with pytest.raises(ValueError, match='range 2-5 outside 1-2'):
-        list(lspet.lspet_samples(good, 2, 5))
+        list(lspet.read_frames(good, 2, 5))
     with pytest.raises(ValueError, match='needs --range'):
         open_source(good)
     (good / 'images' / 'im00002.jpg').unlink()
     with pytest.raises(OSError, match='im00002.jpg'):
-        list(lspet.lspet_samples(good, 1, 2))
+        list(lspet.read_frames(good, 1, 2))
     with pytest.raises(ValueError, match='A-B'):
         parse_range('12')
     assert parse_range('2501-3000') == (2501, 3000)
@@ -85,7 +88,7 @@ def test_real_lspet_file() -> None:
     assert_allclose(uv[0, 13], (116.56859752, 53.42206246), atol=1e-6)    # head top
     # unlabelled joints carry no location; labelled ones lie near their image
     assert np.isnan(uv[~vis]).all() and np.isfinite(uv[vis]).all()
-    (s,) = list(lspet.lspet_samples(LSPET, 1, 1))
+    (s,) = list(lspet.read_frames(LSPET, 1, 1))
     h, w = s.color.shape[:2]
     assert s.color.dtype == np.uint8 and (h, w) == (105, 157)
     inside = (uv[:3000, :, 0] > -20) & (uv[:3000, :, 1] > -20)

@@ -4,26 +4,14 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from helpers import BODY, INTR
 from numpy.testing import assert_allclose
 
 from pose4d_ros.core import joints as cj
-from pose4d_ros.core.camera import backproject, cad60_intrinsics, project
+from pose4d_ros.core.camera import backproject, project
 from pose4d_ros.core.joints import JointSet
 from pose4d_ros.core.pipeline import IkStage, TrackerStage, limb_bones, reorder
 from pose4d_ros.core.skeleton import PARTS_10, PARTS_14, SKELETON_14
-
-INTR = cad60_intrinsics()
-
-# A person 2.5 m away, optical frame (metres): 14 joints, elbows and knees bent.
-BODY = {
-    'head': (0.0, -0.75, 2.5), 'neck': (0.0, -0.5, 2.5),
-    'left_shoulder': (0.18, -0.48, 2.5), 'right_shoulder': (-0.18, -0.48, 2.5),
-    'left_elbow': (0.30, -0.30, 2.42), 'right_elbow': (-0.30, -0.30, 2.42),
-    'left_wrist': (0.38, -0.12, 2.35), 'right_wrist': (-0.38, -0.12, 2.35),
-    'left_hip': (0.1, 0.0, 2.5), 'right_hip': (-0.1, 0.0, 2.5),
-    'left_knee': (0.12, 0.45, 2.42), 'right_knee': (-0.12, 0.45, 2.42),
-    'left_ankle': (0.12, 0.9, 2.5), 'right_ankle': (-0.12, 0.9, 2.5),
-}
 
 
 def _parts(offset=(0.0, 0.0, 0.0), noise_px=0.0, rng=None, drop=()):

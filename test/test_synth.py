@@ -12,13 +12,13 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from helpers import J, standing_pose, synthetic_take, write_utkinect
 from numpy.testing import assert_allclose, assert_array_equal
 
 from pose4d_ros.cli.main import main as pose4d_main
 from pose4d_ros.core.camera import cad60_intrinsics, project
 from pose4d_ros.core.skeleton import CAD60_JOINTS
 from pose4d_ros.datasets import cad60
-from pose4d_ros.datasets.utkinect import UTKINECT_JOINTS
 from pose4d_ros.synth import render as synth
 from pose4d_ros.synth import video as synth_video
 from pose4d_ros.synth.kinect import KinectModel, kinect_depth
@@ -26,27 +26,11 @@ from pose4d_ros.synth.raycast import projector_shadow
 
 UTKINECT = Path(__file__).resolve().parents[2] / 'shared' / 'data' / 'utkinect'
 K = cad60_intrinsics()
-J = {n: i for i, n in enumerate(UTKINECT_JOINTS)}
 
 
 def in_room(scene: synth.Scene, optical: np.ndarray) -> np.ndarray:
     """Optical-frame points in the scene's room frame (the inverse of `Scene.to_optical`)."""
     return optical @ scene.room_to_cam + scene.cam_pos
-
-
-def standing_pose(z: float = 2.8, cam_height: float = 1.0, arm: float = 0.0) -> np.ndarray:
-    """A person facing the camera (optical frame), feet on a floor `cam_height` below the
-    camera; `arm` (radians) lifts both arms sideways."""
-    d = synth._REST_DIR.copy()
-    for side, sign in (('left', 1.0), ('right', -1.0)):
-        for joint in (f'{side}_elbow', f'{side}_wrist', f'{side}_hand'):
-            d[J[joint]] = [sign * np.sin(arm), np.cos(arm), -0.1]
-    d[1:] /= np.linalg.norm(d[1:], axis=1, keepdims=True)
-    pose = np.zeros((20, 3))
-    for i in range(1, 20):
-        pose[i] = pose[synth.PARENTS[i]] + d[i] * synth.REF_BONES[i]
-    pose += [0.0, cam_height - 0.04 - pose[[14, 15, 18, 19], 1].max(), z]
-    return pose
 
 
 def test_retarget_keeps_directions_and_sets_lengths() -> None:
@@ -228,15 +212,6 @@ def test_cad60_ground_truth_tpose_is_identity_and_sides_are_anatomical() -> None
                                                            0]
 
 
-def synthetic_take(frames: int = 90) -> np.ndarray:
-    """(F, 20, 3) optical-frame motion: arms swinging, walking slowly sideways and away."""
-    t = np.arange(frames) / 30.0
-    out = np.array([standing_pose(z=2.5 + 0.4 * np.sin(1.5 * ti), cam_height=0.9,
-                                  arm=0.3 + 0.8 * np.sin(2 * ti)) for ti in t])
-    out[:, :, 0] += 0.3 * np.sin(2 * t)[:, None]
-    return out
-
-
 def test_fit_floor_recovers_a_tilted_floor() -> None:
     joints = synthetic_take()
     tilt = np.deg2rad(8.0)  # camera pitched down: rotate the scene up about x
@@ -247,18 +222,6 @@ def test_fit_floor_recovers_a_tilted_floor() -> None:
     assert_allclose(up, rot @ [0.0, -1.0, 0.0], atol=2e-3)  # the weak level-camera prior
     feet = tilted[:, [14, 15, 18, 19]]
     assert_allclose((feet @ up + height).min(axis=1), 0.0, atol=5e-3)
-
-
-def write_utkinect(directory: Path, frames: int = 90) -> None:
-    """A tiny UTKinect directory: s01_e01 and s02_e01 from `synthetic_take`."""
-    directory.mkdir(parents=True, exist_ok=True)
-    sdk = synthetic_take(frames) * [-1.0, -1.0, 1.0]  # optical -> Kinect SDK space
-    for name in ('s01_e01', 's02_e01'):
-        lines = [' '.join([str(2 * i + 10)] + [f'{v:.5f}' for v in sdk[i].ravel()])
-                 for i in range(frames)]
-        (directory / f'joints_{name}.txt').write_text('\n'.join(lines) + '\n')
-    (directory / 'actionLabel.txt').write_text(
-        's01_e01\nwaveHands: 10 100\nclapHands: NaN NaN\ns02_e01\nsitDown: 150 180\n')
 
 
 def test_pose4d_synth_writes_cad60_that_reads_back(tmp_path: Path) -> None:
@@ -278,11 +241,10 @@ def test_pose4d_synth_writes_cad60_that_reads_back(tmp_path: Path) -> None:
     for video in videos:
         skel = cad60.read_skeleton(video.skeleton_path)
         assert_array_equal(skel.frames, [1, 4, 7, 10])
-        frames = list(cad60.iter_frames(video, with_mask=True))
+        frames = list(cad60.read_frames(video.person_dir, videos=[video.video_id]))
         for f, uv in zip(frames, skel.pixels(), strict=True):
-            assert f.depth_mm.dtype == np.uint16 and f.depth_mm.shape == (240, 320)
-            assert f.rgb.shape == (240, 320, 3) and f.mask.any()
-            assert (f.depth_mm == 0).any()
+            assert f.depth_m.shape == (240, 320) and f.color.shape == (240, 320, 3)
+            assert f.mask.any() and np.isnan(f.depth_m).any()
             u, v = np.rint(uv[CAD60_JOINTS.index('head')]).astype(int)
             assert f.mask[v, u]
             assert uv[CAD60_JOINTS.index('left_shoulder'), 0] > \

@@ -10,16 +10,14 @@ import time
 
 from pose4d_ros.core.camera import cad60_intrinsics
 from pose4d_ros.core.dpm.model import load_model
-from pose4d_ros.core.foreground import segment
-from pose4d_ros.core.pipeline import DetectorStage, FramePipeline, warm_up_frame
+from pose4d_ros.core.pipeline import DetectorStage, ForegroundStage, FramePipeline
 from pose4d_ros.models import model_path, shipped_models
 
 
 def main() -> int:
     t0 = time.monotonic()
     intr = cad60_intrinsics()
-    _, depth, _ = warm_up_frame(intr)
-    segment(depth, intr, previous=segment(depth, intr))
+    ForegroundStage().warm_up(intr)
     for name in shipped_models():
         FramePipeline(DetectorStage(load_model(model_path(name)))).warm_up(intr)
     print(f'compiled the kernels (foreground, {len(shipped_models())} shipped model(s)) in '

@@ -12,7 +12,8 @@ from pathlib import Path
 
 import numpy as np
 
-from pose4d_ros.datasets.sources import Sample, open_source, parse_range
+from pose4d_ros.datasets.frame import Frame
+from pose4d_ros.datasets.sources import open_source, parse_range
 
 
 def progress(iterable: Iterable, desc: str, total: int | None = None) -> Iterable:
@@ -28,21 +29,27 @@ def log(message: str) -> None:
     print(message, file=sys.stderr, flush=True)
 
 
-def load_samples(sources: list[str], *, frame_range: str | None, stride: int,
-                 max_frames: int | None, seed: int) -> list[Sample]:
-    """All samples of the sources (an LSPET source uses `frame_range`); `max_frames` keeps an
-    evenly spread subset (deterministic)."""
+def load_frames(sources: list[str], *, frame_range: str | None = None, stride: int = 1,
+                max_frames: int | None = None, labelled: bool = True) -> list[Frame]:
+    """All frames of the sources (an LSPET source uses `frame_range`); `max_frames` keeps an
+    evenly spread subset (deterministic). With `labelled`, a frame without ground truth is an
+    error."""
     rng_ = parse_range(frame_range)
-    samples: list[Sample] = []
+    frames: list[Frame] = []
     for src in sources:
         it = open_source(src, frame_range=rng_, stride=stride)
-        samples.extend(progress(it, f'reading {Path(src).name}'))
-    if max_frames is not None and len(samples) > max_frames:
-        idx = np.unique(np.linspace(0, len(samples) - 1, max_frames).round().astype(int))
-        samples = [samples[i] for i in idx]
-    if not samples:
-        raise ValueError(f'no labelled frames in {", ".join(sources)}')
-    return samples
+        with progress(it, f'reading {Path(src).name}') as bar:  # closed on a damaged file too
+            frames.extend(bar)
+    if max_frames is not None and len(frames) > max_frames:
+        idx = np.unique(np.linspace(0, len(frames) - 1, max_frames).round().astype(int))
+        frames = [frames[i] for i in idx]
+    if not frames:
+        raise ValueError(f'no frames in {", ".join(sources)}')
+    if labelled:
+        for f in frames:
+            if f.truth is None:
+                raise ValueError(f'{f.key}: no ground truth (a bag needs /cad60/skeleton)')
+    return frames
 
 
 def ms_stats(ms: Iterable[float]) -> dict[str, float | None]:

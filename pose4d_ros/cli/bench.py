@@ -3,13 +3,14 @@
     pose4d bench SOURCE --json FILE [--model rgbd_10] [--frames N] [--warmup W] [--graph]
                  [--peer mediapipe]
 
-Each frame goes through the stages as the live pipeline runs them (`core.pipeline`): the
-foreground stage's mask on the depth image (`core.foreground.segment`), the part detector on the
-masked frame (`DetectorStage`: `core.dpm.infer.Detector.detect` and the 3-D lift), the SLQE
-tracker and the IK (`TrackerStage`, `IkStage`). The p50 and p95 of each stage's CPU time (this
-process's, `time.process_time`: `stages_ms`) and wall time (`wall_ms`), and of their sum over
-the four stages (`total`: one frame through all of them), are taken over the frames after
-`--warmup` (numba compilation and caches).
+Each frame goes through the stages as the live pipeline runs them, in order
+(`core.pipeline.FramePipeline`): the foreground stage's mask on the depth image
+(`ForegroundStage`, with the previous frame's floor and box), the part detector on the masked
+frame (`DetectorStage`: `core.dpm.infer.Detector.detect` and the 3-D lift), the SLQE tracker
+and the IK (`TrackerStage`, `IkStage`); an RGB model gets no depth and no foreground. The p50
+and p95 of each stage's CPU time (this process's, `time.process_time`: `stages_ms`) and wall
+time (`wall_ms`), and of their sum over the four stages (`total`: one frame through all of
+them), are taken over the frames after `--warmup` (numba compilation and caches).
 
 With `--peer mediapipe` (`make peer`), MediaPipe Pose then runs on the same frames in the same
 run (its own warm-up first), as a user tracking a video would run it (video mode, one video):
@@ -36,13 +37,13 @@ from pathlib import Path
 
 import numpy as np
 
-from pose4d_ros.cli._dpm import load_samples, machine, ms_stats, progress
+from pose4d_ros.cli._dpm import load_frames, machine, ms_stats, progress
 from pose4d_ros.cli.eval import default_models
-from pose4d_ros.core.camera import cad60_intrinsics
 from pose4d_ros.core.dpm.infer import SearchConfig
 from pose4d_ros.core.dpm.model import load_model
 from pose4d_ros.core.dpm.threads import set_blas_threads
 from pose4d_ros.core.files import write_json
+from pose4d_ros.datasets.frame import Frame
 from pose4d_ros.datasets.sources import source_kind
 from pose4d_ros.models import model_path
 from pose4d_ros.peer import PEERS, MediaPipePeer
@@ -77,55 +78,40 @@ def run(args: argparse.Namespace) -> int:
     if args.frames < 1 or args.warmup < 0:
         raise ValueError(f'--frames must be >= 1 and --warmup >= 0, got {args.frames}, '
                          f'{args.warmup}')
-    from pose4d_ros.core.foreground import apply_mask, segment
-    from pose4d_ros.core.pipeline import STAGES, DetectorStage, IkStage, TrackerStage
+    from pose4d_ros.core.pipeline import STAGES, DetectorStage, FramePipeline
 
     threads = set_blas_threads(args.blas_threads)
     kind = source_kind(args.source)
     model = load_model(model_path(args.model or default_models(kind)[0]))
     peer = MediaPipePeer() if args.peer else None  # without its venv, stop before any work
     try:
-        samples = load_samples([args.source], frame_range=args.frame_range, stride=1,
-                               max_frames=args.frames + args.warmup, seed=0)
+        frames = load_frames([args.source], frame_range=args.frame_range,
+                             max_frames=args.frames + args.warmup, labelled=False)
         use_depth = model.channels == 'rgbd'
-        if use_depth and all(s.depth_m is None for s in samples):
+        if use_depth and any(f.depth_m is None for f in frames):
             raise ValueError(f'{args.source}: no depth images for the rgbd model')
-        stage = DetectorStage(model, search=SearchConfig(n_levels=args.levels))
-        tracker, ik = TrackerStage(), IkStage()
+        pipeline = FramePipeline(DetectorStage(model, search=SearchConfig(n_levels=args.levels)))
         # per clock: each stage's ms per frame, and their sum (one frame through all four)
         ms = {clock: {k: [] for k in (*STAGES, 'total')} for clock in ('cpu', 'wall')}
-        for i, s in enumerate(progress(samples, 'bench')):
-            if i == min(args.warmup, len(samples) - 1):
+        for i, f in enumerate(progress(frames, 'bench')):
+            if i == min(args.warmup, len(frames) - 1):
                 threads = set_blas_threads(args.blas_threads)  # also the libraries loaded since
-            h, w = s.color.shape[:2]
-            intr = s.intrinsics or cad60_intrinsics(w, h)
-            t = [_now()]
-            color, depth, mask = s.color, s.depth_m if use_depth else None, None
-            if depth is not None:
-                fg = segment(depth, intr)
-                mask = fg.mask
-                color, depth = apply_mask(color, depth, mask)
-            t.append(_now())
-            parts = stage.step(color, depth, intr, mask=mask)
-            t.append(_now())
-            tracked = tracker.step(parts, i / 30.0, intr)  # a subset is no sequence: timing
-            t.append(_now())
-            ik.step(tracked, depth, intr)
-            t.append(_now())
-            if i >= args.warmup:
-                for c, clock in enumerate(ms.values()):
-                    per_stage = [(t[k + 1][c] - t[k][c]) * 1e3 for k in range(len(STAGES))]
-                    for name, v in zip(STAGES, per_stage, strict=True):
-                        if name != 'foreground' or depth is not None:
-                            clock[name].append(v)
-                    clock['total'].append(sum(per_stage))
+            out = pipeline.step(f.color, f.depth_m if use_depth else None, f.intrinsics,
+                                f.stamp_ns * 1e-9)
+            if i < args.warmup:
+                continue
+            for clock, times in (('cpu', out.cpu_s), ('wall', out.wall_s)):
+                for name in STAGES:
+                    if name != 'foreground' or use_depth:
+                        ms[clock][name].append(times[name] * 1e3)
+                ms[clock]['total'].append(sum(times.values()) * 1e3)
         if peer is not None:
-            peer_cpu, peer_wall = time_peer(peer, samples, args.warmup)
+            peer_cpu, peer_wall = time_peer(peer, frames, args.warmup)
     finally:
         if peer is not None:
             peer.close()
     m = machine()
-    h, w = samples[0].color.shape[:2]
+    h, w = frames[0].color.shape[:2]
     print(f"machine: {m['cores']} cores, {m['cpu']}, load average {m['load_average']}, "
           f"this process may use CPUs {sorted(os.sched_getaffinity(0))}")
     print(f"threads: numba {m['numba_threads']} (no parallel kernels), BLAS {m['blas_threads']}"
@@ -153,18 +139,13 @@ def run(args: argparse.Namespace) -> int:
     return 0
 
 
-def _now() -> tuple[float, float]:
-    """(this process's CPU time, wall time), seconds."""
-    return time.process_time(), time.perf_counter()
-
-
-def time_peer(peer: MediaPipePeer, samples: list, warmup: int
+def time_peer(peer: MediaPipePeer, frames: list[Frame], warmup: int
               ) -> tuple[list[float], list[float]]:
     """The peer's CPU and wall ms per frame after `warmup` frames, the frames one video."""
     cpu, wall = [], []
-    for i, s in enumerate(progress(samples, peer.name)):
+    for i, f in enumerate(progress(frames, peer.name)):
         start = time.perf_counter()
-        peer.step(s.color, s.depth_m, s.intrinsics, new_video=i == 0)
+        peer.step(f.color, f.depth_m, f.intrinsics, new_video=i == 0)
         if i >= warmup:
             wall.append((time.perf_counter() - start) * 1e3)
             cpu.append(peer.last_cpu_s * 1e3)

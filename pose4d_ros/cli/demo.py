@@ -24,14 +24,18 @@ from typing import Any
 import cv2
 import numpy as np
 
+from pose4d_ros.cli._dpm import load_frames
 from pose4d_ros.cli.eval import format_table
+from pose4d_ros.core.dpm.model import load_model
 from pose4d_ros.core.draw import draw_skeleton, legend
 from pose4d_ros.core.files import write_atomic, write_json
 from pose4d_ros.core.joints import MISSING, JointSet
-from pose4d_ros.core.metrics import score_joint_sets
 from pose4d_ros.core.pipeline import limb_bones
 from pose4d_ros.core.skeleton import SKELETON_14
 from pose4d_ros.datasets import bag, cad60_bag
+from pose4d_ros.datasets.frame import Frame
+from pose4d_ros.datasets.messages import joints_from_msg, stamp_to_ns
+from pose4d_ros.models import model_path
 
 STAGES = ('foreground', 'detector', 'tracker', 'ik')
 RECORDED = ('pose4d/skeleton', 'pose4d/parts', 'pose4d/parts/tracked', '/tf')
@@ -250,47 +254,39 @@ def run(args: argparse.Namespace) -> int:
     return report(bag_path, result, args)
 
 
-def _by_stamp(path: Path, topic: str) -> dict[int, tuple[int, Any]]:
-    """{header stamp: (bag receive time ns, message)} of one topic."""
-    out = {}
-    for m in bag.read_messages(path, [topic]):
-        msg = bag.deserialize(m)
-        out.setdefault(bag.stamp_ns(msg), (m.timestamp_ns, msg))
-    return out
-
-
 def report(bag_path: Path, result: GraphRun, args: argparse.Namespace) -> int:
-    from pose4d_ros.cli._pipeline_eval import evaluate_bag
+    from pose4d_ros.cli._pipeline_eval import Row, pipeline_rows, score_rows
 
-    truth = _by_stamp(bag_path, cad60_bag.SKELETON_TOPIC)
-    stamps = sorted(truth)
-    skeletons = _by_stamp(result.recorded, '/pose4d/skeleton')
-    frames, latency = result.frames, result.latency_ms()
-    truths = [bag.joint_set(truth[s][1]) for s in stamps]
-    graph_pred = [bag.joint_set(skeletons[s][1]) if s in skeletons else None for s in stamps]
-    table = score_joint_sets(graph_pred, truths, SKELETON_14)
-    offline = evaluate_bag(bag_path, model=args.model)
+    frames = load_frames([str(bag_path)])
+    skeletons = {}
+    for m in bag.read_messages(result.recorded, ['/pose4d/skeleton']):
+        msg = bag.deserialize(m)
+        skeletons.setdefault(stamp_to_ns(msg.header.stamp), joints_from_msg(msg))
+    graph = Row([skeletons.get(f.stamp_ns, JointSet.missing(SKELETON_14)) for f in frames])
+    offline = pipeline_rows(frames, load_model(model_path(args.model)))
+    tables = score_rows({'graph': graph, **offline}, frames)
+    n_in, latency = result.frames, result.latency_ms()
     results = {
         'bag': str(bag_path), 'rate': args.rate, 'input_rate_hz': result.input_rate_hz(),
-        'frames_in': frames, 'skeletons_out': len(skeletons),
-        'frames_lost': frames - len(skeletons),
+        'frames_in': n_in, 'skeletons_out': len(skeletons),
+        'frames_lost': n_in - len(skeletons),
         'latency_ms': ({'p50': float(np.percentile(latency, 50)),
                         'p95': float(np.percentile(latency, 95)), 'n': int(latency.size)}
                        if latency.size else None),
         'tf': tf_per_skeleton(result.recorded, skeletons),
-        'graph': table, 'offline': offline['rows'],
+        'graph': tables.pop('graph'), 'offline': tables,
     }
-    print(format_table({'graph (live, rgbd+kf+ik)': table,
-                        **{f'offline {k}': v for k, v in offline['rows'].items()}}, frames))
-    print(f'\nframes in {frames} (replayed at {result.input_rate_hz():.1f} Hz), skeletons out '
-          f'{len(skeletons)}, lost {frames - len(skeletons)}')
+    print(format_table({'graph (live, rgbd+kf+ik)': results['graph'],
+                        **{f'offline {k}': v for k, v in tables.items()}}, n_in))
+    print(f'\nframes in {n_in} (replayed at {result.input_rate_hz():.1f} Hz), skeletons out '
+          f'{len(skeletons)}, lost {n_in - len(skeletons)}')
     if latency.size:
         print(f'latency colour frame -> /pose4d/skeleton: p50 {results["latency_ms"]["p50"]:.1f}'
               f' ms, p95 {results["latency_ms"]["p95"]:.1f} ms (n = {latency.size})')
     tf = results['tf']
     print(f'/tf: {tf["transforms"]} transforms, one per located joint, stamped like the '
           f'skeleton, for {tf["matching"]} of {tf["skeletons"]} skeletons')
-    overlay = overlay_picture(bag_path, stamps, skeletons, truths)
+    overlay = overlay_picture(frames, graph.preds)
     ok, png = cv2.imencode('.png', overlay[:, :, ::-1])
     if not ok:
         raise ValueError(f'could not encode the overlay picture ({overlay.shape})')
@@ -300,7 +296,7 @@ def report(bag_path: Path, result: GraphRun, args: argparse.Namespace) -> int:
     return 0 if len(skeletons) else 1
 
 
-def tf_per_skeleton(recorded: Path, skeletons: dict[int, tuple[int, Any]], *,
+def tf_per_skeleton(recorded: Path, skeletons: dict[int, JointSet], *,
                     prefix: str = 'pose4d') -> dict[str, int]:
     """The recorded /tf against the recorded skeletons: `matching` counts the skeletons whose
     stamp has exactly one transform per located joint (`<prefix>/<track>/<joint>`) on /tf."""
@@ -309,10 +305,9 @@ def tf_per_skeleton(recorded: Path, skeletons: dict[int, tuple[int, Any]], *,
     frames: dict[int, list[str]] = {}
     for m in bag.read_messages(recorded, ['/tf']):
         for t in bag.deserialize(m).transforms:
-            frames.setdefault(bag.stamp_ns(t), []).append(t.child_frame_id)
+            frames.setdefault(stamp_to_ns(t.header.stamp), []).append(t.child_frame_id)
     matching = 0
-    for stamp, (_, msg) in skeletons.items():
-        joints = bag.joint_set(msg)
+    for stamp, joints in skeletons.items():
         located = (joints.source != MISSING) & np.isfinite(joints.xyz).all(axis=1)
         want = [joint_frame(prefix, joints.track_id, name)
                 for name, ok in zip(joints.names, located, strict=True) if ok]
@@ -321,22 +316,10 @@ def tf_per_skeleton(recorded: Path, skeletons: dict[int, tuple[int, Any]], *,
             'transforms': sum(len(f) for f in frames.values())}
 
 
-def overlay_picture(bag_path: Path, stamps: list[int], skeletons: dict, truths: list,
-                    n: int = 4) -> np.ndarray:
+def overlay_picture(frames: list[Frame], skeletons: list[JointSet], n: int = 4) -> np.ndarray:
     """n frames spread over the bag, skeletons drawn by joint source, ground truth crossed."""
-    picks = [stamps[int(i)] for i in np.linspace(0, len(stamps) - 1, n)]
-    images = {}
-    for m in bag.read_messages(bag_path, [cad60_bag.COLOR_TOPIC]):
-        msg = bag.deserialize(m)
-        s = bag.stamp_ns(msg)
-        if s in picks:
-            images[s] = msg.data.reshape(msg.height, msg.width, 3)
-    tiles = []
     bones = limb_bones()
-    for s in picks:
-        truth = truths[stamps.index(s)]
-        shown = bag.joint_set(skeletons[s][1]) if s in skeletons else \
-            JointSet.missing(SKELETON_14)
-        tiles.append(draw_skeleton(images[s], shown, bones, truth_uv=truth.uv))
+    tiles = [draw_skeleton(frames[i].color, skeletons[i], bones, truth_uv=frames[i].truth.uv)
+             for i in np.linspace(0, len(frames) - 1, n).astype(int)]
     row = np.hstack(tiles)
     return np.vstack([row, legend(row.shape[1])])

@@ -22,7 +22,7 @@ from pathlib import Path
 
 import numpy as np
 
-from pose4d_ros.cli._dpm import git_commit, load_samples, log, machine, progress
+from pose4d_ros.cli._dpm import git_commit, load_frames, log, machine, progress
 from pose4d_ros.core.dpm.model import save_model
 from pose4d_ros.core.dpm.samples import (
     Negative,
@@ -33,7 +33,7 @@ from pose4d_ros.core.dpm.samples import (
 )
 from pose4d_ros.core.dpm.threads import set_blas_threads
 from pose4d_ros.core.dpm.train import train
-from pose4d_ros.datasets.sources import Sample
+from pose4d_ros.datasets.frame import Frame
 
 
 def add_parser(subparsers: argparse._SubParsersAction) -> None:
@@ -80,16 +80,16 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     p.set_defaults(func=run)
 
 
-def room_backgrounds(samples: list[Sample], *, dilate_px: int = 5) -> list[Negative]:
+def room_backgrounds(samples: list[Frame], *, dilate_px: int = 5) -> list[Negative]:
     """The room behind the person, per video of a masked (synthetic) set: every pixel from the
     latest frame in which the (dilated) person mask leaves it free; pixels the person never
     leaves are cut off by keeping the widest free band of columns on either side."""
     import cv2
 
-    by_video: dict[str, list[Sample]] = defaultdict(list)
+    by_video: dict[str, list[Frame]] = defaultdict(list)
     for s in samples:
         if s.mask is not None and s.depth_m is not None:
-            by_video[str(s.extra.get('video', s.key))].append(s)
+            by_video[s.video or s.key].append(s)
     kernel = np.ones((2 * dilate_px + 1, 2 * dilate_px + 1), np.uint8)
     out = []
     for vid, ss in by_video.items():
@@ -125,7 +125,7 @@ def room_backgrounds(samples: list[Sample], *, dilate_px: int = 5) -> list[Negat
     return out
 
 
-def with_foreground_masks(samples: list[Sample]) -> list[Sample]:
+def with_foreground_masks(samples: list[Frame]) -> list[Frame]:
     """The samples with `mask` replaced by the foreground stage's mask (`core.foreground`),
     so that a masked model trains on what it will see; a frame where the foreground finds no
     person keeps its own mask (the renderer's), or none."""
@@ -151,7 +151,7 @@ def with_foreground_masks(samples: list[Sample]) -> list[Sample]:
     return out
 
 
-def build_negatives(samples: list[Sample], cfg: TrainConfig, max_images: int, seed: int
+def build_negatives(samples: list[Frame], cfg: TrainConfig, max_images: int, seed: int
                     ) -> list[Negative]:
     """Background images for mining: room plates (masked sets) + strips beside the person."""
     negs = room_backgrounds(samples)
@@ -187,8 +187,8 @@ def run(args: argparse.Namespace) -> int:
                       cache_limit=args.cache_limit, seed=args.seed)
     if args.out.suffix != '.npz':
         raise ValueError(f'{args.out}: the model file must end in .npz')
-    samples = load_samples(args.sources, frame_range=args.frame_range, stride=args.stride,
-                           max_frames=args.max_frames, seed=args.seed)
+    samples = load_frames(args.sources, frame_range=args.frame_range, stride=args.stride,
+                          max_frames=args.max_frames)
     if cfg.channels == 'rgbd' and not any(s.depth_m is not None for s in samples):
         raise ValueError(f'{", ".join(args.sources)}: no depth images; use --channels rgb')
     if cfg.masked_input:

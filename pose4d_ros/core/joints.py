@@ -7,12 +7,14 @@ checks it). `check_joints` is the physical-sense check of a JointSet that came f
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass, field, replace
 
 import numpy as np
 from numpy.typing import NDArray
 
 from pose4d_ros.core.camera import MAX_DEPTH_M, Intrinsics
+from pose4d_ros.core.skeleton import ground_truth_name
 
 DETECTED = 0  # measured by the part detector in this frame
 TRACKED = 1  # estimated by the tracker
@@ -76,6 +78,23 @@ class JointSet:
     def get(self, name: str) -> int | None:
         """Index of a joint, None if absent."""
         return self.names.index(name) if name in self.names else None
+
+    def labelled(self, names: Sequence[str]) -> tuple[NDArray[np.float64], NDArray[np.float64],
+                                                     NDArray[np.bool_]]:
+        """This set as the ground truth of the named joints: (P, 2) pixels, (P, 3) positions
+        and (P,) labelled flags (confidence > 0 and a finite pixel); a name the set lacks is
+        looked up under its ground-truth alias (`skeleton.ground_truth_name`: a `left_wrist`
+        is CAD-60's `left_hand`); NaN / False for joints it has under neither name."""
+        uv = np.full((len(names), 2), np.nan)
+        xyz = np.full((len(names), 3), np.nan)
+        labelled = np.zeros(len(names), bool)
+        for i, name in enumerate(names):
+            k = self.get(name)
+            k = self.get(ground_truth_name(name)) if k is None else k
+            if k is not None:
+                uv[i], xyz[i] = self.uv[k], self.xyz[k]
+                labelled[i] = bool(self.confidence[k] > 0) and bool(np.isfinite(uv[i]).all())
+        return uv, xyz, labelled
 
     def with_(self, **changes: object) -> JointSet:
         """A copy with some fields replaced."""

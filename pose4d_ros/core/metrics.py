@@ -23,12 +23,13 @@ metrics' `average` is over every group present.
 from __future__ import annotations
 
 import warnings
+from collections.abc import Sequence
 
 import numpy as np
 from numpy.typing import NDArray
 
 from pose4d_ros.core.joints import MISSING, JointSet
-from pose4d_ros.core.skeleton import JOINT_GROUPS, TABLE_GROUPS, ground_truth_name
+from pose4d_ros.core.skeleton import JOINT_GROUPS, TABLE_GROUPS
 
 WITHIN_M = 0.10  # the 3-D hit distance of `within_10cm`, metres
 
@@ -207,7 +208,7 @@ def _with_average(values: dict[str, float]) -> dict[str, float]:
 
 def score_joint_sets(predictions: list[JointSet | None], truths: list[JointSet],
                      names: tuple[str, ...], *, alphas: tuple[float, ...] = (0.1, 0.2),
-                     image_size: tuple[int, int] | None = None
+                     image_sizes: Sequence[tuple[int, int]] | None = None
                      ) -> dict[str, dict[str, float]]:
     """The table of `score_groups` for frame-aligned predictions and ground truths.
 
@@ -216,11 +217,11 @@ def score_joint_sets(predictions: list[JointSet | None], truths: list[JointSet],
     predictions : one JointSet per frame (None = no output for that frame: every joint wrong).
         MISSING joints count as not predicted; a joint's confidence is its APK score.
     truths : the ground truth of each frame, e.g. CAD-60's 15 joints; a joint is visible when
-        its confidence is positive and its pixel finite. Names are looked up through
-        `skeleton.ground_truth_name` (a predicted `left_wrist` is scored against CAD-60's
-        `left_hand`).
+        labelled (`JointSet.labelled`: its confidence positive and its pixel finite, a
+        predicted `left_wrist` scored against CAD-60's `left_hand`).
     names : the joints to score (predicted names).
-    image_size : (width, height); ground-truth joints outside the image are not visible.
+    image_sizes : (width, height) of each frame; ground-truth joints outside the image are not
+        visible.
 
     The 3-D errors are scored when the ground truth has 3-D positions and the predictions
     have any (a row without 3-D output, such as the RGB-only baseline, has none).
@@ -235,16 +236,12 @@ def score_joint_sets(predictions: list[JointSet | None], truths: list[JointSet],
     gt_xyz = np.full((f, j, 3), np.nan)
     visible = np.zeros((f, j), bool)
     for k, (p, t) in enumerate(zip(predictions, truths, strict=True)):
+        gt[k], gt_xyz[k], visible[k] = t.labelled(names)
+        if image_sizes is not None:
+            w, h = image_sizes[k]
+            with np.errstate(invalid='ignore'):
+                visible[k] &= ((gt[k] >= 0) & (gt[k] <= (w - 1, h - 1))).all(axis=1)
         for i, name in enumerate(names):
-            ti = t.get(ground_truth_name(name))
-            if ti is not None:
-                gt[k, i] = t.uv[ti]
-                gt_xyz[k, i] = t.xyz[ti]
-                u, v = t.uv[ti]
-                visible[k, i] = bool(t.confidence[ti] > 0) and bool(np.isfinite(t.uv[ti]).all())
-                if image_size is not None:
-                    visible[k, i] &= bool(0 <= u <= image_size[0] - 1
-                                          and 0 <= v <= image_size[1] - 1)
             pi = p.get(name) if p is not None else None
             if pi is not None and p.source[pi] != MISSING:
                 pred[k, i] = p.uv[pi]

@@ -4,17 +4,18 @@ The ROS nodes (`foreground`, `detector`, `tracker`, `ik`, and `pipeline` with al
 process) and the offline tools (`pose4d eval`, `bench`, `demo`) call these same objects, so an
 offline evaluation and a live run of the graph give the same answers on the same frames.
 
+- `ForegroundStage`: the person's mask from the depth image (`core.foreground`: floor removal
+  and MSER), applied to colour and depth.
 - `DetectorStage`: the 4D deformable part model (`core.dpm`) on the masked frame; each part's
   pixel is lifted to 3-D with the robust depth of the person's pixels around it.
-
 - `TrackerStage`: the SLQE Kalman filter (`core.slqe`, eqs. 6-16) on the detected parts' pixels,
   plus each part's depth carried from its last detection, so tracked parts have a 3-D position
   too (back-projected with the camera's intrinsics).
 - `IkStage`: Denavit-Hartenberg inverse kinematics (`core.kinematics`, eqs. 17-24) completing
   elbows and knees from shoulders/hips and wrists/ankles in 3-D, the swivel chosen by the depth
   image; output the 14-joint skeleton (`skeleton.SKELETON_14`).
-- `FramePipeline`: all of them on one frame, foreground first (`core.foreground`: floor removal
-  and MSER on depth); what the `pipeline` node and `pose4d eval`/`demo` run.
+- `FramePipeline`: all of them on one frame, in that order; what the `pipeline` node and
+  `pose4d eval`, `bench` and `demo` run.
 """
 
 from __future__ import annotations
@@ -74,6 +75,46 @@ def reorder(joints: JointSet, names: tuple[str, ...]) -> JointSet:
                                                       joints.covariance[k])
     return JointSet(names, uv, xyz, confidence=conf, source=src, covariance=cov,
                     score=joints.score, track_id=joints.track_id)
+
+
+class ForegroundStage:
+    """The person's mask from the depth image, applied to colour and depth.
+
+    Parameters
+    ----------
+    config : the foreground configuration (`core.foreground.ForegroundConfig`).
+    temporal : pass each frame's result (its floor and its box) to the next frame.
+    """
+
+    def __init__(self, config: ForegroundConfig | None = None, *, temporal: bool = True) -> None:
+        self.config = config or ForegroundConfig()
+        self.temporal = temporal
+        self.previous: ForegroundResult | None = None
+
+    def reset(self) -> None:
+        self.previous = None
+
+    def warm_up(self, intrinsics: Intrinsics) -> None:
+        """Run on `warm_up_frame` twice (the second time with a previous frame), then forget
+        it, so the kernels are compiled."""
+        color, depth, _ = warm_up_frame(intrinsics)
+        for _ in range(2):
+            self.step(color, depth, intrinsics)
+        self.reset()
+
+    def step(self, color: NDArray[np.uint8], depth_m: NDArray[np.floating],
+             intrinsics: Intrinsics
+             ) -> tuple[ForegroundResult, NDArray[np.uint8], NDArray[np.float32]]:
+        """The foreground of one frame, and the colour and depth (float32 metres, NaN = no
+        reading) blanked outside it."""
+        color, depth_m = np.asarray(color), np.asarray(depth_m, np.float32)
+        if color.shape[:2] != depth_m.shape:
+            raise ValueError(f'colour is {color.shape[1]}x{color.shape[0]} but depth is '
+                             f'{depth_m.shape[1]}x{depth_m.shape[0]} (not registered?)')
+        fg = segment(depth_m, intrinsics, config=self.config,
+                     previous=self.previous if self.temporal else None)
+        self.previous = fg if fg.found else None
+        return (fg, *apply_mask(color, depth_m, fg.mask))
 
 
 class DetectorStage:
@@ -304,74 +345,76 @@ class IkStage:
                         score=score, track_id=tracked.track_id)
 
 
-# The stages of `FramePipeline.step`, in order (the keys of `FrameResult.cpu_s`)
+# The stages of `FramePipeline.step`, in order (the keys of `FrameResult.cpu_s` and `wall_s`)
 STAGES = ('foreground', 'detector', 'tracker', 'ik')
 
 
 @dataclass(frozen=True)
 class FrameResult:
-    """Everything one frame produced, stage by stage, and each stage's CPU time (`cpu_s`:
-    seconds of this process's CPU, `time.process_time`, per name of `STAGES`)."""
+    """Everything one frame produced, stage by stage (the foreground and the masked images are
+    None for a frame without depth), and each stage's time per name of `STAGES`: `cpu_s`,
+    seconds of this process's CPU (`time.process_time`), and `wall_s`."""
 
-    foreground: ForegroundResult
+    foreground: ForegroundResult | None
     color_masked: NDArray[np.uint8]
-    depth_masked: NDArray[np.float32]
+    depth_masked: NDArray[np.float32] | None
     parts: JointSet
     tracked: JointSet
     skeleton: JointSet
     cpu_s: dict[str, float]
+    wall_s: dict[str, float]
 
 
 class FramePipeline:
-    """Foreground, detector, tracker and IK on one RGB-D frame, in that order.
+    """Foreground, detector, tracker and IK on one frame, in that order.
 
     Parameters
     ----------
     detector : the detector stage (holds the part model).
-    foreground : the foreground configuration.
-    tracker, ik : the tracking and completion stages (defaults if None).
-    temporal : pass the previous frame's foreground to the next (its floor and its box).
+    foreground, tracker, ik : the other stages (defaults if None).
     """
 
-    def __init__(self, detector: DetectorStage, *, foreground: ForegroundConfig | None = None,
-                 tracker: TrackerStage | None = None, ik: IkStage | None = None,
-                 temporal: bool = True) -> None:
+    def __init__(self, detector: DetectorStage, *, foreground: ForegroundStage | None = None,
+                 tracker: TrackerStage | None = None, ik: IkStage | None = None) -> None:
+        self.foreground = foreground or ForegroundStage()
         self.detector = detector
-        self.foreground_config = foreground or ForegroundConfig()
         self.tracker = tracker or TrackerStage()
         self.ik = ik or IkStage()
-        self.temporal = temporal
-        self.previous: ForegroundResult | None = None
 
-    def step(self, color: NDArray[np.uint8], depth_m: NDArray[np.floating],
-             intrinsics: Intrinsics, stamp_s: float) -> FrameResult:
-        """Run every stage on one frame (depth: float32 metres, NaN = no reading)."""
-        color, depth_m = np.asarray(color), np.asarray(depth_m, np.float32)
-        if color.shape[:2] != depth_m.shape:
-            raise ValueError(f'colour is {color.shape[1]}x{color.shape[0]} but depth is '
-                             f'{depth_m.shape[1]}x{depth_m.shape[0]}')
-        clock = [time.process_time()]
-        fg = segment(depth_m, intrinsics, config=self.foreground_config,
-                     previous=self.previous if self.temporal else None)
-        self.previous = fg if fg.found else None
-        color_m, depth_mm = apply_mask(color, depth_m, fg.mask)
-        clock.append(time.process_time())
+    def reset(self) -> None:
+        """Forget the previous frames (the next one starts a new track)."""
+        self.foreground.reset()
+        self.tracker.reset()
+
+    def step(self, color: NDArray[np.uint8], depth_m: NDArray[np.floating] | None,
+             intrinsics: Intrinsics | None, stamp_s: float) -> FrameResult:
+        """Run every stage on one frame (depth: float32 metres, NaN = no reading).
+
+        Without depth (an RGB-only model's source) there is no foreground: the detector
+        searches the whole colour image.
+        """
+        clock = [(time.process_time(), time.perf_counter())]
+        fg, color_m, depth_mm = None, color, None
+        if depth_m is not None:
+            fg, color_m, depth_mm = self.foreground.step(color, depth_m, intrinsics)
+        clock.append((time.process_time(), time.perf_counter()))
         # the detector sees what the detector node receives: the masked frame and the mask
-        parts = self.detector.step(color_m, depth_mm, intrinsics, mask=fg.mask)
-        clock.append(time.process_time())
+        parts = self.detector.step(color_m, depth_mm, intrinsics,
+                                   mask=fg.mask if fg is not None else None)
+        clock.append((time.process_time(), time.perf_counter()))
         tracked = self.tracker.step(parts, stamp_s, intrinsics)
-        clock.append(time.process_time())
+        clock.append((time.process_time(), time.perf_counter()))
         skeleton = self.ik.step(tracked, depth_mm, intrinsics)
-        clock.append(time.process_time())
-        cpu_s = {stage: clock[k + 1] - clock[k] for k, stage in enumerate(STAGES)}
-        return FrameResult(fg, color_m, depth_mm, parts, tracked, skeleton, cpu_s)
+        clock.append((time.process_time(), time.perf_counter()))
+        cpu_s, wall_s = ({stage: clock[k + 1][c] - clock[k][c] for k, stage in enumerate(STAGES)}
+                         for c in (0, 1))
+        return FrameResult(fg, color_m, depth_mm, parts, tracked, skeleton, cpu_s, wall_s)
 
     def warm_up(self, intrinsics: Intrinsics) -> None:
         """Compile the kernels on a synthetic frame, then forget it (`warm_up_frame`)."""
         color, depth, _ = warm_up_frame(intrinsics)
         self.step(color, depth, intrinsics, 0.0)
-        self.previous = None
-        self.tracker.reset()
+        self.reset()
 
 
 def limb_bones() -> list[tuple[int, int]]:

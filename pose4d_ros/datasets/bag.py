@@ -23,7 +23,6 @@ from functools import cache
 from pathlib import Path
 from typing import Any
 
-import numpy as np
 from rosbags.interfaces import (
     Qos,
     QosDurability,
@@ -38,8 +37,6 @@ from rosbags.rosbag2.metadata import parse_qos
 from rosbags.rosbag2.storage_mcap import decompress, get_qos
 from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 from rosbags.typesys.store import Typestore
-
-from pose4d_ros.core.joints import JointSet
 
 MSG_PACKAGE = 'pose4d_msgs'
 MSG_NAMES = ('Joint', 'JointArray')
@@ -268,27 +265,6 @@ def read_messages(path: str | Path, topics: Iterable[str] | None = None,
 def deserialize(message: BagMessage) -> Any:
     """Decode a message's CDR bytes into a rosbags message object."""
     return typestore().deserialize_cdr(message.data, message.msgtype)
-
-
-def joint_set(msg: Any) -> JointSet:
-    """A `pose4d_msgs/JointArray` read from a bag (rosbags object) as a core JointSet."""
-    js = msg.joints
-    n = len(js)
-    return JointSet(
-        tuple(j.name for j in js),
-        np.array([[j.u, j.v] for j in js], np.float64).reshape(n, 2),
-        np.array([[j.position.x, j.position.y, j.position.z] for j in js],
-                 np.float64).reshape(n, 3),
-        confidence=np.array([j.confidence for j in js], np.float32),
-        source=np.array([j.source for j in js], np.uint8),
-        covariance=np.array([np.asarray(j.position_covariance, np.float64) for j in js]
-                            ).reshape(n, 3, 3),
-        score=float(msg.score), track_id=int(msg.track_id))
-
-
-def stamp_ns(msg: Any) -> int:
-    """Header stamp of a message read from a bag, nanoseconds."""
-    return int(msg.header.stamp.sec) * 1_000_000_000 + int(msg.header.stamp.nanosec)
 
 
 # ------------------------------------------------------------------ crash recovery

@@ -33,7 +33,7 @@ when complete, so an interrupted run never leaves a half-written file behind.
 from __future__ import annotations
 
 import re
-from collections.abc import Iterator
+from collections.abc import Iterator, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -41,9 +41,11 @@ import cv2
 import numpy as np
 from numpy.typing import NDArray
 
-from pose4d_ros.core.camera import Intrinsics, cad60_intrinsics, project
+from pose4d_ros.core.camera import Intrinsics, cad60_intrinsics, depth_to_metres, project
 from pose4d_ros.core.files import write_atomic
+from pose4d_ros.core.joints import DETECTED, MISSING, JointSet
 from pose4d_ros.core.skeleton import CAD60_JOINTS
+from pose4d_ros.datasets.frame import Frame
 
 N_JOINTS = 15
 N_ORIENTED = 11  # joints 1-11 carry an orientation matrix
@@ -54,6 +56,12 @@ AFFINE_U = (156.858, 0.0977, -0.00064, 0.00157)
 AFFINE_V = (125.536, 0.000215, -0.11849, -0.00221)
 
 _ID = re.compile(r'^\d{10}$')
+
+# The frames' clock (`read_frames`, and the stamps of `pose4d cad60-to-bag`): 30 fps from T0_S,
+# a one-second gap between videos.
+T0_S = 1_700_000_000.0
+FRAME_PERIOD_NS = 1_000_000_000 // 30 + 1  # 33.333... ms, rounded up so stamps never repeat
+VIDEO_GAP_NS = 1_000_000_000
 
 
 def _mirror_permutation() -> tuple[int, ...]:
@@ -141,28 +149,6 @@ class Video:
     def person(self) -> str:
         """The person directory's name, e.g. `data1`."""
         return self.person_dir.name
-
-
-@dataclass(frozen=True)
-class Frame:
-    """One frame of a video, as `iter_frames` yields it.
-
-    Attributes
-    ----------
-    frame : k, the frame number.
-    rgb : (H, W, 3) uint8, RGB channel order.
-    depth_mm : (H, W) uint16, millimetres, 0 = no reading.
-    joints_mm : (15, 3) float64, mm, OpenNI world frame, anatomical sides.
-    joint_conf : (15,) float64.
-    mask : (H, W) bool person mask (synthetic sets only), or None.
-    """
-
-    frame: int
-    rgb: NDArray[np.uint8]
-    depth_mm: NDArray[np.uint16]
-    joints_mm: NDArray[np.float64]
-    joint_conf: NDArray[np.float64]
-    mask: NDArray[np.bool_] | None = None
 
 
 # --------------------------------------------------------------------------------------------
@@ -441,31 +427,60 @@ def load_frame(frame_dir: str | Path, k: int) -> tuple[NDArray[np.uint8], NDArra
     return rgb, depth
 
 
-def load_frame_mask(frame_dir: str | Path, k: int) -> NDArray[np.bool_]:
-    """The synthetic sets' person mask of frame k, (H, W) bool (True = person visible)."""
-    return load_mask(frame_paths(frame_dir, k)[2])
+def read_frames(root: str | Path, *, stride: int = 1, videos: Sequence[str] | None = None,
+                max_frames: int | None = None, projection: str = 'perspective',
+                t0_s: float = T0_S) -> Iterator[Frame]:
+    """The frames of a CAD-60 directory (real or synthetic), video after video.
 
-
-def iter_frames(video: Video, *, skeleton: Skeleton | None = None,
-                with_mask: bool = False) -> Iterator[Frame]:
-    """Yield the frames of a video in skeleton order, with their ground-truth joints.
+    Each frame has its RGB, its depth in metres, the OpenNI perspective intrinsics at its size,
+    the video's skeleton as ground truth (the 15 joints' pixels by `projection`, 'perspective' or
+    the README's 'affine' fit; 3-D in the optical frame; the file's confidence, MISSING where it
+    is 0) and, in the synthetic sets, the person mask (`Mask_<k>.png`). Stamps keep the videos'
+    30 fps clock from `t0_s`, with a one-second gap between videos.
 
     Parameters
     ----------
-    video : from `list_videos`.
-    skeleton : the video's skeleton if already read (else read from `video.skeleton_path`).
-    with_mask : also load `Mask_<k>.png` (synthetic sets; raises if missing).
+    root : a person directory (`dataN/`) or a directory of them.
+    stride : every n-th frame of each video.
+    videos : only these video ids (all if None).
+    max_frames : only the first `max_frames` frames of each video.
     """
-    skeleton = skeleton if skeleton is not None else read_skeleton(video.skeleton_path)
-    for i, k in enumerate(skeleton.frames):
-        rgb, depth = load_frame(video.frame_dir, int(k))
-        mask = None
-        if with_mask:
-            mask = load_frame_mask(video.frame_dir, int(k))
-            if mask.shape != depth.shape:
-                raise ValueError(f'{frame_paths(video.frame_dir, int(k))[2]}: mask size '
-                                 f'{mask.shape} differs from the depth image {depth.shape}')
-        yield Frame(int(k), rgb, depth, skeleton.joints_mm[i], skeleton.joint_conf[i], mask)
+    if stride < 1:
+        raise ValueError(f'stride must be >= 1, got {stride}')
+    if projection not in ('perspective', 'affine'):
+        raise ValueError(f"projection must be 'perspective' or 'affine', got {projection!r}")
+    selected = list_videos(root)
+    if videos is not None:
+        unknown = set(videos) - {v.video_id for v in selected}
+        if unknown:
+            raise ValueError(f'{root}: no video(s) {", ".join(sorted(unknown))}')
+        selected = [v for v in selected if v.video_id in set(videos)]
+    stamp_ns = int(round(t0_s * 1e9))
+    for video in selected:
+        skeleton = read_skeleton(video.skeleton_path)
+        optical = skeleton.joints_optical()
+        with_mask = len(skeleton) > 0 and \
+            frame_paths(video.frame_dir, int(skeleton.frames[0]))[2].is_file()
+        for i, k in enumerate(skeleton.frames[:max_frames]):
+            if i:
+                stamp_ns += FRAME_PERIOD_NS * int(k - skeleton.frames[i - 1])
+            if i % stride:
+                continue
+            rgb_path, _, mask_path = frame_paths(video.frame_dir, int(k))
+            rgb, depth = load_frame(video.frame_dir, int(k))
+            mask = load_mask(mask_path) if with_mask else None
+            if mask is not None and mask.shape != depth.shape:
+                raise ValueError(f'{mask_path}: mask size {mask.shape} differs from the depth '
+                                 f'image {depth.shape}')
+            intrinsics = cad60_intrinsics(depth.shape[1], depth.shape[0])
+            conf = skeleton.joint_conf[i]
+            uv = project_joints(skeleton.joints_mm[i], intrinsics, model=projection)
+            truth = JointSet(CAD60_JOINTS, uv, optical[i], confidence=conf,
+                             source=np.where(conf > 0, DETECTED, MISSING), score=1.0,
+                             track_id=1)
+            yield Frame(stamp_ns, rgb, depth_to_metres(depth), intrinsics, truth, mask,
+                        key=str(rgb_path), video=f'{video.person}/{video.video_id}')
+        stamp_ns += VIDEO_GAP_NS
 
 
 # --------------------------------------------------------------------------------------------

@@ -1,7 +1,7 @@
 """CAD-60 directory (real or synthetic) -> rosbag2 with the topics of a Kinect driver.
 
-Topics, all stamped with the frame time (30 fps from `t0`; videos follow each other with a
-one-second gap) and recorded at that time:
+Topics, all stamped with the frame time (`cad60.read_frames`: 30 fps, videos one second apart)
+and recorded at that time:
 
 - `/camera/color/image_raw` (sensor_msgs/Image, rgb8)
 - `/camera/depth/image_raw` (sensor_msgs/Image, 16UC1 millimetres, registered to colour)
@@ -13,7 +13,7 @@ one-second gap) and recorded at that time:
   (the synthetic sets do): the ground truth of the foreground stage.
 
 The bag is written atomically (see `bag.BagWriter`), mcap with zstd chunk compression unless
-asked otherwise.
+asked otherwise. `read_frames` reads such a bag (or any bag with these topics) back as frames.
 """
 
 from __future__ import annotations
@@ -25,11 +25,19 @@ from typing import Any
 
 import numpy as np
 
-from pose4d_ros.core import joints as cj
-from pose4d_ros.core.camera import Intrinsics, cad60_intrinsics, depth_to_metres
-from pose4d_ros.core.skeleton import CAD60_JOINTS
+from pose4d_ros.core.camera import Intrinsics, depth_to_millimetres
+from pose4d_ros.core.joints import JointSet
+from pose4d_ros.core.sync import StampSync
 from pose4d_ros.datasets import bag, cad60
-from pose4d_ros.datasets.image_codec import decode
+from pose4d_ros.datasets.frame import Frame
+from pose4d_ros.datasets.messages import (
+    color_from_msg,
+    depth_from_msg,
+    image_to_array,
+    intrinsics_from_msg,
+    joints_from_msg,
+    stamp_to_ns,
+)
 
 COLOR_TOPIC = '/camera/color/image_raw'
 DEPTH_TOPIC = '/camera/depth/image_raw'
@@ -37,8 +45,6 @@ INFO_TOPIC = '/camera/color/camera_info'
 SKELETON_TOPIC = '/cad60/skeleton'
 MASK_TOPIC = '/cad60/mask'
 FRAME_ID = 'camera_color_optical_frame'
-FRAME_PERIOD_NS = 1_000_000_000 // 30 + 1  # 33.333... ms, rounded up so stamps never repeat
-VIDEO_GAP_NS = 1_000_000_000
 
 
 @dataclass(frozen=True)
@@ -51,7 +57,7 @@ class ConversionResult:
 
 
 def convert(root: str | Path, out: str | Path, *, storage: str = 'mcap', compress: bool = True,
-            projection: str = 'perspective', t0_s: float = 1_700_000_000.0,
+            projection: str = 'perspective', t0_s: float = cad60.T0_S,
             videos: Sequence[str] | None = None, max_frames: int | None = None,
             frame_id: str = FRAME_ID, progress: Callable[[int], Any] | None = None
             ) -> ConversionResult:
@@ -67,60 +73,37 @@ def convert(root: str | Path, out: str | Path, *, storage: str = 'mcap', compres
     max_frames : at most this many frames per video.
     progress : called with the number of frames written so far, after each frame.
     """
-    if projection not in ('perspective', 'affine'):
-        raise ValueError(f"projection must be 'perspective' or 'affine', got {projection!r}")
-    selected = cad60.list_videos(root)
-    if videos is not None:
-        unknown = set(videos) - {v.video_id for v in selected}
-        if unknown:
-            raise ValueError(f'{root}: no video(s) {", ".join(sorted(unknown))}')
-        selected = [v for v in selected if v.video_id in set(videos)]
-    store = bag.typestore()
-    types = store.types
-    intr = cad60_intrinsics()
-    stamp_ns = int(round(t0_s * 1e9))
-    frames = 0
+    types = bag.typestore().types
+    frames, seen, first_ns, last_ns = 0, set(), None, None
     with bag.BagWriter(out, storage=storage, compress=compress) as writer:
         for topic, msgtype in ((COLOR_TOPIC, 'sensor_msgs/msg/Image'),
                                (DEPTH_TOPIC, 'sensor_msgs/msg/Image'),
                                (INFO_TOPIC, 'sensor_msgs/msg/CameraInfo'),
                                (SKELETON_TOPIC, 'pose4d_msgs/msg/JointArray')):
             writer.add_topic(topic, msgtype)
-        has_mask = False
-        first_ns = stamp_ns
-        for video in selected:
-            skeleton = cad60.read_skeleton(video.skeleton_path)
-            pixels = skeleton.pixels(intr, model=projection)
-            optical = skeleton.joints_optical()
-            with_mask = cad60.frame_paths(video.frame_dir, int(skeleton.frames[0]))[2].is_file() \
-                if len(skeleton) else False
-            if with_mask and not has_mask:
-                writer.add_topic(MASK_TOPIC, 'sensor_msgs/msg/Image')
-                has_mask = True
-            for i, frame in enumerate(cad60.iter_frames(video, skeleton=skeleton,
-                                                        with_mask=with_mask)):
-                if max_frames is not None and i >= max_frames:
-                    break
-                if i:
-                    stamp_ns += FRAME_PERIOD_NS * int(frame.frame - skeleton.frames[i - 1])
-                header = _header(types, stamp_ns, frame_id)
-                writer.write(COLOR_TOPIC, stamp_ns, _image(types, header, frame.rgb, 'rgb8'))
-                writer.write(DEPTH_TOPIC, stamp_ns,
-                             _image(types, header, frame.depth_mm, '16UC1'))
-                writer.write(INFO_TOPIC, stamp_ns, _camera_info(types, header, intr))
-                writer.write(SKELETON_TOPIC, stamp_ns, _ground_truth(
-                    types, header, pixels[i], optical[i], frame.joint_conf))
-                if frame.mask is not None:
-                    writer.write(MASK_TOPIC, stamp_ns, _image(
-                        types, header, frame.mask.astype(np.uint8) * 255, 'mono8'))
-                frames += 1
-                if progress is not None:
-                    progress(frames)
-            stamp_ns += VIDEO_GAP_NS
+        for frame in cad60.read_frames(root, videos=videos, max_frames=max_frames,
+                                       projection=projection, t0_s=t0_s):
+            stamp_ns = frame.stamp_ns
+            header = _header(types, stamp_ns, frame_id)
+            writer.write(COLOR_TOPIC, stamp_ns, _image(types, header, frame.color, 'rgb8'))
+            writer.write(DEPTH_TOPIC, stamp_ns,
+                         _image(types, header, depth_to_millimetres(frame.depth_m), '16UC1'))
+            writer.write(INFO_TOPIC, stamp_ns, _camera_info(types, header, frame.intrinsics))
+            writer.write(SKELETON_TOPIC, stamp_ns, _joint_array(types, header, frame.truth))
+            if frame.mask is not None:
+                if MASK_TOPIC not in writer.counts:
+                    writer.add_topic(MASK_TOPIC, 'sensor_msgs/msg/Image')
+                writer.write(MASK_TOPIC, stamp_ns, _image(
+                    types, header, frame.mask.astype(np.uint8) * 255, 'mono8'))
+            frames += 1
+            seen.add(frame.video)
+            first_ns = stamp_ns if first_ns is None else first_ns
+            last_ns = stamp_ns
+            if progress is not None:
+                progress(frames)
         counts = dict(writer.counts)
-    last_ns = stamp_ns - VIDEO_GAP_NS if selected else first_ns
-    return ConversionResult(Path(out), frames, len(selected), counts,
-                            max(last_ns - first_ns, 0) * 1e-9)
+    duration_s = (last_ns - first_ns) * 1e-9 if frames else 0.0
+    return ConversionResult(Path(out), frames, len(seen), counts, duration_s)
 
 
 def _header(types: dict, stamp_ns: int, frame_id: str) -> Any:
@@ -150,125 +133,40 @@ def _camera_info(types: dict, header: Any, intr: Intrinsics) -> Any:
         binning_x=0, binning_y=0, roi=roi)
 
 
-def _ground_truth(types: dict, header: Any, uv: np.ndarray, xyz: np.ndarray,
-                  conf: np.ndarray) -> Any:
+def _joint_array(types: dict, header: Any, joints: JointSet) -> Any:
     Joint, Point = types['pose4d_msgs/msg/Joint'], types['geometry_msgs/msg/Point']
-    joints = [
-        Joint(name=name, u=float(uv[j, 0]), v=float(uv[j, 1]),
-              position=Point(x=float(xyz[j, 0]), y=float(xyz[j, 1]), z=float(xyz[j, 2])),
-              confidence=float(conf[j]),
-              source=cj.DETECTED if conf[j] > 0 else cj.MISSING,
-              position_covariance=np.zeros(9))
-        for j, name in enumerate(CAD60_JOINTS)]
-    return types['pose4d_msgs/msg/JointArray'](header=header, track_id=1, score=1.0,
-                                               joints=joints)
+    out = [Joint(name=name, u=float(joints.uv[j, 0]), v=float(joints.uv[j, 1]),
+                 position=Point(x=float(joints.xyz[j, 0]), y=float(joints.xyz[j, 1]),
+                                z=float(joints.xyz[j, 2])),
+                 confidence=float(joints.confidence[j]), source=int(joints.source[j]),
+                 position_covariance=joints.covariance[j].reshape(9))
+           for j, name in enumerate(joints.names)]
+    return types['pose4d_msgs/msg/JointArray'](header=header, track_id=int(joints.track_id),
+                                               score=float(joints.score), joints=out)
 
 
-@dataclass(frozen=True)
-class BagFrame:
-    """One RGB-D frame of a bag with its ground truth (what `read_frames` yields).
-
-    Attributes
-    ----------
-    stamp_ns : header stamp of the colour image.
-    color : (H, W, 3) uint8 RGB.
-    depth_m : (H, W) float32 metres, NaN = no reading.
-    intrinsics : from the frame's camera_info.
-    truth : the ground-truth joints (`/cad60/skeleton`), or None if the bag has none.
-    mask : (H, W) bool ground-truth person mask (`/cad60/mask`), or None.
-    """
-
-    stamp_ns: int
-    color: np.ndarray
-    depth_m: np.ndarray
-    intrinsics: Intrinsics
-    truth: cj.JointSet | None
-    mask: np.ndarray | None
-
-
-def read_frames(path: str | Path, *, color_topic: str = COLOR_TOPIC,
-                depth_topic: str = DEPTH_TOPIC, info_topic: str = INFO_TOPIC
-                ) -> Iterator[BagFrame]:
+def read_frames(path: str | Path) -> Iterator[Frame]:
     """The RGB-D frames of a bag in stamp order: colour, depth and camera_info of the same
-    header stamp, with the ground truth and mask of that stamp when the bag has them.
+    header stamp (`core.sync.StampSync`), with the ground truth (`/cad60/skeleton`) and the mask
+    (`/cad60/mask`) of that stamp when the bag has those topics.
 
-    Raises ValueError naming the bag and topic when a needed topic is missing; frames whose
-    colour has no depth or camera_info of the same stamp are skipped.
+    Raises ValueError naming the bag and topic when a needed topic is missing; a frame without
+    a message of every topic at its stamp is skipped.
     """
     infos = bag.topics(path)
-    for topic in (color_topic, depth_topic, info_topic):
+    for topic in (COLOR_TOPIC, DEPTH_TOPIC, INFO_TOPIC):
         if topic not in infos:
             raise ValueError(f'{path}: no {topic} topic (has {", ".join(sorted(infos))})')
-    topics = [color_topic, depth_topic, info_topic]
+    topics = [COLOR_TOPIC, DEPTH_TOPIC, INFO_TOPIC]
     topics += [t for t in (SKELETON_TOPIC, MASK_TOPIC) if t in infos]
-    pending: dict[int, dict[str, Any]] = {}
+    stream = {t: k for k, t in enumerate(topics)}
+    sync = StampSync(len(topics))
     for m in bag.read_messages(path, topics):
         msg = bag.deserialize(m)
-        stamp = bag.stamp_ns(msg)
-        pending.setdefault(stamp, {})[m.topic] = msg
-        ready = [s for s, got in pending.items()
-                 if s < stamp and all(t in got for t in (color_topic, depth_topic, info_topic))]
-        for s in sorted(ready):
-            yield _frame(s, pending.pop(s), color_topic, depth_topic, info_topic)
-        for s in [s for s in pending if s < stamp - 10**9]:  # incomplete and old: skip
-            del pending[s]
-    for s in sorted(pending):
-        got = pending[s]
-        if all(t in got for t in (color_topic, depth_topic, info_topic)):
-            yield _frame(s, got, color_topic, depth_topic, info_topic)
-
-
-def _frame(stamp: int, got: dict[str, Any], color_topic: str, depth_topic: str,
-           info_topic: str) -> BagFrame:
-    color = _pixels(got[color_topic])
-    if got[color_topic].encoding == 'bgr8':
-        color = color[:, :, ::-1]
-    depth = depth_to_metres(_pixels(got[depth_topic]))
-    k = got[info_topic].k
-    info = got[info_topic]
-    intr = Intrinsics(float(k[0]), float(k[4]), float(k[2]), float(k[5]), int(info.width),
-                      int(info.height))
-    truth = bag.joint_set(got[SKELETON_TOPIC]) if SKELETON_TOPIC in got else None
-    mask = _pixels(got[MASK_TOPIC]) > 127 if MASK_TOPIC in got else None
-    return BagFrame(stamp, np.ascontiguousarray(color), depth, intr, truth, mask)
-
-
-def _pixels(msg: Any) -> np.ndarray:
-    return decode(msg.data, msg.height, msg.width, msg.step, msg.encoding, msg.is_bigendian)
-
-
-def cad60_frames(root: str | Path, *, projection: str = 'perspective',
-                 t0_s: float = 1_700_000_000.0, videos: Sequence[str] | None = None,
-                 stride: int = 1) -> Iterator[BagFrame]:
-    """The frames of a CAD-60 directory as `read_frames` gives them from its converted bag.
-
-    Stamps follow `convert` (30 fps from `t0_s`, a one-second gap between videos), so a
-    directory and its bag give the same frames, and a tracker sees each video as a new track.
-    `stride` keeps every n-th frame of each video.
-    """
-    if stride < 1:
-        raise ValueError(f'stride must be >= 1, got {stride}')
-    selected = cad60.list_videos(root)
-    if videos is not None:
-        selected = [v for v in selected if v.video_id in set(videos)]
-    intr = cad60_intrinsics()
-    stamp_ns = int(round(t0_s * 1e9))
-    for video in selected:
-        skeleton = cad60.read_skeleton(video.skeleton_path)
-        pixels = skeleton.pixels(intr, model=projection)
-        optical = skeleton.joints_optical()
-        with_mask = len(skeleton) > 0 and \
-            cad60.frame_paths(video.frame_dir, int(skeleton.frames[0]))[2].is_file()
-        for i, frame in enumerate(cad60.iter_frames(video, skeleton=skeleton,
-                                                    with_mask=with_mask)):
-            if i:
-                stamp_ns += FRAME_PERIOD_NS * int(frame.frame - skeleton.frames[i - 1])
-            if i % stride:
-                continue
-            conf = frame.joint_conf
-            truth = cj.JointSet(CAD60_JOINTS, pixels[i], optical[i],
-                                confidence=conf.astype(np.float32),
-                                source=np.where(conf > 0, cj.DETECTED, cj.MISSING), track_id=1)
-            yield BagFrame(stamp_ns, frame.rgb, depth_to_metres(frame.depth_mm), intr, truth,
-                           frame.mask)
-        stamp_ns += VIDEO_GAP_NS
+        for stamp, items in sync.push(stream[m.topic], stamp_to_ns(msg.header.stamp), msg):
+            got = dict(zip(topics, items, strict=True))
+            yield Frame(stamp, color_from_msg(got[COLOR_TOPIC]),
+                        depth_from_msg(got[DEPTH_TOPIC]), intrinsics_from_msg(got[INFO_TOPIC]),
+                        joints_from_msg(got[SKELETON_TOPIC]) if SKELETON_TOPIC in got else None,
+                        image_to_array(got[MASK_TOPIC]) > 127 if MASK_TOPIC in got else None,
+                        key=f'{path}@{stamp}')

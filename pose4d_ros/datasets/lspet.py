@@ -20,7 +20,8 @@ import cv2
 import numpy as np
 from numpy.typing import NDArray
 
-from pose4d_ros.datasets.sources import Sample
+from pose4d_ros.core.joints import JointSet
+from pose4d_ros.datasets.frame import Frame
 
 # joints.mat order, in skeleton names (head top -> 'head').
 LSPET_JOINTS: tuple[str, ...] = (
@@ -81,12 +82,13 @@ def read_image(root: str | Path, index: int) -> NDArray[np.uint8]:
     return cv2.cvtColor(im, cv2.COLOR_BGR2RGB)
 
 
-def lspet_samples(root: str | Path, first: int, last: int) -> Iterator[Sample]:
-    """Samples of images `first` .. `last` (inclusive, from 1): colour, no depth, 14 joints."""
+def read_frames(root: str | Path, first: int, last: int) -> Iterator[Frame]:
+    """Images `first` .. `last` (inclusive, from 1): colour, no depth, the 14 joints' labels as
+    ground truth (confidence 1 where labelled); stamps one second apart."""
     uv, vis = read_joints(root)
     if not 1 <= first <= last <= len(uv):
         raise ValueError(f'{Path(root) / "joints.mat"}: range {first}-{last} outside 1-{len(uv)}')
     for i in range(first, last + 1):
-        yield Sample(color=read_image(root, i), depth_m=None, joints_uv=uv[i - 1].copy(),
-                     visible=vis[i - 1].copy(), names=LSPET_JOINTS,
-                     key=str(image_path(root, i)))
+        truth = JointSet(LSPET_JOINTS, uv[i - 1], confidence=vis[i - 1])
+        yield Frame(i * 1_000_000_000, read_image(root, i), None, None, truth,
+                    key=str(image_path(root, i)))

@@ -1,11 +1,12 @@
-"""The one place where messages become arrays and back (after cv_bridge and image_geometry).
+"""Messages <-> arrays for the nodes (after cv_bridge and image_geometry).
 
-- `sensor_msgs/Image` <-> numpy: row stride (`step`) and endianness honoured; colour as RGB
-  uint8; depth per REP-118: `16UC1`/`mono16` millimetres or `32FC1` metres, 0/NaN = no reading,
-  returned in the core's convention (float32 metres, NaN = no reading) by `depth_from_msg`.
-- `sensor_msgs/CameraInfo` <-> `core.camera.Intrinsics`.
-- `pose4d_msgs/JointArray` <-> `core.joints.JointSet`; a JointSet -> `tf2_msgs/TFMessage`.
-- Stamps: `builtin_interfaces/Time` <-> integer nanoseconds.
+Reading (Image, CameraInfo, JointArray and stamps to arrays) is `datasets.messages`, shared with
+the bag readers and re-exported here; this module adds what needs the rclpy message classes:
+
+- numpy -> `sensor_msgs/Image` (rows packed), `PointCloud2`, RViz markers;
+- `core.camera.Intrinsics` -> `sensor_msgs/CameraInfo`;
+- `core.joints.JointSet` -> `pose4d_msgs/JointArray`, and -> `tf2_msgs/TFMessage`;
+- integer nanoseconds -> `builtin_interfaces/Time`.
 """
 
 from __future__ import annotations
@@ -24,50 +25,26 @@ from std_msgs.msg import ColorRGBA, Header
 from tf2_msgs.msg import TFMessage
 from visualization_msgs.msg import Marker, MarkerArray
 
-from pose4d_ros.core.camera import Intrinsics, depth_to_metres
+from pose4d_ros.core.camera import Intrinsics
 from pose4d_ros.core.joints import DETECTED, INFERRED, MISSING, TRACKED, JointSet
-from pose4d_ros.datasets.image_codec import ENCODINGS, decode
+from pose4d_ros.datasets.messages import (
+    ENCODINGS,
+    color_from_msg,
+    depth_from_msg,
+    image_to_array,
+    intrinsics_from_msg,
+    joints_from_msg,
+    stamp_to_ns,
+)
 
-
-def stamp_to_ns(stamp: Time) -> int:
-    return int(stamp.sec) * 1_000_000_000 + int(stamp.nanosec)
+__all__ = ['array_to_image', 'cloud_to_msg', 'color_from_msg', 'depth_from_msg',
+           'image_to_array', 'intrinsics_from_msg', 'intrinsics_to_msg', 'joint_frame',
+           'joints_from_msg', 'joints_to_msg', 'joints_to_tf', 'message_type', 'ns_to_stamp',
+           'skeleton_markers', 'stamp_to_ns']
 
 
 def ns_to_stamp(ns: int) -> Time:
     return Time(sec=int(ns // 1_000_000_000), nanosec=int(ns % 1_000_000_000))
-
-
-def image_to_array(msg: Image) -> NDArray:
-    """Pixels of an Image as a (H, W) or (H, W, C) array (a copy), in the message's encoding.
-
-    Raises ValueError naming the encoding or size that is wrong.
-    """
-    return decode(msg.data, msg.height, msg.width, msg.step, msg.encoding, msg.is_bigendian)
-
-
-def color_from_msg(msg: Image) -> NDArray[np.uint8]:
-    """Colour image as (H, W, 3) uint8 RGB."""
-    img = image_to_array(msg)
-    enc = msg.encoding
-    if enc in ('rgb8', '8UC3'):
-        return img
-    if enc == 'bgr8':
-        return np.ascontiguousarray(img[..., ::-1])
-    if enc == 'rgba8':
-        return np.ascontiguousarray(img[..., :3])
-    if enc == 'bgra8':
-        return np.ascontiguousarray(img[..., 2::-1])
-    if enc in ('mono8', '8UC1'):
-        return np.repeat(img[..., None], 3, axis=2)
-    raise ValueError(f'colour image has a depth encoding {enc!r}')
-
-
-def depth_from_msg(msg: Image) -> NDArray[np.float32]:
-    """Depth image as (H, W) float32 metres, NaN = no reading (16UC1/mono16 mm or 32FC1 m)."""
-    if msg.encoding not in ('16UC1', 'mono16', '32FC1'):
-        raise ValueError(f'depth image encoding must be 16UC1 (mm) or 32FC1 (m), '
-                         f'got {msg.encoding!r}')
-    return depth_to_metres(image_to_array(msg))
 
 
 def array_to_image(img: NDArray, encoding: str, header: Header) -> Image:
@@ -83,16 +60,6 @@ def array_to_image(img: NDArray, encoding: str, header: Header) -> Image:
                 step=img.shape[1] * channels * img.dtype.itemsize)
     msg.data = array.array('B', img.tobytes())
     return msg
-
-
-def intrinsics_from_msg(msg: CameraInfo) -> Intrinsics:
-    """Pinhole intrinsics from CameraInfo's K (rectified images assumed)."""
-    k = msg.k
-    if k[0] <= 0 or k[4] <= 0:
-        raise ValueError(f'camera_info K has non-positive focal length (fx={k[0]}, fy={k[4]}); '
-                         'is the camera calibrated?')
-    return Intrinsics(float(k[0]), float(k[4]), float(k[2]), float(k[5]), int(msg.width),
-                      int(msg.height))
 
 
 def intrinsics_to_msg(intr: Intrinsics, header: Header) -> CameraInfo:
@@ -116,20 +83,6 @@ def joints_to_msg(joints: JointSet, header: Header) -> JointArray:
             position_covariance=joints.covariance[i].reshape(9).tolist()))
     msg.joints = out
     return msg
-
-
-def joints_from_msg(msg: JointArray) -> JointSet:
-    js = msg.joints
-    n = len(js)
-    uv = np.array([[j.u, j.v] for j in js], dtype=np.float64).reshape(n, 2)
-    xyz = np.array([[j.position.x, j.position.y, j.position.z] for j in js],
-                   dtype=np.float64).reshape(n, 3)
-    cov = np.array([np.asarray(j.position_covariance, dtype=np.float64) for j in js]
-                   ).reshape(n, 3, 3)
-    return JointSet(tuple(j.name for j in js), uv, xyz,
-                    confidence=np.array([j.confidence for j in js], dtype=np.float32),
-                    source=np.array([j.source for j in js], dtype=np.uint8), covariance=cov,
-                    score=float(msg.score), track_id=int(msg.track_id))
 
 
 def joint_frame(prefix: str, track_id: int, name: str) -> str:

@@ -32,8 +32,8 @@ from sensor_msgs.msg import CameraInfo, Image, PointCloud2
 from std_msgs.msg import Header
 
 from pose4d_ros.core.camera import backproject, cad60_intrinsics, depth_to_millimetres
-from pose4d_ros.core.foreground import ForegroundConfig, ForegroundResult, apply_mask, segment
-from pose4d_ros.core.pipeline import warm_up_frame
+from pose4d_ros.core.foreground import ForegroundConfig
+from pose4d_ros.core.pipeline import ForegroundStage
 from pose4d_ros.nodes import qos
 from pose4d_ros.nodes.common import PairedInputs, StageMonitor, run
 from pose4d_ros.nodes.convert import (
@@ -77,14 +77,15 @@ CAMERA_TOPICS = [(Image, 'camera/color/image_raw', qos.SENSOR_QOS),
                  (CameraInfo, 'camera/color/camera_info', qos.SENSOR_QOS)]
 
 
-def foreground_config(p: dict[str, Any]) -> ForegroundConfig:
-    """The foreground configuration from the parameters (also used by the pipeline node)."""
-    return replace(ForegroundConfig(), max_region_area_px=p['foreground.max_region_area_px'],
-                   mser_delta=p['foreground.mser_delta'],
-                   mser_max_variation=p['foreground.mser_max_variation'],
-                   depth_near_m=p['foreground.depth_near_m'],
-                   depth_far_m=p['foreground.depth_far_m'],
-                   floor_remove=p['foreground.floor_remove'])
+def foreground_stage(p: dict[str, Any]) -> ForegroundStage:
+    """The foreground stage configured by the parameters (also used by the pipeline node)."""
+    config = replace(ForegroundConfig(), max_region_area_px=p['foreground.max_region_area_px'],
+                     mser_delta=p['foreground.mser_delta'],
+                     mser_max_variation=p['foreground.mser_max_variation'],
+                     depth_near_m=p['foreground.depth_near_m'],
+                     depth_far_m=p['foreground.depth_far_m'],
+                     floor_remove=p['foreground.floor_remove'])
+    return ForegroundStage(config, temporal=p['foreground.temporal'])
 
 
 def foreground_messages(mask: np.ndarray, color_m: np.ndarray, depth_m: np.ndarray,
@@ -102,15 +103,10 @@ class ForegroundNode(Node):
     def __init__(self) -> None:
         super().__init__('foreground')
         p = declare(self, PARAMS)
-        self.config = foreground_config(p)
-        self.temporal = p['foreground.temporal']
+        self.stage = foreground_stage(p)
         self.publish_cloud = p['foreground.publish_cloud']
         self.cloud_step = p['foreground.cloud_step']
-        self.previous: ForegroundResult | None = None
-        # compile the kernels before subscribing: the first camera frame must not wait for it
-        _, depth, _ = warm_up_frame(cad60_intrinsics())
-        segment(depth, cad60_intrinsics(), config=self.config,
-                previous=segment(depth, cad60_intrinsics(), config=self.config))
+        self.stage.warm_up(cad60_intrinsics())  # compile before the first camera frame
         self.monitor = StageMonitor(self, 'foreground')
         self.pub_mask = self.create_publisher(Image, 'pose4d/foreground/mask', qos.OUTPUT_QOS)
         self.pub_color = self.create_publisher(Image, 'pose4d/foreground/color',
@@ -125,7 +121,8 @@ class ForegroundNode(Node):
             f'masking {self.resolve_topic_name("camera/color/image_raw")} + '
             f'{self.resolve_topic_name("camera/depth/image_raw")} -> '
             f'{self.resolve_topic_name("pose4d/foreground")} (background area > '
-            f'{self.config.max_region_area_px} px, floor removal {self.config.floor_remove})')
+            f'{self.stage.config.max_region_area_px} px, floor removal '
+            f'{self.stage.config.floor_remove})')
 
     def process(self, items: Any) -> None:
         color_msg, depth_msg, info_msg = items
@@ -133,20 +130,14 @@ class ForegroundNode(Node):
         stamp = stamp_to_ns(color_msg.header.stamp)
         try:
             color = color_from_msg(color_msg)
-            depth = depth_from_msg(depth_msg)
             intrinsics = intrinsics_from_msg(info_msg)
-            if color.shape[:2] != depth.shape:
-                raise ValueError(f'colour is {color.shape[1]}x{color.shape[0]} but depth is '
-                                 f'{depth.shape[1]}x{depth.shape[0]} (not registered?)')
-            result = segment(depth, intrinsics, config=self.config,
-                             previous=self.previous if self.temporal else None)
+            result, color_m, depth_m = self.stage.step(color, depth_from_msg(depth_msg),
+                                                       intrinsics)
         except ValueError as exc:
             self.monitor.bad_input(f'frame at {stamp} ns refused: {exc}')
             return
-        self.previous = result if result.found else None
         if not result.found:
             self.get_logger().debug(f'frame at {stamp} ns: no person ({result.reason})')
-        color_m, depth_m = apply_mask(color, depth, result.mask)
         header = color_msg.header
         for pub, msg in zip((self.pub_mask, self.pub_color, self.pub_depth),
                             foreground_messages(result.mask, color_m, depth_m,

@@ -54,9 +54,8 @@ class PipelineNode(Node):
         super().__init__('pipeline')
         p = declare(self, PARAMS)
         self.pipeline = FramePipeline(
-            detector.detector_stage(p), foreground=foreground.foreground_config(p),
-            tracker=tracker.tracker_stage(p), ik=ik.ik_stage(p),
-            temporal=p['foreground.temporal'])
+            detector.detector_stage(p), foreground=foreground.foreground_stage(p),
+            tracker=tracker.tracker_stage(p), ik=ik.ik_stage(p))
         self.pipeline.warm_up(cad60_intrinsics())  # compile before the first camera frame
         self.publish_foreground = p['pipeline.publish_foreground']
         self.monitor = StageMonitor(self, 'pipeline')

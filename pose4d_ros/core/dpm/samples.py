@@ -12,7 +12,7 @@ from numpy.typing import NDArray
 
 from pose4d_ros.core.camera import Intrinsics, cad60_intrinsics
 from pose4d_ros.core.hog import Level, depth_image, feature_pyramid
-from pose4d_ros.core.skeleton import GROUND_TRUTH_ALIASES, PART_TREES, PartTree
+from pose4d_ros.core.skeleton import PART_TREES, PartTree
 
 Progress = Callable[[Iterable, str, int | None], Iterable]
 Log = Callable[[str], None]
@@ -111,19 +111,11 @@ def mirror_name(name: str) -> str:
     return name
 
 
-def part_joints(sample, names: Sequence[str]) -> tuple[NDArray[np.float64], NDArray[np.bool_]]:
-    """(P, 2) pixels and (P,) labelled flags of the model's parts in a sample, looking a part up
-    under its ground-truth alias when the sample lacks it ('left_wrist' -> 'left_hand')."""
-    uv = np.full((len(names), 2), np.nan)
-    vis = np.zeros(len(names), bool)
-    for i, n in enumerate(names):
-        for cand in (n, GROUND_TRUTH_ALIASES.get(n)):
-            if cand is not None and cand in sample.names:
-                j = sample.names.index(cand)
-                uv[i] = sample.joints_uv[j]
-                vis[i] = bool(sample.visible[j]) and bool(np.isfinite(uv[i]).all())
-                break
-    return uv, vis
+def part_joints(frame, names: Sequence[str]) -> tuple[NDArray[np.float64], NDArray[np.bool_]]:
+    """(P, 2) pixels and (P,) labelled flags of the model's parts in a frame's ground truth
+    (`JointSet.labelled`: 'left_wrist' is CAD-60's 'left_hand')."""
+    uv, _, labelled = frame.truth.labelled(names)
+    return uv, labelled
 
 
 def joint_scale(uv: NDArray, names: Sequence[str]) -> float:
@@ -170,8 +162,7 @@ def person_scale(sample, names: Sequence[str], cfg: TrainConfig, uv: NDArray | N
             h, w = sample.depth_m.shape
             k: Intrinsics = sample.intrinsics or cad60_intrinsics(w, h)
             return k.fx * cfg.scale_length_m / z
-    all_uv = np.asarray(sample.joints_uv, np.float64)
-    return joint_scale(all_uv, list(sample.names))
+    return joint_scale(sample.truth.uv, list(sample.truth.names))
 
 
 @dataclass
@@ -284,7 +275,7 @@ def background_crops(sample, scale: float, *, min_size: float = 2.0, margin: flo
         cols = np.flatnonzero(sample.mask.any(0))
         box = np.array([cols[0], rows[0], cols[-1] + 1, rows[-1] + 1], float)
     else:
-        uv = np.asarray(sample.joints_uv)[np.asarray(sample.visible, bool)]
+        uv = sample.truth.uv[sample.truth.confidence > 0]
         uv = uv[np.isfinite(uv).all(1)]
         if len(uv) == 0:
             return []

@@ -264,7 +264,7 @@ def train(samples: Sequence, negatives: Sequence[Negative], cfg: TrainConfig, *,
 
     Parameters
     ----------
-    samples : labelled frames (`datasets.sources.Sample`); frames without every part of the
+    samples : labelled frames (`datasets.frame.Frame`); frames without every part of the
         model labelled are skipped (the model is fully supervised). For `cfg.masked_input`,
         `sample.mask` is the foreground mask the frame is blanked with.
     negatives : background images without people (see `background_crops`); may be empty when

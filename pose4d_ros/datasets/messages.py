@@ -1,0 +1,122 @@
+"""Messages as arrays, read from their fields: the one reader of the project's messages.
+
+Live messages (rclpy, through `nodes/convert.py`) and recorded ones (rosbags objects, through the
+bag readers) carry the same fields, so this module reads both without importing either:
+
+- `sensor_msgs/Image` -> numpy (`decode`): row stride (`step`) and endianness honoured; colour
+  as RGB uint8; depth per REP-118: `16UC1`/`mono16` millimetres or `32FC1` metres, 0/NaN = no
+  reading, returned in the core's convention (float32 metres, NaN = no reading);
+- `sensor_msgs/CameraInfo` -> `core.camera.Intrinsics`;
+- `pose4d_msgs/JointArray` -> `core.joints.JointSet`;
+- `builtin_interfaces/Time` -> integer nanoseconds.
+
+Messages are built from arrays in `nodes/convert.py` (rclpy) and `cad60_bag.py` (rosbags).
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from pose4d_ros.core.camera import Intrinsics, depth_to_metres
+from pose4d_ros.core.joints import JointSet
+
+# encoding -> (dtype, channels)
+ENCODINGS: dict[str, tuple[str, int]] = {
+    'rgb8': ('u1', 3), 'bgr8': ('u1', 3), 'rgba8': ('u1', 4), 'bgra8': ('u1', 4),
+    'mono8': ('u1', 1), '8UC1': ('u1', 1), '8UC3': ('u1', 3),
+    'mono16': ('u2', 1), '16UC1': ('u2', 1), '32FC1': ('f4', 1),
+}
+
+
+def decode(data: object, height: int, width: int, step: int, encoding: str,
+           bigendian: bool) -> NDArray:
+    """(H, W) or (H, W, C) array (native byte order, a copy) of an image's pixel buffer.
+
+    Raises ValueError naming the encoding, the size or the stride that is wrong.
+    """
+    if encoding not in ENCODINGS:
+        raise ValueError(f'unsupported image encoding {encoding!r} '
+                         f'(supported: {", ".join(ENCODINGS)})')
+    kind, channels = ENCODINGS[encoding]
+    dtype = np.dtype(kind).newbyteorder('>' if bigendian else '<')
+    h, w, step = int(height), int(width), int(step)
+    row = w * channels * dtype.itemsize
+    if h == 0 or w == 0:
+        raise ValueError(f'empty image ({w}x{h})')
+    if step < row:
+        raise ValueError(f'image step {step} is smaller than a row ({row} bytes, {w}x{channels} '
+                         f'{encoding})')
+    buf = np.frombuffer(data, dtype=np.uint8)
+    if buf.size < step * h:
+        raise ValueError(f'image data has {buf.size} bytes, expected {step * h} '
+                         f'({h} rows of {step})')
+    rows = buf[: step * h].reshape(h, step)[:, :row]
+    out = np.ascontiguousarray(rows).view(dtype)
+    out = out.reshape((h, w, channels) if channels > 1 else (h, w))
+    return out if dtype.isnative else out.astype(dtype.newbyteorder('='))
+
+
+def stamp_to_ns(stamp: Any) -> int:
+    """A `builtin_interfaces/Time` as integer nanoseconds."""
+    return int(stamp.sec) * 1_000_000_000 + int(stamp.nanosec)
+
+
+def image_to_array(msg: Any) -> NDArray:
+    """Pixels of an Image as a (H, W) or (H, W, C) array (a copy), in the message's encoding.
+
+    Raises ValueError naming the encoding or size that is wrong.
+    """
+    return decode(msg.data, msg.height, msg.width, msg.step, msg.encoding, msg.is_bigendian)
+
+
+def color_from_msg(msg: Any) -> NDArray[np.uint8]:
+    """Colour image as (H, W, 3) uint8 RGB."""
+    img = image_to_array(msg)
+    enc = msg.encoding
+    if enc in ('rgb8', '8UC3'):
+        return img
+    if enc == 'bgr8':
+        return np.ascontiguousarray(img[..., ::-1])
+    if enc == 'rgba8':
+        return np.ascontiguousarray(img[..., :3])
+    if enc == 'bgra8':
+        return np.ascontiguousarray(img[..., 2::-1])
+    if enc in ('mono8', '8UC1'):
+        return np.repeat(img[..., None], 3, axis=2)
+    raise ValueError(f'colour image has a depth encoding {enc!r}')
+
+
+def depth_from_msg(msg: Any) -> NDArray[np.float32]:
+    """Depth image as (H, W) float32 metres, NaN = no reading (16UC1/mono16 mm or 32FC1 m)."""
+    if msg.encoding not in ('16UC1', 'mono16', '32FC1'):
+        raise ValueError(f'depth image encoding must be 16UC1 (mm) or 32FC1 (m), '
+                         f'got {msg.encoding!r}')
+    return depth_to_metres(image_to_array(msg))
+
+
+def intrinsics_from_msg(msg: Any) -> Intrinsics:
+    """Pinhole intrinsics from CameraInfo's K (rectified images assumed)."""
+    k = msg.k
+    if k[0] <= 0 or k[4] <= 0:
+        raise ValueError(f'camera_info K has non-positive focal length (fx={k[0]}, fy={k[4]}); '
+                         'is the camera calibrated?')
+    return Intrinsics(float(k[0]), float(k[4]), float(k[2]), float(k[5]), int(msg.width),
+                      int(msg.height))
+
+
+def joints_from_msg(msg: Any) -> JointSet:
+    """A `pose4d_msgs/JointArray` as a JointSet."""
+    js = msg.joints
+    n = len(js)
+    uv = np.array([[j.u, j.v] for j in js], dtype=np.float64).reshape(n, 2)
+    xyz = np.array([[j.position.x, j.position.y, j.position.z] for j in js],
+                   dtype=np.float64).reshape(n, 3)
+    cov = np.array([np.asarray(j.position_covariance, dtype=np.float64) for j in js]
+                   ).reshape(n, 3, 3)
+    return JointSet(tuple(j.name for j in js), uv, xyz,
+                    confidence=np.array([j.confidence for j in js], dtype=np.float32),
+                    source=np.array([j.source for j in js], dtype=np.uint8), covariance=cov,
+                    score=float(msg.score), track_id=int(msg.track_id))

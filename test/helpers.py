@@ -1,0 +1,64 @@
+"""Test data shared by several test modules: a body in front of the camera, synthetic Kinect
+motion and a tiny UTKinect directory made from it."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from pose4d_ros.core.camera import cad60_intrinsics
+from pose4d_ros.datasets.utkinect import UTKINECT_JOINTS
+from pose4d_ros.synth import render
+
+INTR = cad60_intrinsics()
+
+# A person 2.5 m away, optical frame (metres): 14 joints, elbows and knees bent.
+BODY = {
+    'head': (0.0, -0.75, 2.5), 'neck': (0.0, -0.5, 2.5),
+    'left_shoulder': (0.18, -0.48, 2.5), 'right_shoulder': (-0.18, -0.48, 2.5),
+    'left_elbow': (0.30, -0.30, 2.42), 'right_elbow': (-0.30, -0.30, 2.42),
+    'left_wrist': (0.38, -0.12, 2.35), 'right_wrist': (-0.38, -0.12, 2.35),
+    'left_hip': (0.1, 0.0, 2.5), 'right_hip': (-0.1, 0.0, 2.5),
+    'left_knee': (0.12, 0.45, 2.42), 'right_knee': (-0.12, 0.45, 2.42),
+    'left_ankle': (0.12, 0.9, 2.5), 'right_ankle': (-0.12, 0.9, 2.5),
+}
+
+# Index of each UTKinect joint by name.
+J = {n: i for i, n in enumerate(UTKINECT_JOINTS)}
+
+
+def standing_pose(z: float = 2.8, cam_height: float = 1.0, arm: float = 0.0) -> np.ndarray:
+    """A person facing the camera (optical frame), feet on a floor `cam_height` below the
+    camera; `arm` (radians) lifts both arms sideways."""
+    d = render._REST_DIR.copy()
+    for side, sign in (('left', 1.0), ('right', -1.0)):
+        for joint in (f'{side}_elbow', f'{side}_wrist', f'{side}_hand'):
+            d[J[joint]] = [sign * np.sin(arm), np.cos(arm), -0.1]
+    d[1:] /= np.linalg.norm(d[1:], axis=1, keepdims=True)
+    pose = np.zeros((20, 3))
+    for i in range(1, 20):
+        pose[i] = pose[render.PARENTS[i]] + d[i] * render.REF_BONES[i]
+    pose += [0.0, cam_height - 0.04 - pose[[14, 15, 18, 19], 1].max(), z]
+    return pose
+
+
+def synthetic_take(frames: int = 90) -> np.ndarray:
+    """(F, 20, 3) optical-frame motion: arms swinging, walking slowly sideways and away."""
+    t = np.arange(frames) / 30.0
+    out = np.array([standing_pose(z=2.5 + 0.4 * np.sin(1.5 * ti), cam_height=0.9,
+                                  arm=0.3 + 0.8 * np.sin(2 * ti)) for ti in t])
+    out[:, :, 0] += 0.3 * np.sin(2 * t)[:, None]
+    return out
+
+
+def write_utkinect(directory: Path, frames: int = 90) -> None:
+    """A tiny UTKinect directory: s01_e01 and s02_e01 from `synthetic_take`."""
+    directory.mkdir(parents=True, exist_ok=True)
+    sdk = synthetic_take(frames) * [-1.0, -1.0, 1.0]  # optical -> Kinect SDK space
+    for name in ('s01_e01', 's02_e01'):
+        lines = [' '.join([str(2 * i + 10)] + [f'{v:.5f}' for v in sdk[i].ravel()])
+                 for i in range(frames)]
+        (directory / f'joints_{name}.txt').write_text('\n'.join(lines) + '\n')
+    (directory / 'actionLabel.txt').write_text(
+        's01_e01\nwaveHands: 10 100\nclapHands: NaN NaN\ns02_e01\nsitDown: 150 180\n')
