@@ -110,6 +110,17 @@ class RosPeer:
         while time.monotonic() < deadline:
             self.executor.spin_once(timeout_sec=0.02)
 
+    def send_until_answered(self, send: Callable[[], None], answered: Callable[[], bool],
+                            what: str, *, tries: int = 15, timeout: float = 2.0) -> None:
+        """`send()` until `answered()`, waiting `timeout` seconds for the answer each time: a
+        best-effort reader drops what comes before it has matched our writer (camera_info
+        too), so a message may have to be sent again. AssertionError after `tries` sends."""
+        for _ in range(tries):
+            send()
+            if self.wait(answered, timeout):
+                return
+        raise AssertionError(f'no answer to {what} after {tries} sends')
+
     def collect(self, msg_type: type, topic: str, qos: Any = 10) -> list:
         """Subscribe and return the list that received messages are appended to."""
         received: list = []

@@ -1,4 +1,5 @@
-"""`core.metrics` against hand-worked examples: the 3-D errors and PCK's seven-group average."""
+"""`core.metrics` against hand-worked examples: the reference size, PCK, APK, pixel and 3-D
+errors, PCK's seven-group average, and how ground truth is found."""
 
 from __future__ import annotations
 
@@ -8,7 +9,7 @@ from numpy.testing import assert_allclose
 
 from pose4d_ros.core import joints as cj
 from pose4d_ros.core.joints import JointSet
-from pose4d_ros.core.metrics import score_groups, score_joint_sets
+from pose4d_ros.core.metrics import reference_size, score_groups, score_joint_sets
 from pose4d_ros.core.skeleton import SKELETON_14
 
 NAMES = ('head', 'left_shoulder', 'right_shoulder')
@@ -108,3 +109,63 @@ def test_score_joint_sets_takes_3d_from_the_joint_sets() -> None:
     # predictions without any 3-D (an RGB-only row): no 3-D metrics
     flat = [p.with_(xyz=np.full((3, 3), np.nan)) for p in preds]
     assert 'error_mm' not in score_joint_sets(flat, truths, NAMES)
+
+
+def two_frames_2d() -> dict[str, np.ndarray]:
+    """Head and shoulders in two frames, worked by hand.
+
+    Reference sizes: frame 0's joints span 30 x 40 px -> 40 px (PCK@0.1 radius 4 px, @0.2
+    8 px); frame 1's span 50 x 100 px -> 100 px (10 px, 20 px). Prediction errors (px): frame 0
+    head 3, left shoulder 6, right shoulder not predicted; frame 1 head 15, left shoulder 8,
+    right shoulder 30.
+    """
+    gt = np.array([[[10.0, 20.0], [40.0, 60.0], [25.0, 30.0]],
+                   [[0.0, 0.0], [0.0, 100.0], [50.0, 100.0]]])
+    pred = gt + np.array([[[3.0, 0.0], [0.0, 6.0], [np.nan, np.nan]],
+                          [[0.0, 15.0], [8.0, 0.0], [0.0, 30.0]]])
+    scores = np.array([[0.9, 0.7, 0.5], [0.8, 0.6, 0.95]])
+    return {'pred': pred, 'scores': scores, 'gt': gt, 'visible': np.ones((2, 3), bool)}
+
+
+def test_reference_size_by_hand() -> None:
+    case = two_frames_2d()
+    assert_allclose(reference_size(case['gt'], case['visible']), [40.0, 100.0])
+    # a joint that is not visible does not count; a frame with one visible joint has no size
+    visible = np.array([[True, True, False], [True, False, False]])
+    assert_allclose(reference_size(case['gt'], visible), [40.0, np.nan])
+
+
+def test_pck_apk_and_pixel_error_by_hand() -> None:
+    table = score_groups(**two_frames_2d(), names=NAMES)
+    # PCK@0.1: head 3 <= 4 yes, 15 <= 10 no -> 50 %; shoulders 6 > 4, none, 8 <= 10, 30 > 10
+    assert_allclose(table['pck']['head'], 50.0)
+    assert_allclose(table['pck']['shoulder'], 25.0)
+    assert_allclose(table['pck']['average'], 37.5)
+    # PCK@0.2: head 3 <= 8, 15 <= 20 -> 100 %; shoulders 6 <= 8, none, 8 <= 20, 30 > 20
+    assert_allclose(table['pck@0.2']['head'], 100.0)
+    assert_allclose(table['pck@0.2']['shoulder'], 50.0)
+    # APK, head: by score a hit (0.9) then a miss (0.8) of 2 visible heads: precision 1 up to
+    # recall 0.5 -> 50 %. Shoulders (4 visible): by score a miss (0.95), a miss (0.7), a hit
+    # (0.6) -> recall 0.25 at precision 1/3 -> 1/12; the unpredicted one is no detection.
+    assert_allclose(table['apk']['head'], 50.0)
+    assert_allclose(table['apk']['shoulder'], 100.0 / 12)
+    assert_allclose(table['apk']['average'], (50.0 + 100.0 / 12) / 2)
+    # pixel error over the predicted joints: head (3 + 15) / 2, shoulders (6 + 8 + 30) / 3
+    assert_allclose(table['error_px']['head'], 9.0)
+    assert_allclose(table['error_px']['shoulder'], 44.0 / 3)
+
+
+def test_score_joint_sets_finds_the_truth_by_name_or_alias_and_inside_the_image() -> None:
+    case = two_frames_2d()
+    names = ('head', 'left_wrist', 'right_wrist')  # CAD-60 calls the wrists' joints hands
+    preds = [JointSet(names, case['pred'][k], confidence=case['scores'][k]) for k in range(2)]
+    cad60 = [JointSet(('head', 'left_hand', 'right_hand'), case['gt'][k]) for k in range(2)]
+    lspet = [JointSet(names, case['gt'][k]) for k in range(2)]
+    for truths in (cad60, lspet):
+        table = score_joint_sets(preds, truths, names)
+        assert_allclose(table['pck']['head'], 50.0)
+        assert_allclose(table['pck']['wrist'], 25.0)
+    # ground truth outside the image is not scored: in a 50 x 101 px frame 1, the right wrist
+    # at u = 50 is outside (the reference size, of the visible joints, becomes 100 px anyway)
+    table = score_joint_sets(preds, cad60, names, image_sizes=[(320, 240), (50, 101)])
+    assert_allclose(table['pck']['wrist'], 100.0 / 3)  # 6 > 4, none, 8 <= 10

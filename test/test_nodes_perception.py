@@ -68,13 +68,11 @@ def test_foreground_node_masks_the_person(ros, frames, tmp_path):
         headers = [Header(stamp=ns_to_stamp(10**18 + k * 33_333_334), frame_id='cam')
                    for k in range(len(frames))]
         for r, header in zip(frames, headers, strict=True):
-            # A best-effort reader drops what comes before it has matched the writer, and our
-            # side may see the match first: send a frame again until its result comes out.
-            for _ in range(15):
-                _publish_frame(ros, pubs, r, header)
-                if ros.wait(lambda h=header: h in [m.header for m in depths], 1.0):
-                    break
-        ros.spin_for(0.3)
+            ros.send_until_answered(lambda r=r, h=header: _publish_frame(ros, pubs, r, h),
+                                    lambda h=header: h in [m.header for m in depths],
+                                    f'the frame at {header.stamp.nanosec} ns')
+            ros.spin_until(lambda h=header: h in [m.header for m in masks] and
+                           h in [m.header for m in colors], 5.0, 'its mask and colour')
     finally:
         assert node.stop() == 0, node.output()
 
@@ -108,15 +106,13 @@ def _part_errors_px(joints, frame) -> dict[str, float]:
 
 
 def _send_until_answered(ros, pubs, frames, headers, answers, complete=lambda m: True) -> None:
-    """Publish each frame until a `complete` answer to it comes out: a best-effort reader
-    drops what comes before it has matched our writer, camera_info included (a detector that
-    has no camera_info yet answers with pixels but no 3-D)."""
+    """Publish each frame until a `complete` answer to it comes out (a detector that has no
+    camera_info yet answers with pixels but no 3-D)."""
     for r, header in zip(frames, headers, strict=True):
-        for _ in range(15):
-            _publish_frame(ros, pubs, r, header)
-            if ros.wait(lambda h=header: any(m.header == h and complete(m) for m in answers),
-                        2.0):
-                break
+        ros.send_until_answered(
+            lambda r=r, h=header: _publish_frame(ros, pubs, r, h),
+            lambda h=header: any(m.header == h and complete(m) for m in answers),
+            f'the frame at {header.stamp.nanosec} ns')
 
 
 def _camera_publishers(ros):
@@ -151,7 +147,6 @@ def test_foreground_and_detector_nodes_find_the_parts(ros, frames, tmp_path):
         head = PARTS_10.names.index('head')
         _send_until_answered(ros, pubs, frames, headers, parts,
                              lambda m: np.isfinite(m.joints[head].position.z))
-        ros.spin_for(0.3)
     finally:
         for node in nodes:
             assert node.stop() == 0, node.output()

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 from harness import check_tf, start
-from test_pipeline_stages import BODY, INTR
+from helpers import BODY, INTR
 
 from pose4d_ros.core import joints as cj
 from pose4d_ros.core.camera import project
@@ -57,21 +57,23 @@ def test_tracker_node(ros, info_pub, tmp_path):
         ros.wait_for_subscribers(pub)
         ros.wait_for_subscribers(info_pub)
         ros.wait_for_publishers('pose4d/parts/tracked')
-        sent = []
-        info_pub.publish(intrinsics_to_msg(INTR, _header(0)))  # the camera is known first
-        ros.spin_for(0.3)
+        sent = [_header(k) for k in range(-1, 20)]
+
+        def send(k: int) -> None:
+            info_pub.publish(intrinsics_to_msg(INTR, sent[k + 1]))
+            pub.publish(_parts_msg(k, sent[k + 1], missing=('left_wrist',) if k == 19 else ()))
+
+        # frame -1 again until the answer has 3-D: the camera is known (best effort may lose
+        # camera_info); then each frame once its predecessor is answered
+        ros.send_until_answered(lambda: send(-1), lambda: any(
+            np.isfinite(joints_from_msg(m).xyz).all() for m in got), 'the first frame')
         for k in range(20):
-            header = _header(k)
-            info_pub.publish(intrinsics_to_msg(INTR, header))
-            ros.spin_for(0.01)
-            msg = _parts_msg(k, header, missing=('left_wrist',) if k == 19 else ())
-            pub.publish(msg)
-            sent.append(header)
-            ros.spin_for(0.02)
-        ros.spin_until(lambda: len(got) == 20, 10, '20 tracked frames')
+            send(k)
+            ros.spin_until(lambda h=sent[k + 1]: any(m.header == h for m in got), 10,
+                           f'frame {k} tracked')
     finally:
         assert node.stop() == 0, node.output()
-    assert [m.header for m in got] == sent
+    assert [m.header for m in got if m.header != sent[0]] == sent[1:]
     last = joints_from_msg(got[-1])
     assert last.names == PARTS_10.names and last.track_id == 1
     i = PARTS_10.index('left_wrist')
@@ -108,19 +110,28 @@ def test_ik_node(ros, info_pub, tmp_path, use_depth):
         ros.wait_for_publishers('/tf')
         depth = np.full((INTR.height, INTR.width), 2500, np.uint16)
         headers = [_header(k) for k in range(5)]
-        info_pub.publish(intrinsics_to_msg(INTR, headers[0]))  # the camera is known first
-        ros.spin_for(0.3)
-        for k, header in enumerate(headers):
-            info_pub.publish(intrinsics_to_msg(INTR, header))
-            ros.spin_for(0.01)
-            pub.publish(_parts_msg(0, header, missing=('left_wrist',) if k == 4 else ()))
+        elbow = SKELETON_14.index('right_elbow')  # inferred in every frame
+
+        def send(k: int) -> None:
+            info_pub.publish(intrinsics_to_msg(INTR, headers[k]))
+            pub.publish(_parts_msg(0, headers[k], missing=('left_wrist',) if k == 4 else ()))
             if use_depth:
-                depth_pub.publish(array_to_image(depth, '16UC1', header))
-            ros.spin_for(0.02)
-        ros.spin_until(lambda: len(got) == 5 and len(markers) == 5 and len(tf) == 5, 10,
-                       '5 skeletons, their markers and transforms')
+                depth_pub.publish(array_to_image(depth, '16UC1', headers[k]))
+
+        # each frame until answered (best effort may lose camera_info or depth), with pixels
+        # for the inferred elbow, which need the camera; then its markers and transforms
+        for k, header in enumerate(headers):
+            ros.send_until_answered(lambda k=k: send(k), lambda h=header: any(
+                m.header == h and np.isfinite(m.joints[elbow].u) for m in got),
+                f'the frame at {header.stamp.nanosec} ns')
+            ros.spin_until(lambda h=header: any(m.markers[0].header == h for m in markers) and
+                           any(m.transforms[0].header == h for m in tf), 5,
+                           'its markers and transforms')
     finally:
         assert node.stop() == 0, node.output()
+    # one answer per frame (a frame sent again may be answered twice)
+    got = list({m.header.stamp.nanosec: m for m in got}.values())
+    markers = list({m.markers[0].header.stamp.nanosec: m for m in markers}.values())
     assert [m.header for m in got] == headers
     assert check_tf(got, tf, prefix) == 4 * 14 + 12
     assert {t.child_frame_id for t in tf[0].transforms} == {

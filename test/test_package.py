@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import ast
+import graphlib
 import importlib
 import os
 import subprocess
@@ -121,6 +122,70 @@ def test_boundary_check_catches_a_violation(tmp_path):
     bad.write_text('import numpy\nfrom sensor_msgs.msg import Image\n'
                    'from rclpy.node import Node\n')
     assert {m for m in _imports(bad) if _is_ros(m)} == {'sensor_msgs', 'rclpy'}
+
+
+# What each subpackage may import of ours (besides itself and the top package): core nothing
+# above it, the readers and the renderer no nodes or tools; the tools (cli) anything.
+LAYERS = {'core': set(), 'datasets': {'core'}, 'synth': {'core', 'datasets'}, 'models': set(),
+          'peer': {'core'}, 'nodes': {'core', 'datasets', 'models'}}
+
+
+def _our_imports(root: Path) -> dict[str, set[str]]:
+    """{module: the modules of ours it imports, at the top or inside a function} under `root`
+    (a directory holding the pose4d_ros package)."""
+    files = {'.'.join(f.relative_to(root).with_suffix('').parts).removesuffix('.__init__'): f
+             for f in (root / PACKAGE).rglob('*.py')}
+    graph = {}
+    for name, f in files.items():
+        package = name if f.name == '__init__.py' else name.rpartition('.')[0]
+        found = set()
+        for node in ast.walk(ast.parse(f.read_text(), filename=str(f))):
+            if isinstance(node, ast.Import):
+                found.update(a.name for a in node.names)
+            elif isinstance(node, ast.ImportFrom):
+                base = node.module or ''
+                if node.level:
+                    base = '.'.join([package.rsplit('.', node.level - 1)[0], base]).strip('.')
+                found.update(f'{base}.{a.name}' if f'{base}.{a.name}' in files else base
+                             for a in node.names)
+        graph[name] = {m for m in found if m in files and m != name}
+    return graph
+
+
+def _layering_faults(graph: dict[str, set[str]]) -> list[str]:
+    """Imports against `LAYERS`, and import cycles."""
+    faults = []
+    for name, deps in graph.items():
+        layer = name.split('.')[1] if '.' in name else ''
+        for dep in sorted(deps):
+            other = dep.split('.')[1] if '.' in dep else ''
+            if layer in LAYERS and other not in LAYERS[layer] | {layer, ''}:
+                faults.append(f'{name} imports {dep}')
+    try:
+        graphlib.TopologicalSorter(graph).prepare()
+    except graphlib.CycleError as exc:
+        faults.append(f'import cycle: {" -> ".join(exc.args[1])}')
+    return faults
+
+
+def test_layering_no_wrong_way_imports_and_no_cycles():
+    graph = _our_imports(REPO)
+    assert len(graph) > 50 and graph[f'{PACKAGE}.cli.eval']  # the walk found the package
+    assert not _layering_faults(graph)
+
+
+def test_layering_check_catches_a_violation(tmp_path):
+    core = tmp_path / PACKAGE / 'core'
+    core.mkdir(parents=True)
+    for name, text in (('__init__', ''), ('a', 'from pose4d_ros.core import b\n'),
+                       ('b', 'def f():\n    from . import a\n    from ..nodes import x\n')):
+        (core / f'{name}.py').write_text(text)
+    (tmp_path / PACKAGE / '__init__.py').write_text('')
+    (tmp_path / PACKAGE / 'nodes').mkdir()
+    (tmp_path / PACKAGE / 'nodes' / 'x.py').write_text('')
+    faults = _layering_faults(_our_imports(tmp_path))
+    assert f'{PACKAGE}.core.b imports {PACKAGE}.nodes.x' in faults
+    assert any(f.startswith('import cycle') for f in faults), faults
 
 
 @pytest.mark.parametrize('exe', sorted(NODE_MODULES))
