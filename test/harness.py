@@ -141,6 +141,27 @@ class RosPeer:
                                  else self.node.count_publishers(topic)) >= count, timeout,
                         f'{count} publisher(s) on {topic}')
 
+    def call(self, srv_type: type, name: str, request: Any, timeout: float = 10.0) -> Any:
+        """Call a service and return its answer."""
+        client = self.node.create_client(srv_type, name)
+        try:
+            self.spin_until(client.service_is_ready, timeout, f'the service {name}')
+            future = client.call_async(request)
+            self.spin_until(future.done, timeout, f'the answer of {name}')
+            return future.result()
+        finally:
+            self.node.destroy_client(client)
+
+    def set_parameters(self, node: str, values: dict[str, Any], timeout: float = 10.0) -> list:
+        """Set parameters of a running node through its parameter service, as
+        `ros2 param set` does; returns one SetParametersResult per parameter."""
+        from rcl_interfaces.srv import SetParameters
+        from rclpy.parameter import Parameter
+
+        request = SetParameters.Request(
+            parameters=[Parameter(k, value=v).to_parameter_msg() for k, v in values.items()])
+        return self.call(SetParameters, f'/{node}/set_parameters', request, timeout).results
+
     def close(self) -> None:
         import rclpy
 

@@ -87,9 +87,14 @@ class ForegroundStage:
     """
 
     def __init__(self, config: ForegroundConfig | None = None, *, temporal: bool = True) -> None:
+        self.configure(config, temporal=temporal)
+        self.previous: ForegroundResult | None = None
+
+    def configure(self, config: ForegroundConfig | None = None, *, temporal: bool = True
+                  ) -> None:
+        """New settings (as in the constructor), used from the next frame on."""
         self.config = config or ForegroundConfig()
         self.temporal = temporal
-        self.previous: ForegroundResult | None = None
 
     def reset(self) -> None:
         self.previous = None
@@ -131,15 +136,22 @@ class DetectorStage:
 
     def __init__(self, model: PartModel, *, search: SearchConfig | None = None,
                  depth_radius_px: int = DEPTH_RADIUS_PX, min_confidence: float = 0.0) -> None:
+        self.model = model
+        self.detector = Detector(model, search)
+        self.last_flags: tuple[str, ...] = ()
+        self.configure(search=search, depth_radius_px=depth_radius_px,
+                       min_confidence=min_confidence)
+
+    def configure(self, *, search: SearchConfig | None = None,
+                  depth_radius_px: int = DEPTH_RADIUS_PX, min_confidence: float = 0.0) -> None:
+        """New settings (as in the constructor), used from the next frame on."""
         if depth_radius_px < 0:
             raise ValueError(f'depth_radius_px must be >= 0, got {depth_radius_px}')
         if not 0.0 <= min_confidence <= 1.0:
             raise ValueError(f'min_confidence must be in [0, 1], got {min_confidence}')
-        self.model = model
-        self.detector = Detector(model, search)
+        self.detector.config = search or SearchConfig()
         self.depth_radius_px = depth_radius_px
         self.min_confidence = min_confidence
-        self.last_flags: tuple[str, ...] = ()
 
     @property
     def names(self) -> tuple[str, ...]:
@@ -195,15 +207,24 @@ class TrackerStage:
                  depth_std_m: float = 0.05) -> None:
         if kind not in ('slqe', 'cv'):
             raise ValueError(f"tracker kind must be 'slqe' or 'cv', got {kind!r}")
+        self.kind = kind
+        self.fixed_tree = tree
+        self.track_id = 0
+        self.configure(slqe=slqe, cv=cv, depth_std_m=depth_std_m)
+        self._use(tree or PARTS_10)
+
+    def configure(self, *, slqe: SlqeConfig | None = None, cv: CvConfig | None = None,
+                  depth_std_m: float = 0.05) -> None:
+        """New settings (as in the constructor), used from the next frame on; the track goes
+        on under them."""
         if not depth_std_m >= 0:
             raise ValueError(f'depth_std_m must be >= 0, got {depth_std_m}')
-        self.kind = kind
         self.slqe_config = slqe or SlqeConfig()
         self.cv_config = cv or CvConfig()
-        self.fixed_tree = tree
         self.depth_std_m = depth_std_m
-        self.track_id = 0
-        self._use(tree or PARTS_10)
+        if hasattr(self, 'filter'):
+            self.filter.config = (self.slqe_config if self.kind == 'slqe'
+                                  else self.cv_config.to_slqe())
 
     def _use(self, tree: PartTree) -> None:
         """A new filter (no track) on `tree`."""
@@ -284,11 +305,19 @@ class IkStage:
                  lengths: Mapping[str, tuple[float, float]] | None = None, learn: bool = True,
                  use_depth: bool = True) -> None:
         self.config = config or IkConfig()
-        self.defaults = dict(lengths) if lengths is not None else None
-        self.learn = learn
-        self.learner = LimbLengths(self.defaults)
         self.use_depth = use_depth
         self.track_id: int | None = None
+        self.configure(lengths=lengths, learn=learn)
+
+    def configure(self, *, lengths: Mapping[str, tuple[float, float]] | None = None,
+                  learn: bool = True) -> None:
+        """New settings (as in the constructor), used from the next frame on; new `lengths`
+        restart the learning from them."""
+        defaults = dict(lengths) if lengths is not None else None
+        if not hasattr(self, 'learner') or defaults != self.defaults:
+            self.learner = LimbLengths(defaults)
+        self.defaults = defaults
+        self.learn = learn
 
     def lengths(self) -> dict[str, tuple[float, float]]:
         return self.learner.as_dict() if self.learn else dict(self.learner.defaults)

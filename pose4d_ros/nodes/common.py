@@ -2,18 +2,26 @@
 
 Each stage publishes a `diagnostic_msgs/DiagnosticArray` on `/diagnostics` once a second (the
 diagnostics aggregator listens on that absolute name): frames in and out, rate, processing
-time p50/p95, latency from the input stamp p50/p95, frames dropped and bad inputs.
+time p50/p95, latency from the input stamp p50/p95, the time step between input stamps,
+frames dropped and bad inputs.
+
+Time: rates and latencies are measured on the node's clock, which with `use_sim_time:=true`
+is the `/clock` a bag replay publishes (`replay.publish_clock:=true`), so a replayed bag is
+measured in its own time. A stamp more than `CLOCK_MISMATCH_S` away from the node's clock comes
+from another clock (a bag replayed without sim time, a camera whose clock is not synchronised):
+the stage says so once in its log and with a `clock_mismatch` key on /diagnostics, and keeps
+such frames out of its latency figures.
 """
 
 from __future__ import annotations
 
-import time
 from collections import deque
 from collections.abc import Callable
 
 import numpy as np
 import rclpy
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+from rclpy.clock import Clock, ClockType
 from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
 from rclpy.signals import SignalHandlerOptions
@@ -28,6 +36,8 @@ from pose4d_ros.nodes.convert import intrinsics_from_msg, stamp_to_ns
 from pose4d_ros.nodes.params import ParameterError
 
 DIAGNOSTICS_TOPIC = '/diagnostics'
+# A stamp farther than this from the node's clock was taken on another clock, seconds
+CLOCK_MISMATCH_S = 10.0
 
 
 def run(factory: Callable[[], Node], args: list[str] | None = None,
@@ -67,7 +77,8 @@ class StageMonitor:
     """Counts and times one stage's frames and publishes them as diagnostics.
 
     `frame(stamp_ns, processing_s)` after each processed frame; `dropped(n)` for frames skipped
-    on purpose; `bad_input(text)` for refused input (logged, throttled, counted).
+    on purpose; `bad_input(text)` for refused input (logged, throttled, counted). Diagnostics
+    are published on the wall clock (a paused sim clock does not silence them).
     """
 
     def __init__(self, node: Node, stage: str, *, window: int = 300,
@@ -80,16 +91,37 @@ class StageMonitor:
         self._proc: deque[float] = deque(maxlen=window)
         self._latency: deque[float] = deque(maxlen=window)
         self._times: deque[float] = deque(maxlen=window)
+        self._steps: deque[float] = deque(maxlen=window)
+        self._last_stamp_ns: int | None = None
+        self.clock_offset_s: float | None = None  # of the last frame, if from another clock
+        self._clock_warned = False
         self._pub = node.create_publisher(DiagnosticArray, DIAGNOSTICS_TOPIC, 10)
-        self._timer = node.create_timer(period_s, self.publish)
+        self._timer = node.create_timer(period_s, self.publish,
+                                        clock=Clock(clock_type=ClockType.STEADY_TIME))
 
     def frame(self, stamp_ns: int, processing_s: float) -> None:
-        now = time.monotonic()
         self.frames += 1
         self._proc.append(processing_s)
-        self._times.append(now)
-        latency = (self._node.get_clock().now().nanoseconds - stamp_ns) * 1e-9
-        self._latency.append(latency)
+        if self._last_stamp_ns is not None and stamp_ns > self._last_stamp_ns:
+            self._steps.append((stamp_ns - self._last_stamp_ns) * 1e-9)
+        self._last_stamp_ns = stamp_ns
+        now_ns = self._node.get_clock().now().nanoseconds
+        if now_ns == 0:  # sim time before the first /clock: no time to measure against
+            return
+        self._times.append(now_ns * 1e-9)
+        latency = (now_ns - stamp_ns) * 1e-9
+        if abs(latency) <= CLOCK_MISMATCH_S:
+            self._latency.append(latency)
+            self.clock_offset_s = None
+            return
+        self.clock_offset_s = latency
+        if not self._clock_warned:
+            self._clock_warned = True
+            self._node.get_logger().warning(
+                f'input stamps are {abs(latency):.0f} s {"behind" if latency > 0 else "ahead of"}'
+                " this node's clock: they come from another clock (a bag replayed without "
+                'use_sim_time? then set use_sim_time:=true here and replay.publish_clock:=true);'
+                ' latency is not measured on such frames')
 
     def dropped(self, n: int = 1) -> None:
         self.dropped_frames += n
@@ -105,7 +137,8 @@ class StageMonitor:
             rate = (len(self._times) - 1) / (self._times[-1] - self._times[0])
         values = {'frames': self.frames, 'dropped': self.dropped_frames,
                   'bad_inputs': self.bad_inputs, 'rate_hz': round(rate, 2)}
-        for key, data in (('processing_ms', self._proc), ('latency_ms', self._latency)):
+        for key, data in (('processing_ms', self._proc), ('latency_ms', self._latency),
+                          ('time_step_ms', self._steps)):
             if data:
                 p50, p95 = np.percentile(np.asarray(data) * 1e3, [50, 95])
                 values[f'{key}_p50'] = round(float(p50), 2)
@@ -115,6 +148,11 @@ class StageMonitor:
         if self.bad_inputs or self.dropped_frames:
             level = DiagnosticStatus.WARN
             message = f'{self.bad_inputs} bad inputs, {self.dropped_frames} dropped'
+        if self.clock_offset_s is not None:
+            values['clock_mismatch'] = (f'stamps {self.clock_offset_s:.1f} s from this node\'s '
+                                        'clock (use_sim_time?)')
+            level = DiagnosticStatus.WARN
+            message = 'input stamps from another clock'
         status = DiagnosticStatus(
             level=level, name=f'pose4d: {self.stage}', message=message,
             hardware_id=self._node.get_fully_qualified_name(),

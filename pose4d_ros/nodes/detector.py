@@ -42,7 +42,7 @@ from pose4d_ros.nodes.convert import (
     joints_to_msg,
     stamp_to_ns,
 )
-from pose4d_ros.nodes.params import Param, ParameterError, declare
+from pose4d_ros.nodes.params import NodeParams, Param, ParameterError
 
 _S = SearchConfig()
 
@@ -57,16 +57,25 @@ def _model_exists(value: str) -> str | None:
 
 PARAMS = (
     Param('detector.model', 'rgbd_10', 'Part model: the name of a shipped model (rgbd_10, '
-          'rgb_10, ...) or the path of a .npz.', check=_model_exists),
+          'rgb_10, ...) or the path of a .npz.', check=_model_exists,
+          restart='the model is loaded, and its kernels compiled, at start-up'),
     Param('detector.n_levels', _S.n_levels, 'Pyramid levels searched around the scale the '
-          "person's depth predicts.", range=(1, 9)),
+          "person's depth predicts.", range=(1, 9), live=True),
     Param('detector.margin', _S.margin, 'Search margin around the foreground box, in person '
-          'scales.', range=(0.0, 5.0)),
+          'scales.', range=(0.0, 5.0), live=True),
     Param('detector.depth_radius_px', 3, 'Half-size of the window of the robust depth look-up '
-          "that lifts a part to 3-D, pixels.", range=(0, 20)),
+          "that lifts a part to 3-D, pixels.", range=(0, 20), live=True),
     Param('detector.min_confidence', 0.0, 'Parts less confident than this are MISSING.',
-          range=(0.0, 1.0)),
+          range=(0.0, 1.0), live=True),
 )
+
+
+def detector_settings(p: dict[str, Any]) -> dict[str, Any]:
+    """The live settings of the detector stage (`DetectorStage.configure`) from the
+    parameters (also used by the pipeline node)."""
+    return {'search': SearchConfig(n_levels=p['detector.n_levels'], margin=p['detector.margin']),
+            'depth_radius_px': p['detector.depth_radius_px'],
+            'min_confidence': p['detector.min_confidence']}
 
 
 def detector_stage(p: dict[str, Any]) -> DetectorStage:
@@ -76,9 +85,7 @@ def detector_stage(p: dict[str, Any]) -> DetectorStage:
         model = load_model(path)
     except (OSError, ValueError) as exc:
         raise ParameterError(f'parameter detector.model: {exc}') from None
-    search = SearchConfig(n_levels=p['detector.n_levels'], margin=p['detector.margin'])
-    return DetectorStage(model, search=search, depth_radius_px=p['detector.depth_radius_px'],
-                         min_confidence=p['detector.min_confidence'])
+    return DetectorStage(model, **detector_settings(p))
 
 
 class DetectorNode(Node):
@@ -86,7 +93,8 @@ class DetectorNode(Node):
 
     def __init__(self) -> None:
         super().__init__('detector')
-        p = declare(self, PARAMS)
+        self.params = NodeParams(self, PARAMS, check=detector_settings)
+        p = self.params.values
         self.stage = detector_stage(p)
         self.stage.warm_up(cad60_intrinsics())  # compile before the first camera frame
         self.monitor = StageMonitor(self, 'detector')
@@ -101,6 +109,8 @@ class DetectorNode(Node):
             f' -> {self.resolve_topic_name("pose4d/parts")}')
 
     def process(self, items: Any) -> None:
+        if (p := self.params.changes()) is not None:
+            self.stage.configure(**detector_settings(p))
         color_msg, depth_msg, mask_msg = items
         t0 = time.perf_counter()
         stamp = stamp_to_ns(color_msg.header.stamp)

@@ -44,30 +44,33 @@ from pose4d_ros.nodes.convert import (
     intrinsics_from_msg,
     stamp_to_ns,
 )
-from pose4d_ros.nodes.params import Param, declare
+from pose4d_ros.nodes.params import NodeParams, Param
 
 _F = ForegroundConfig()
 PARAMS = (
     Param('foreground.max_region_area_px', _F.max_region_area_px, 'The background area '
           'threshold: stable regions larger than this are background, pixels.',
-          range=(100, 10_000_000)),
+          range=(100, 10_000_000), live=True),
     Param('foreground.mser_delta', _F.mser_delta, 'MSER stability step, 8-bit depth levels.',
-          range=(1, 64)),
+          range=(1, 64), live=True),
     Param('foreground.mser_max_variation', _F.mser_max_variation, "MSER stability score: "
-          'largest relative area change over +-delta levels.', range=(0.01, 10.0)),
+          'largest relative area change over +-delta levels.', range=(0.01, 10.0), live=True),
     Param('foreground.depth_near_m', _F.depth_near_m, 'Nearest depth mapped to 8 bits, '
-          'metres.', range=(0.0, 10.0)),
+          'metres.', range=(0.0, 10.0), live=True),
     Param('foreground.depth_far_m', _F.depth_far_m, 'Farthest depth mapped to 8 bits, metres.',
-          range=(0.1, 20.0)),
+          range=(0.1, 20.0), live=True),
     Param('foreground.floor_remove', _F.floor_remove, 'Fit the floor plane (RANSAC) and drop '
-          'it before MSER.'),
+          'it before MSER.', live=True),
     Param('foreground.temporal', True, "Prefer regions overlapping the previous frame's "
-          'person and reuse its floor plane.'),
+          'person and reuse its floor plane.', live=True),
     Param('foreground.slop_s', 0.0, 'Largest stamp difference between colour and depth, '
-          'seconds (0 = the same stamp).', range=(0.0, 1.0)),
+          'seconds (0 = the same stamp).', range=(0.0, 1.0),
+          restart='the pairing of colour and depth is set up at start-up'),
     Param('foreground.publish_cloud', False, "Publish the person's pixels as a PointCloud2 "
-          '(pose4d/foreground/points).'),
-    Param('foreground.cloud_step', 2, 'Pixel stride of the point cloud.', range=(1, 16)),
+          '(pose4d/foreground/points).',
+          restart='it decides at start-up whether the cloud has a publisher'),
+    Param('foreground.cloud_step', 2, 'Pixel stride of the point cloud.', range=(1, 16),
+          live=True),
 )
 
 
@@ -77,15 +80,21 @@ CAMERA_TOPICS = [(Image, 'camera/color/image_raw', qos.SENSOR_QOS),
                  (CameraInfo, 'camera/color/camera_info', qos.SENSOR_QOS)]
 
 
-def foreground_stage(p: dict[str, Any]) -> ForegroundStage:
-    """The foreground stage configured by the parameters (also used by the pipeline node)."""
+def foreground_settings(p: dict[str, Any]) -> dict[str, Any]:
+    """The live settings of the foreground stage (`ForegroundStage.configure`) from the
+    parameters (also used by the pipeline node)."""
     config = replace(ForegroundConfig(), max_region_area_px=p['foreground.max_region_area_px'],
                      mser_delta=p['foreground.mser_delta'],
                      mser_max_variation=p['foreground.mser_max_variation'],
                      depth_near_m=p['foreground.depth_near_m'],
                      depth_far_m=p['foreground.depth_far_m'],
                      floor_remove=p['foreground.floor_remove'])
-    return ForegroundStage(config, temporal=p['foreground.temporal'])
+    return {'config': config, 'temporal': p['foreground.temporal']}
+
+
+def foreground_stage(p: dict[str, Any]) -> ForegroundStage:
+    """The foreground stage configured by the parameters (also used by the pipeline node)."""
+    return ForegroundStage(**foreground_settings(p))
 
 
 def foreground_messages(mask: np.ndarray, color_m: np.ndarray, depth_m: np.ndarray,
@@ -102,7 +111,8 @@ class ForegroundNode(Node):
 
     def __init__(self) -> None:
         super().__init__('foreground')
-        p = declare(self, PARAMS)
+        self.params = NodeParams(self, PARAMS, check=foreground_settings)
+        p = self.params.values
         self.stage = foreground_stage(p)
         self.publish_cloud = p['foreground.publish_cloud']
         self.cloud_step = p['foreground.cloud_step']
@@ -125,6 +135,9 @@ class ForegroundNode(Node):
             f'{self.stage.config.floor_remove})')
 
     def process(self, items: Any) -> None:
+        if (p := self.params.changes()) is not None:
+            self.stage.configure(**foreground_settings(p))
+            self.cloud_step = p['foreground.cloud_step']
         color_msg, depth_msg, info_msg = items
         t0 = time.perf_counter()
         stamp = stamp_to_ns(color_msg.header.stamp)

@@ -46,7 +46,7 @@ from pose4d_ros.nodes.convert import (
     skeleton_markers,
     stamp_to_ns,
 )
-from pose4d_ros.nodes.params import Param, declare
+from pose4d_ros.nodes.params import NodeParams, Param
 
 
 def _frame_prefix(value: str) -> str | None:
@@ -58,30 +58,39 @@ def _frame_prefix(value: str) -> str | None:
 _ARM, _LEG = DEFAULT_LIMB_LENGTHS_M['left_arm'], DEFAULT_LIMB_LENGTHS_M['left_leg']
 PARAMS = (
     Param('ik.use_depth', True, 'Choose the elbow/knee swivel with the depth image '
-          '(pose4d/foreground/depth); false = joint-limit prior only, no depth subscription.'),
+          '(pose4d/foreground/depth); false = joint-limit prior only, no depth subscription.',
+          restart='it decides at start-up whether depth is subscribed to'),
     Param('ik.learn_lengths', True, "Learn each track's bone lengths from the observed reach; "
-          'false = the fixed lengths below.'),
+          'false = the fixed lengths below.', live=True),
     Param('ik.upper_arm_length_m', _ARM[0], 'Shoulder-elbow length, metres.',
-          range=(0.05, 1.0)),
-    Param('ik.forearm_length_m', _ARM[1], 'Elbow-wrist length, metres.', range=(0.05, 1.0)),
-    Param('ik.thigh_length_m', _LEG[0], 'Hip-knee length, metres.', range=(0.05, 1.5)),
-    Param('ik.shin_length_m', _LEG[1], 'Knee-ankle length, metres.', range=(0.05, 1.5)),
+          range=(0.05, 1.0), live=True),
+    Param('ik.forearm_length_m', _ARM[1], 'Elbow-wrist length, metres.', range=(0.05, 1.0),
+          live=True),
+    Param('ik.thigh_length_m', _LEG[0], 'Hip-knee length, metres.', range=(0.05, 1.5), live=True),
+    Param('ik.shin_length_m', _LEG[1], 'Knee-ankle length, metres.', range=(0.05, 1.5), live=True),
     Param('ik.depth_slop_s', 0.0, 'Largest stamp difference between tracked parts and depth, '
-          'seconds (0 = the same stamp).', range=(0.0, 1.0)),
+          'seconds (0 = the same stamp).', range=(0.0, 1.0),
+          restart='the pairing of parts and depth is set up at start-up'),
     Param('ik.marker_lifetime_s', 0.5, 'Lifetime of the RViz markers, seconds.',
-          range=(0.0, 60.0)),
-    Param('tf.publish', True, 'Publish each located joint of the skeleton on /tf.'),
+          range=(0.0, 60.0), live=True),
+    Param('tf.publish', True, 'Publish each located joint of the skeleton on /tf.', live=True),
     Param('tf.prefix', 'pose4d', 'First part of the joints\' TF frame names, '
-          '<prefix>/<track_id>/<joint>.', check=_frame_prefix),
+          '<prefix>/<track_id>/<joint>.', check=_frame_prefix, live=True),
 )
+
+
+def ik_settings(p: dict[str, Any]) -> dict[str, Any]:
+    """The live settings of the IK stage (`IkStage.configure`) from the parameters (also used
+    by the pipeline node)."""
+    arm = (p['ik.upper_arm_length_m'], p['ik.forearm_length_m'])
+    leg = (p['ik.thigh_length_m'], p['ik.shin_length_m'])
+    return {'lengths': {'left_arm': arm, 'right_arm': arm, 'left_leg': leg, 'right_leg': leg},
+            'learn': p['ik.learn_lengths']}
 
 
 def ik_stage(p: dict[str, Any]) -> IkStage:
     """The IK stage configured by the parameters (also used by the pipeline node)."""
-    arm = (p['ik.upper_arm_length_m'], p['ik.forearm_length_m'])
-    leg = (p['ik.thigh_length_m'], p['ik.shin_length_m'])
-    fixed = {'left_arm': arm, 'right_arm': arm, 'left_leg': leg, 'right_leg': leg}
-    return IkStage(lengths=fixed, learn=p['ik.learn_lengths'], use_depth=p['ik.use_depth'])
+    return IkStage(use_depth=p['ik.use_depth'], **ik_settings(p))
 
 
 class SkeletonOutputs:
@@ -116,7 +125,8 @@ class IkNode(Node):
 
     def __init__(self) -> None:
         super().__init__('ik')
-        p = declare(self, PARAMS)
+        self.params = NodeParams(self, PARAMS, check=ik_settings)
+        p = self.params.values
         self.stage = ik_stage(p)
         self.monitor = StageMonitor(self, 'ik')
         self.camera = LatestIntrinsics(self, self.monitor)
@@ -136,6 +146,9 @@ class IkNode(Node):
             f'learn lengths: {p["ik.learn_lengths"]}, joints on /tf: {p["tf.publish"]})')
 
     def process(self, msg: JointArray, depth_msg: Image | None) -> None:
+        if (p := self.params.changes()) is not None:
+            self.stage.configure(**ik_settings(p))
+            self.outputs.configure(p)
         t0 = time.perf_counter()
         stamp = stamp_to_ns(msg.header.stamp)
         try:

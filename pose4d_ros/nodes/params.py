@@ -1,9 +1,12 @@
-"""Declared, described and validated node parameters.
+"""Declared, described and validated node parameters, some of them settable while running.
 
-Each node lists its parameters once as `Param` specs; `declare` declares them with a
+Each node lists its parameters once as `Param` specs. `NodeParams` declares them with a
 `ParameterDescriptor` (description, range, read-only) and validates the start-up values, refusing
-a bad one with a message that names the parameter, the value and the rule, and returns them.
-`config/<node>.yaml` holds the same defaults (a test checks).
+a bad one with a message that names the parameter, the value and the rule. A `live` parameter
+(a threshold, a gate, a noise level, a rate, TF on/off) can be changed while the node runs
+(`ros2 param set`): the same rules validate the new value, and the node takes it up before its
+next message (`NodeParams.changes`). The others are read-only, and their description says why a
+change needs a restart. `config/<node>.yaml` holds the same defaults (a test checks).
 """
 
 from __future__ import annotations
@@ -17,8 +20,10 @@ from rcl_interfaces.msg import (
     FloatingPointRange,
     IntegerRange,
     ParameterDescriptor,
+    SetParametersResult,
 )
 from rclpy.node import Node
+from rclpy.parameter import Parameter
 
 Value = bool | int | float | str | list[str]
 
@@ -32,7 +37,8 @@ class Param:
     """One node parameter.
 
     `range` is inclusive (numbers); `choices` restricts strings; `check` is an extra rule that
-    returns an error text or None. Parameters are read-only: read once at start-up.
+    returns an error text or None. Either `live` (settable while the node runs) or read-only,
+    with `restart` saying why a change needs a restart.
     """
 
     name: str
@@ -41,12 +47,21 @@ class Param:
     range: tuple[float, float] | None = None
     choices: tuple[str, ...] | None = None
     check: Callable[[Any], str | None] | None = None
+    live: bool = False
+    restart: str = ''
+
+    def __post_init__(self) -> None:
+        if self.live == bool(self.restart):
+            raise TypeError(f'{self.name}: a parameter is either live or says why a change '
+                            'needs a restart')
 
     def descriptor(self) -> ParameterDescriptor:
         text = self.description
         if self.choices:
             text += f' One of: {", ".join(self.choices)}.'
-        d = ParameterDescriptor(description=text, read_only=True)
+        text += (' Settable while running (ros2 param set), used from the next message on.'
+                 if self.live else f' Read-only while running: {self.restart}.')
+        d = ParameterDescriptor(description=text, read_only=not self.live)
         if self.range is not None:
             lo, hi = self.range
             if isinstance(self.default, bool):
@@ -71,26 +86,75 @@ class Param:
         return None
 
 
-def declare(node: Node, params: Sequence[Param]) -> dict[str, Any]:
-    """Declare and validate `params` on `node`; return {name: value}.
+class NodeParams:
+    """A node's parameters, declared and validated; live ones follow `ros2 param set`.
 
-    Raises ParameterError for a start-up value that breaks a rule (rclpy's own type and range
-    checks raise their exceptions, which `common.run` reports the same way).
+    `values` holds the current value of each parameter by name. A set request is refused with
+    the rule it breaks (rclpy itself refuses read-only parameters, other types and values out of
+    range; `check(values)`, which builds the node's settings, raises ValueError for values that
+    break the core's rules together); an accepted one updates `values` and is reported once by
+    `changes()`, which the node calls before each message it processes, so a change takes
+    effect between two frames. Raises ParameterError for start-up values that break a rule.
     """
-    values: dict[str, Any] = {}
-    for p in params:
+
+    def __init__(self, node: Node, params: Sequence[Param],
+                 check: Callable[[dict[str, Any]], object] | None = None) -> None:
+        self._specs = {p.name: p for p in params}
+        values: dict[str, Any] = {}
+        for p in params:
+            try:
+                param = node.declare_parameter(p.name, p.default, p.descriptor())
+            except Exception as exc:  # rclpy's InvalidParameterValue/TypeException
+                raise ParameterError(f'parameter {p.name}: {exc}') from None
+            values[p.name] = _plain(param.value)
+            problem = p.validate(values[p.name])
+            if problem:
+                raise ParameterError(f'parameter {p.name}: {problem}')
+        self._check_all = check
+        if problem := self._problem(values):
+            raise ParameterError(problem)
+        self.values: dict[str, Any] = values
+        self._changed = False
+        node.add_on_set_parameters_callback(self._check)
+        node.add_post_set_parameters_callback(self._store)
+
+    def changes(self) -> dict[str, Any] | None:
+        """The values, if a parameter changed since the last call; else None."""
+        if not self._changed:
+            return None
+        self._changed = False
+        return self.values
+
+    def _problem(self, values: dict[str, Any]) -> str | None:
+        """Why the values together break the node's rules, or None."""
+        if self._check_all is None:
+            return None
         try:
-            param = node.declare_parameter(p.name, p.default, p.descriptor())
-        except Exception as exc:  # rclpy's InvalidParameterValue/TypeException
-            raise ParameterError(f'parameter {p.name}: {exc}') from None
-        value = param.value
-        if isinstance(value, list | tuple) and not isinstance(value, str):
-            value = list(value)
-        problem = p.validate(value)
-        if problem:
-            raise ParameterError(f'parameter {p.name}: {problem}')
-        values[p.name] = value
-    return values
+            self._check_all(values)
+        except ValueError as exc:
+            return f'parameters refused: {exc}'
+        return None
+
+    def _check(self, parameters: list[Parameter]) -> SetParametersResult:
+        for param in parameters:
+            spec = self._specs.get(param.name)
+            problem = spec.validate(_plain(param.value)) if spec is not None else None
+            if problem:
+                return SetParametersResult(successful=False,
+                                           reason=f'parameter {param.name}: {problem}')
+        problem = self._problem({**self.values, **{p.name: _plain(p.value) for p in parameters
+                                                   if p.name in self._specs}})
+        return SetParametersResult(successful=problem is None, reason=problem or '')
+
+    def _store(self, parameters: list[Parameter]) -> None:
+        ours = {p.name: _plain(p.value) for p in parameters if p.name in self._specs}
+        if ours:
+            self.values = {**self.values, **ours}  # one assignment: readers see old or new
+            self._changed = True
+
+
+def _plain(value: Any) -> Any:
+    return list(value) if isinstance(value, list | tuple) else value
 
 
 def override_args(params: Mapping[str, Value]) -> list[str]:

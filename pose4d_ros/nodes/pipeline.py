@@ -38,13 +38,20 @@ from pose4d_ros.nodes.convert import (
     joints_to_msg,
     stamp_to_ns,
 )
-from pose4d_ros.nodes.params import Param, declare
+from pose4d_ros.nodes.params import NodeParams, Param
 
 PARAMS = (
     *foreground.PARAMS, *detector.PARAMS, *tracker.PARAMS, *ik.PARAMS,
     Param('pipeline.publish_foreground', True, 'Also publish the foreground mask and the '
-          'masked colour and depth images.'),
+          'masked colour and depth images.',
+          restart='it decides at start-up whether the foreground images have publishers'),
 )
+
+
+def _settings(p: dict[str, Any]) -> tuple:
+    """Every stage's live settings (ValueError for values that break a stage's rules)."""
+    return (foreground.foreground_settings(p), detector.detector_settings(p),
+            tracker.tracker_settings(p), ik.ik_settings(p))
 
 
 class PipelineNode(Node):
@@ -52,7 +59,8 @@ class PipelineNode(Node):
 
     def __init__(self) -> None:
         super().__init__('pipeline')
-        p = declare(self, PARAMS)
+        self.params = NodeParams(self, PARAMS, check=_settings)
+        p = self.params.values
         self.pipeline = FramePipeline(
             detector.detector_stage(p), foreground=foreground.foreground_stage(p),
             tracker=tracker.tracker_stage(p), ik=ik.ik_stage(p))
@@ -75,7 +83,17 @@ class PipelineNode(Node):
             f'{self.resolve_topic_name("pose4d/skeleton")} (model {p["detector.model"]}, '
             f'tracker {p["tracker.kind"]}, IK depth {p["ik.use_depth"]})')
 
+    def configure(self, p: dict[str, Any]) -> None:
+        """The live parameters' new values, between two frames."""
+        self.pipeline.foreground.configure(**foreground.foreground_settings(p))
+        self.pipeline.detector.configure(**detector.detector_settings(p))
+        self.pipeline.tracker.configure(**tracker.tracker_settings(p))
+        self.pipeline.ik.configure(**ik.ik_settings(p))
+        self.outputs.configure(p)
+
     def process(self, items: Any) -> None:
+        if (p := self.params.changes()) is not None:
+            self.configure(p)
         color_msg, depth_msg, info_msg = items
         t0 = time.perf_counter()
         stamp = stamp_to_ns(color_msg.header.stamp)

@@ -2,12 +2,13 @@
 
 Finds each topic's type and its publishers' QoS on the graph (like `ros2 bag record`: reliable
 only when every publisher is reliable), subscribes to the raw CDR bytes and writes them with
-their receive time. On SIGINT or SIGTERM it first takes what is still on its way (nothing
-published before the signal is lost), then closes the bag and moves it into place; until then
-it lives under a hidden temporary name (.NAME.partial-PID), so a bag under the final name is
-always complete. Every `recorder.flush_period_s` what was received is put on disk, so after a
-crash (`kill -9`) `pose4d bag-repair` recovers all but the last moments; at start the recorder
-names the unfinished recordings such crashes left beside its output.
+their receive time on the node's clock (with `use_sim_time:=true`, the replayed bag's /clock).
+On SIGINT or SIGTERM it first takes what is still on its way (nothing published before the
+signal is lost), then closes the bag and moves it into place; until then it lives under a
+hidden temporary name (.NAME.partial-PID), so a bag under the final name is always complete.
+Every `recorder.flush_period_s` what was received is put on disk, so after a crash (`kill -9`)
+`pose4d bag-repair` recovers all but the last moments; at start the recorder names the
+unfinished recordings such crashes left beside its output.
 
 Subscriptions
     every topic in `recorder.topics` (relative names; namespaces and remapping apply)
@@ -26,6 +27,7 @@ import time
 from typing import Any
 
 import rclpy
+from rclpy.clock import Clock, ClockType
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, ReliabilityPolicy
@@ -34,7 +36,7 @@ from pose4d_ros.datasets import bag
 from pose4d_ros.nodes import qos
 from pose4d_ros.nodes.common import run
 from pose4d_ros.nodes.convert import message_type
-from pose4d_ros.nodes.params import Param, ParameterError, declare
+from pose4d_ros.nodes.params import NodeParams, Param, ParameterError
 
 
 def _new_path(path: str) -> str | None:
@@ -48,14 +50,19 @@ def _new_path(path: str) -> str | None:
 
 PARAMS = (
     Param('recorder.output', '', 'Directory of the new rosbag2 to write; must not exist.',
-          check=_new_path),
+          check=_new_path, restart='the bag is created at start-up'),
     Param('recorder.topics', ['pose4d/skeleton'], 'Topics to record (relative names).',
-          check=lambda v: None if v and all(v) else 'give at least one topic name'),
-    Param('recorder.storage', 'mcap', 'rosbag2 storage plugin.', choices=('mcap', 'sqlite3')),
-    Param('recorder.compress', True, 'zstd chunk compression (mcap).'),
-    Param('recorder.depth', 1000, 'Subscription queue depth, messages.', range=(1, 100000)),
+          check=lambda v: None if v and all(v) else 'give at least one topic name',
+          restart='the topics are looked up and subscribed to from start-up'),
+    Param('recorder.storage', 'mcap', 'rosbag2 storage plugin.', choices=('mcap', 'sqlite3'),
+          restart='the bag is created at start-up'),
+    Param('recorder.compress', True, 'zstd chunk compression (mcap).',
+          restart='the bag is created at start-up'),
+    Param('recorder.depth', 1000, 'Subscription queue depth, messages.', range=(1, 100000),
+          restart='the subscriptions are made with it'),
     Param('recorder.flush_period_s', 0.5, 'Put what was received on disk this often, seconds '
-          '(what a crash can lose).', range=(0.05, 60.0)),
+          '(what a crash can lose).', range=(0.05, 60.0),
+          restart='the flush timer is made with it'),
 )
 
 
@@ -64,7 +71,7 @@ class RecorderNode(Node):
 
     def __init__(self) -> None:
         super().__init__('recorder')
-        p = declare(self, PARAMS)
+        p = NodeParams(self, PARAMS).values
         self.depth = p['recorder.depth']
         self.topics = [self.resolve_topic_name(t.lstrip('/')) for t in p['recorder.topics']]
         try:
@@ -75,8 +82,11 @@ class RecorderNode(Node):
         self.subscriptions_: dict[str, Any] = {}
         self.received = 0
         self.closed = False
-        self.timer = self.create_timer(0.2, self.discover)
-        self.flush_timer = self.create_timer(p['recorder.flush_period_s'], self.writer.flush)
+        # on the wall clock: discovery and flushing must go on while a sim clock stands still
+        wall = Clock(clock_type=ClockType.STEADY_TIME)
+        self.timer = self.create_timer(0.2, self.discover, clock=wall)
+        self.flush_timer = self.create_timer(p['recorder.flush_period_s'], self.writer.flush,
+                                             clock=wall)
         self.get_logger().info(f'recording {", ".join(self.topics)} to {self.writer.path}')
         for partial in bag.partial_recordings(self.writer.path.parent):
             self.get_logger().warning(

@@ -30,7 +30,7 @@ from pose4d_ros.datasets import bag
 from pose4d_ros.nodes import qos
 from pose4d_ros.nodes.common import run
 from pose4d_ros.nodes.convert import message_type, ns_to_stamp
-from pose4d_ros.nodes.params import Param, ParameterError, declare
+from pose4d_ros.nodes.params import NodeParams, Param, ParameterError
 
 
 def _exists(path: str) -> str | None:
@@ -60,25 +60,27 @@ def _check_counts(entries: list[str]) -> str | None:
 
 PARAMS = (
     Param('replay.bag', '', 'Path of the rosbag2 directory (mcap or sqlite3) to play.',
-          check=_exists),
+          check=_exists, restart='the bag is opened and its publishers made at start-up'),
     Param('replay.rate', 1.0, 'Playback speed factor; 1.0 = as recorded, 0 = as fast as '
-          'possible.', range=(0.0, 100.0)),
-    Param('replay.loop', False, 'Start again from the beginning when the bag ends.'),
+          'possible.', range=(0.0, 100.0), live=True),
+    Param('replay.loop', False, 'Start again from the beginning when the bag ends.', live=True),
     Param('replay.start_offset_s', 0.0, 'Skip this many seconds at the start of the bag.',
-          range=(0.0, 1e6)),
+          range=(0.0, 1e6), restart='playing starts once, from there'),
     Param('replay.topics', ['*'], 'Topics to play: names or shell patterns (camera/*), '
-          'without leading slash.'),
+          'without leading slash.',
+          restart='the bag is opened and its publishers made at start-up'),
     Param('replay.publish_clock', False, 'Publish /clock with the bag time of each message '
-          '(for use_sim_time).'),
+          '(for use_sim_time).', restart='the bag is opened and its publishers made at start-up'),
     Param('replay.wait_for_subscribers', ['*=0'], 'Before playing, wait until the played '
           'topics have this many subscribers: pattern=count entries (camera/*=1, '
           'camera/color/camera_info=4); a topic matched by several needs the largest count.',
-          check=_check_counts),
+          check=_check_counts, restart='it applies once, before playing'),
     Param('replay.wait_timeout_s', 10.0, 'Longest wait for subscribers, seconds.',
-          range=(0.0, 3600.0)),
+          range=(0.0, 3600.0), restart='it applies once, before playing'),
     Param('replay.delay_s', 0.0, 'Wait this long before playing (after the subscribers are '
           'there), seconds: discovery can match a subscriber to us a moment after we see it, '
-          'and a best-effort subscriber drops what comes before.', range=(0.0, 3600.0)),
+          'and a best-effort subscriber drops what comes before.', range=(0.0, 3600.0),
+          restart='it applies once, before playing'),
 )
 
 
@@ -87,8 +89,8 @@ class ReplayNode(Node):
 
     def __init__(self) -> None:
         super().__init__('replay')
-        p = declare(self, PARAMS)
-        self.cfg: dict[str, Any] = p
+        self.params = NodeParams(self, PARAMS)
+        p = self.cfg
         self.path: str = p['replay.bag']
         try:
             infos = bag.topics(self.path)
@@ -113,6 +115,11 @@ class ReplayNode(Node):
             f'replaying {self.path} at rate {p["replay.rate"]} '
             f'(loop={p["replay.loop"]}, offset {p["replay.start_offset_s"]} s): '
             + ', '.join(f'{n} [{infos[n].count}]' for n in self.selected))
+
+    @property
+    def cfg(self) -> dict[str, Any]:
+        """The parameters' current values (replay.rate and replay.loop may change)."""
+        return self.params.values
 
     def _sleep_until(self, deadline: float) -> None:
         """Wait on the wall clock while still serving the node's services."""
@@ -141,22 +148,25 @@ class ReplayNode(Node):
         return not missing
 
     def play_once(self) -> int:
-        """Play the bag once; returns the number of messages published."""
-        rate = self.cfg['replay.rate']
-        first_ns: int | None = None
-        start_wall = 0.0
+        """Play the bag once; returns the number of messages published.
+
+        Messages are paced from an anchor (a wall time and a bag time) at the rate; a new rate
+        (`ros2 param set`) moves the anchor to the next message.
+        """
+        rate: float | None = None
+        anchor_wall, anchor_ns = 0.0, 0
         count = 0
-        offset_ns = int(self.cfg['replay.start_offset_s'] * 1e9)
         start_ns = None
         for message in bag.read_messages(self.path, self.selected):
-            if first_ns is None:
-                first_ns = message.timestamp_ns
-                start_ns = first_ns + offset_ns
-                start_wall = time.monotonic()
+            if start_ns is None:
+                start_ns = message.timestamp_ns + int(self.cfg['replay.start_offset_s'] * 1e9)
             if message.timestamp_ns < start_ns:
                 continue
+            if self.cfg['replay.rate'] != rate:
+                rate = self.cfg['replay.rate']
+                anchor_wall, anchor_ns = time.monotonic(), message.timestamp_ns
             if rate > 0:
-                self._sleep_until(start_wall + (message.timestamp_ns - start_ns) * 1e-9 / rate)
+                self._sleep_until(anchor_wall + (message.timestamp_ns - anchor_ns) * 1e-9 / rate)
             if self.clock_pub is not None:
                 self.clock_pub.publish(Clock(clock=ns_to_stamp(message.timestamp_ns)))
             self.publishers_[message.topic].publish(message.data)

@@ -28,32 +28,34 @@ from pose4d_ros.nodes.convert import (
     joints_to_msg,
     stamp_to_ns,
 )
-from pose4d_ros.nodes.params import Param, declare
+from pose4d_ros.nodes.params import NodeParams, Param
 
 _D = SlqeConfig()
 PARAMS = (
     Param('tracker.kind', 'slqe', "'slqe': the paper's skeleton-coupled filter; 'cv': a plain "
-          'per-part constant-velocity filter (for comparison).', choices=('slqe', 'cv')),
+          'per-part constant-velocity filter (for comparison).', choices=('slqe', 'cv'),
+          restart='another filter would start without the track'),
     Param('tracker.coupling', _D.coupling, "Pull of a part's velocity and acceleration towards "
-          "its parent's per 1/30 s (0 = independent parts).", range=(0.0, 0.99)),
+          "its parent's per 1/30 s (0 = independent parts).", range=(0.0, 0.99), live=True),
     Param('tracker.process_noise', _D.process_noise, 'White jerk spectral density (square '
-          'root), px/s^3 per sqrt(Hz) (Q).', range=(1e-3, 1e7)),
+          'root), px/s^3 per sqrt(Hz) (Q).', range=(1e-3, 1e7), live=True),
     Param('tracker.measurement_noise_px', _D.measurement_noise_px, 'Detection standard '
-          'deviation per axis at confidence 1, pixels (R).', range=(0.01, 1000.0)),
+          'deviation per axis at confidence 1, pixels (R).', range=(0.01, 1000.0), live=True),
     Param('tracker.gate_chi2', _D.gate_chi2, 'Gate on the squared Mahalanobis innovation '
           '(eq. 16): beyond it a detection is rejected and the prediction used.',
-          range=(0.1, 1e9)),
+          range=(0.1, 1e9), live=True),
     Param('tracker.max_missed_frames', _D.max_missed_frames, 'Frames without an accepted '
-          'detection before a part is dropped (MISSING).', range=(0, 100000)),
+          'detection before a part is dropped (MISSING).', range=(0, 100000), live=True),
     Param('tracker.max_dt_s', _D.max_dt_s, 'A longer gap between stamps restarts the track, '
-          'seconds.', range=(0.001, 3600.0)),
+          'seconds.', range=(0.001, 3600.0), live=True),
     Param('tracker.depth_std_m', 0.05, "Standard deviation of a tracked part's depth in its "
-          'covariance, metres.', range=(0.0, 10.0)),
+          'covariance, metres.', range=(0.0, 10.0), live=True),
 )
 
 
-def tracker_stage(p: dict[str, Any]) -> TrackerStage:
-    """The tracker stage configured by the parameters (also used by the pipeline node)."""
+def tracker_settings(p: dict[str, Any]) -> dict[str, Any]:
+    """The live settings of the tracker stage (`TrackerStage.configure`) from the parameters
+    (also used by the pipeline node)."""
     slqe = SlqeConfig(coupling=p['tracker.coupling'], process_noise=p['tracker.process_noise'],
                       measurement_noise_px=p['tracker.measurement_noise_px'],
                       gate_chi2=p['tracker.gate_chi2'],
@@ -62,8 +64,12 @@ def tracker_stage(p: dict[str, Any]) -> TrackerStage:
     # the comparison filter keeps its own tuned noise levels (core.slqe.CvConfig)
     cv = CvConfig(max_missed_frames=p['tracker.max_missed_frames'],
                   max_dt_s=p['tracker.max_dt_s'])
-    return TrackerStage(kind=p['tracker.kind'], slqe=slqe, cv=cv,
-                        depth_std_m=p['tracker.depth_std_m'])
+    return {'slqe': slqe, 'cv': cv, 'depth_std_m': p['tracker.depth_std_m']}
+
+
+def tracker_stage(p: dict[str, Any]) -> TrackerStage:
+    """The tracker stage configured by the parameters (also used by the pipeline node)."""
+    return TrackerStage(kind=p['tracker.kind'], **tracker_settings(p))
 
 
 class TrackerNode(Node):
@@ -71,7 +77,8 @@ class TrackerNode(Node):
 
     def __init__(self) -> None:
         super().__init__('tracker')
-        self.stage = tracker_stage(declare(self, PARAMS))
+        self.params = NodeParams(self, PARAMS, check=tracker_settings)
+        self.stage = tracker_stage(self.params.values)
         self.monitor = StageMonitor(self, 'tracker')
         self.camera = LatestIntrinsics(self, self.monitor)
         self.pub = self.create_publisher(JointArray, 'pose4d/parts/tracked', qos.OUTPUT_QOS)
@@ -81,6 +88,8 @@ class TrackerNode(Node):
             f'{self.resolve_topic_name("pose4d/parts/tracked")} with {self.stage.kind}')
 
     def on_parts(self, msg: JointArray) -> None:
+        if (p := self.params.changes()) is not None:
+            self.stage.configure(**tracker_settings(p))
         t0 = time.perf_counter()
         stamp = stamp_to_ns(msg.header.stamp)
         try:
