@@ -1,5 +1,5 @@
-"""Shared pieces of the part-model verbs (`train`, `eval`, `bench`): loading sources, progress
-bars, machine and thread facts, training metadata."""
+"""Shared pieces of the part-model verbs (`train`, `eval`, `bench`): loading sources, machine
+and thread facts, training metadata."""
 
 from __future__ import annotations
 
@@ -12,17 +12,9 @@ from pathlib import Path
 
 import numpy as np
 
+from pose4d_ros.cli._progress import progress
 from pose4d_ros.datasets.frame import Frame
 from pose4d_ros.datasets.sources import open_source, parse_range
-
-
-def progress(iterable: Iterable, desc: str, total: int | None = None) -> Iterable:
-    """A tqdm bar on stderr (quiet when stderr is not a terminal and POSE4D_PROGRESS=0)."""
-    from tqdm import tqdm
-
-    disable = os.environ.get('POSE4D_PROGRESS', '1') == '0'
-    return tqdm(iterable, desc=desc, total=total, leave=False, disable=disable,
-                dynamic_ncols=True)
 
 
 def log(message: str) -> None:

@@ -37,7 +37,8 @@ from pathlib import Path
 
 import numpy as np
 
-from pose4d_ros.cli._dpm import load_frames, machine, ms_stats, progress
+from pose4d_ros.cli._dpm import load_frames, machine, ms_stats
+from pose4d_ros.cli._progress import progress
 from pose4d_ros.cli.eval import default_models
 from pose4d_ros.core.dpm.infer import SearchConfig
 from pose4d_ros.core.dpm.model import load_model

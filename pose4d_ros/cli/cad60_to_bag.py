@@ -5,8 +5,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from tqdm import tqdm
-
+from pose4d_ros.cli._progress import progress
 from pose4d_ros.datasets import cad60_bag
 
 
@@ -34,7 +33,7 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
 def run(args: argparse.Namespace) -> int:
     if args.max_frames is not None and args.max_frames < 1:
         raise ValueError(f'--max-frames must be >= 1, got {args.max_frames}')
-    with tqdm(unit='frame', desc='cad60-to-bag', leave=False) as bar:
+    with progress(desc='cad60-to-bag') as bar:
         result = cad60_bag.convert(
             args.dir, args.out, storage=args.storage, compress=not args.no_compress,
             projection=args.projection, t0_s=args.t0,

@@ -32,8 +32,9 @@ from pathlib import Path
 
 import numpy as np
 
-from pose4d_ros.cli._dpm import load_frames, log, progress
+from pose4d_ros.cli._dpm import load_frames, log
 from pose4d_ros.cli._pipeline_eval import Row, peer_rows, pipeline_rows, score_rows
+from pose4d_ros.cli._progress import progress
 from pose4d_ros.core.dpm.infer import SearchConfig
 from pose4d_ros.core.dpm.model import PartModel, load_model
 from pose4d_ros.core.dpm.threads import set_blas_threads

@@ -121,8 +121,8 @@ def _check(args: argparse.Namespace) -> None:
 def run(args: argparse.Namespace) -> int:
     # heavy imports here, so that `pose4d --help` stays fast
     import numpy as np
-    from tqdm import tqdm
 
+    from pose4d_ros.cli._progress import progress
     from pose4d_ros.datasets import cad60
     from pose4d_ros.datasets.utkinect import list_takes
     from pose4d_ros.synth import video
@@ -152,8 +152,7 @@ def run(args: argparse.Namespace) -> int:
         labels: dict[int, dict[str, str]] = {}
         bodies: dict[int, Body] = {}
         records = []
-        with tqdm(total=total, unit='frame', desc='pose4d synth', disable=args.quiet,
-                  file=sys.stderr) as bar:
+        with progress(desc='pose4d synth', total=total, disable=args.quiet) as bar:
             for plan in plans:
                 body = None
                 if args.body_per == 'subject':

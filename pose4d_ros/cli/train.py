@@ -22,7 +22,8 @@ from pathlib import Path
 
 import numpy as np
 
-from pose4d_ros.cli._dpm import git_commit, load_frames, log, machine, progress
+from pose4d_ros.cli._dpm import git_commit, load_frames, log, machine
+from pose4d_ros.cli._progress import progress
 from pose4d_ros.core.dpm.model import save_model
 from pose4d_ros.core.dpm.samples import (
     Negative,
