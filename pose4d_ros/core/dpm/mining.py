@@ -4,7 +4,7 @@ constraint, in background images and, by loss-augmented inference, in the labell
 
 from __future__ import annotations
 
-from collections.abc import Iterable, Sequence
+from collections.abc import Iterable, Iterator, Sequence
 
 import numpy as np
 from numpy.typing import NDArray
@@ -31,10 +31,35 @@ from pose4d_ros.core.dpm.samples import (
 from pose4d_ros.core.dpm.solver import Examples, Layout, Whitening, dot, pose_blocks, whitened
 
 
+def _add_new(ex: Examples, candidates: Iterable[tuple], room: int) -> int:
+    """Add the candidate constraints (key, blocks, label, margin, ref) whose key the cache does
+    not hold yet, until `room` are added or the cache is full; returns how many were added.
+    `blocks` is called for a new key only (the constraint's feature blocks)."""
+    seen = set(ex.keys)
+    added = 0
+    for key, blocks, label, margin, ref in candidates:
+        if key in seen:
+            continue
+        if not ex.add(blocks(), label, margin, ref, key):
+            break
+        seen.add(key)
+        added += 1
+        if added >= room:
+            break
+    return added
+
+
 def mine_background(model: PartModel, negatives: list[Negative], ex: Examples, lay: Layout,
-                     cfg: TrainConfig, white: Whitening, room: int,
-                     progress: Progress | None, round_: int) -> int:
+                    cfg: TrainConfig, white: Whitening, room: int,
+                    progress: Progress | None, round_: int) -> int:
     """Add poses scoring above -1 in background images (at most `room`); returns how many."""
+    return _add_new(ex, _background_poses(model, negatives, lay, cfg, white, progress, round_),
+                    room)
+
+
+def _background_poses(model: PartModel, negatives: list[Negative], lay: Layout,
+                      cfg: TrainConfig, white: Whitening, progress: Progress | None,
+                      round_: int) -> Iterator[tuple]:
     det = Detector(model)
     arrays = det._arrays
     _, parents, springs, anchors, bias = arrays
@@ -42,8 +67,6 @@ def mine_background(model: PartModel, negatives: list[Negative], ex: Examples, l
     n_lev = max(int(np.ceil(np.log2(hi / lo) * cfg.levels_per_octave)) + 1, 1)
     scales = tuple(cfg.canonical_scale_px / (lo * (hi / lo) ** (i / max(n_lev - 1, 1)))
                    for i in range(n_lev))
-    seen = set(ex.keys)
-    added = 0
     it: Iterable = enumerate(negatives)
     if progress is not None:
         it = progress(it, f'round {round_}: background', len(negatives))
@@ -64,34 +87,31 @@ def mine_background(model: PartModel, negatives: list[Negative], ex: Examples, l
                 found.append((float(local[k].sum()), li, level, parts[k]))
         found.sort(key=lambda f: -f[0])
         for _score, li, level, parts in found[:cfg.negatives_per_image]:
-            key = ('neg', j, li, *parts.ravel().tolist())
-            if key in seen:
-                continue
-            blocks = pose_blocks(level.feat, parts, parents, anchors, lay, cfg.filter_cells,
-                                  cfg.bias_feature)
-            if not ex.add(whitened(blocks, white), -1.0, 1.0, -1, key):
-                return added
-            seen.add(key)
-            added += 1
-            if added >= room:
-                return added
-    return added
+            yield (('neg', j, li, *parts.ravel().tolist()),
+                   lambda level=level, parts=parts: whitened(pose_blocks(
+                       level.feat, parts, parents, anchors, lay, cfg.filter_cells,
+                       cfg.bias_feature), white), -1.0, 1.0, -1)
 
 
 def mine_structural(model: PartModel, pos: list[Positive], samples: Sequence,
-                     types: NDArray[np.int64], w: NDArray[np.float64], ex: Examples,
-                     lay: Layout, cfg: TrainConfig, white: Whitening, room: int,
-                     progress: Progress | None, round_: int) -> int:
+                    w: NDArray[np.float64], ex: Examples, lay: Layout, cfg: TrainConfig,
+                    white: Whitening, room: int, progress: Progress | None, round_: int) -> int:
     """Add violated margin-rescaling constraints from the labelled frames: the poses that
     maximise score + loss (exact, the loss decomposes over parts) and whose score is not at
     least their loss below the labelled pose's. Returns how many were added."""
+    return _add_new(ex, _violating_poses(model, pos, samples, w, ex, lay, cfg, white, progress,
+                                         round_), room)
+
+
+def _violating_poses(model: PartModel, pos: list[Positive], samples: Sequence,
+                     w: NDArray[np.float64], ex: Examples, lay: Layout, cfg: TrainConfig,
+                     white: Whitening, progress: Progress | None, round_: int
+                     ) -> Iterator[tuple]:
     arrays = model_arrays(model)
     _, parents, springs, anchors, bias = arrays
     tree = cfg.tree
     p_n = lay.n_parts
     unit = 2.0 / p_n
-    seen = set(ex.keys)
-    added = 0
     arr = ex.arrays()
     it: Iterable = enumerate(pos)
     if progress is not None:
@@ -122,15 +142,7 @@ def mine_structural(model: PartModel, pos: list[Positive], samples: Sequence,
             score = float(local[k].sum()) - loss
             if gt_score - score >= loss - 1e-6:
                 continue
-            key = ('pose', i, *poses[k].ravel().tolist())
-            if key in seen:
-                continue
-            blocks = pose_blocks(level.feat, poses[k], parents, anchors, lay,
-                                  cfg.filter_cells, cfg.bias_feature)
-            if not ex.add(whitened(blocks, white, -1.0), 1.0, loss, i, key):
-                return added
-            seen.add(key)
-            added += 1
-            if added >= room:
-                return added
-    return added
+            yield (('pose', i, *poses[k].ravel().tolist()),
+                   lambda level=level, pose=poses[k]: whitened(pose_blocks(
+                       level.feat, pose, parents, anchors, lay, cfg.filter_cells,
+                       cfg.bias_feature), white, -1.0), 1.0, loss, i)

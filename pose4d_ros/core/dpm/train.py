@@ -395,8 +395,8 @@ def train(samples: Sequence, negatives: Sequence[Negative], cfg: TrainConfig, *,
         if negs:
             added_bg = mine_background(model, negs, ex, lay, cfg, white,
                                         max((cap - ex.n) // 2, 0), progress, rnd)
-        added_st = mine_structural(model, pos, samples, types, w, ex, lay, cfg, white,
-                                    cap - ex.n, progress, rnd)
+        added_st = mine_structural(model, pos, samples, w, ex, lay, cfg, white, cap - ex.n,
+                                   progress, rnd)
         t1 = time.perf_counter()
         arr = ex.arrays()
         alpha = ex.alpha[:ex.n]
