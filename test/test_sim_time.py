@@ -78,21 +78,21 @@ def test_replay_at_2x_runs_the_graph_on_the_bag_clock(ros, tmp_path, sim_time):
         assert recorder.stop() == 0, recorder.output()
     status = _last_status(diagnostics, 'pose4d: tracker')
     # the filter's time step is the bag's 1/30 s whatever the replay speed
-    assert float(status['time_step_ms_p50']) == pytest.approx(STEP_NS * 1e-6, abs=0.01)
+    assert float(status['time_step_ms_p50']) == pytest.approx(STEP_NS * 1e-6, abs=0.01), status
     warnings = tracker.output().count('come from another clock')
     stamps = np.array([m.timestamp_ns for m in bag.read_messages(recorded)])
-    assert len(stamps) == FRAMES
+    assert len(stamps) == FRAMES, recorder.output()
     if sim_time:
         # rate and latency on the bag's clock: 30 Hz (not the 60 Hz of the wall clock), and
         # a latency of at most a frame or two of bag time
-        assert float(status['rate_hz']) == pytest.approx(30.0, rel=0.1)
-        assert abs(float(status['latency_ms_p50'])) < 70.0
-        assert 'clock_mismatch' not in status and warnings == 0
+        assert float(status['rate_hz']) == pytest.approx(30.0, rel=0.1), status
+        assert abs(float(status['latency_ms_p50'])) < 70.0, status
+        assert 'clock_mismatch' not in status and warnings == 0, status
         # the recorder stamps on the bag's clock too
         assert T0_NS <= stamps.min() and stamps.max() <= T0_NS + FRAMES * STEP_NS
     else:
         # stamps from 2012 against today's clock: said once, no absurd latency published
-        assert 'clock_mismatch' in status and 'latency_ms_p50' not in status
-        assert float(status['rate_hz']) == pytest.approx(60.0, rel=0.25)
+        assert 'clock_mismatch' in status and 'latency_ms_p50' not in status, status
+        assert float(status['rate_hz']) > 40.0, status  # the wall clock's (2x the bag's 30 Hz)
         assert warnings == 1, tracker.output()
         assert stamps.min() > T0_NS + 10**17  # wall-clock receive times

@@ -2,7 +2,8 @@
 
 Finds each topic's type and its publishers' QoS on the graph (like `ros2 bag record`: reliable
 only when every publisher is reliable), subscribes to the raw CDR bytes and writes them with
-their receive time on the node's clock (with `use_sim_time:=true`, the replayed bag's /clock).
+their receive time on the node's clock (with `use_sim_time:=true`, the replayed bag's /clock;
+what comes before the first /clock gets its time).
 On SIGINT or SIGTERM it first takes what is still on its way (nothing published before the
 signal is lost), then closes the bag and moves it into place; until then it lives under a
 hidden temporary name (.NAME.partial-PID), so a bag under the final name is always complete.
@@ -81,6 +82,7 @@ class RecorderNode(Node):
             raise ParameterError(f'parameter recorder.output: {exc}') from None
         self.subscriptions_: dict[str, Any] = {}
         self.received = 0
+        self.early: list[tuple[str, bytes]] = []  # received before the sim clock started
         self.closed = False
         # on the wall clock: discovery and flushing must go on while a sim clock stands still
         wall = Clock(clock_type=ClockType.STEADY_TIME)
@@ -119,8 +121,15 @@ class RecorderNode(Node):
 
     def _writer_for(self, topic: str):
         def write(data: bytes) -> None:
-            self.writer.write(topic, self.get_clock().now().nanoseconds, data)
             self.received += 1
+            now = self.get_clock().now().nanoseconds
+            if now == 0:  # sim time whose first /clock is still on its way
+                self.early.append((topic, data))
+                return
+            for early in self.early:  # stamped with the clock's first time
+                self.writer.write(early[0], now, early[1])
+            self.early.clear()
+            self.writer.write(topic, now, data)
         return write
 
     def drain(self, executor: SingleThreadedExecutor, *, quiet_s: float = 0.3,
@@ -138,6 +147,8 @@ class RecorderNode(Node):
         if self.closed:
             return
         self.closed = True
+        for topic, data in self.early:  # the clock never started
+            self.writer.write(topic, 0, data)
         path = self.writer.close()
         counts = ', '.join(f'{t} {n}' for t, n in self.writer.counts.items()) or 'nothing'
         # the context may be shut down already (signal): log without rosout
