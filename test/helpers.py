@@ -1,5 +1,5 @@
-"""Test data shared by several test modules: a body in front of the camera, synthetic Kinect
-motion and a tiny UTKinect directory made from it."""
+"""Test data shared by several test modules: a body in front of the camera and its parts as a
+message, synthetic Kinect motion and a tiny UTKinect directory made from it."""
 
 from __future__ import annotations
 
@@ -7,7 +7,10 @@ from pathlib import Path
 
 import numpy as np
 
-from pose4d_ros.core.camera import cad60_intrinsics
+from pose4d_ros.core import joints as cj
+from pose4d_ros.core.camera import cad60_intrinsics, project
+from pose4d_ros.core.joints import JointSet
+from pose4d_ros.core.skeleton import PARTS_10
 from pose4d_ros.datasets.utkinect import UTKINECT_JOINTS
 from pose4d_ros.synth import render
 
@@ -62,3 +65,28 @@ def write_utkinect(directory: Path, frames: int = 90) -> None:
         (directory / f'joints_{name}.txt').write_text('\n'.join(lines) + '\n')
     (directory / 'actionLabel.txt').write_text(
         's01_e01\nwaveHands: 10 100\nclapHands: NaN NaN\ns02_e01\nsitDown: 150 180\n')
+
+
+def header_at(k: int):
+    """The header of frame k of a 30 fps camera (rclpy message)."""
+    from std_msgs.msg import Header
+
+    from pose4d_ros.nodes.convert import ns_to_stamp
+
+    return Header(stamp=ns_to_stamp(1_700_000_000_000_000_000 + k * 33_333_334),
+                  frame_id='camera_color_optical_frame')
+
+
+def parts_msg(k: int, header, *, missing=()):
+    """The 10 parts of `BODY` moved 2 mm right per frame, as a JointArray (rclpy), `missing`
+    ones MISSING."""
+    from pose4d_ros.nodes.convert import joints_to_msg
+
+    xyz = np.array([BODY[n] for n in PARTS_10.names]) + [0.002 * k, 0, 0]
+    uv = project(xyz, INTR)
+    src = np.full(10, cj.DETECTED, np.uint8)
+    for name in missing:
+        i = PARTS_10.index(name)
+        uv[i], xyz[i], src[i] = np.nan, np.nan, cj.MISSING
+    return joints_to_msg(JointSet(PARTS_10.names, uv, xyz, source=src,
+                                  confidence=np.where(src == 0, 0.9, 0.0)), header)

@@ -9,8 +9,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 from harness import start
-from test_nodes_tracking import _header, _parts_msg
-from test_pipeline_stages import INTR
+from helpers import BODY, INTR, header_at, parts_msg
 
 from pose4d_ros.core import joints as cj
 from pose4d_ros.core.skeleton import PARTS_10
@@ -47,11 +46,11 @@ def test_set_parameters_through_the_service_take_effect_on_the_next_frame(ros, t
         def frame() -> int:
             """Send one frame; wait for its skeleton, and up to 2 s for its joints on /tf."""
             nonlocal k
-            header = _header(k)
+            header = header_at(k)
             k += 1
             info.publish(intrinsics_to_msg(INTR, header))
             ros.spin_for(0.05)
-            pub.publish(_parts_msg(0, header))
+            pub.publish(parts_msg(0, header))
             ros.spin_until(lambda: got and got[-1].header == header, 10, 'the skeleton')
             stamp = stamp_to_ns(header.stamp)
             ros.wait(lambda: frames_on_tf(stamp), 2.0)
@@ -119,8 +118,6 @@ def test_values_that_break_a_stage_rule_together_are_refused(ros):
 def test_tracker_settings_change_between_frames_and_the_track_goes_on():
     """max_missed_frames from 30 to 0: a part the detector misses is dropped on the next frame
     instead of predicted, and the track keeps its id."""
-    from test_pipeline_stages import BODY
-
     from pose4d_ros.core.camera import project
     from pose4d_ros.core.joints import JointSet
 

@@ -5,34 +5,10 @@ from __future__ import annotations
 import numpy as np
 import pytest
 from harness import check_tf, start
-from helpers import BODY, INTR
+from helpers import INTR, header_at, parts_msg
 
 from pose4d_ros.core import joints as cj
-from pose4d_ros.core.camera import project
-from pose4d_ros.core.joints import JointSet
 from pose4d_ros.core.skeleton import PARTS_10, SKELETON_14
-
-
-def _header(k: int):
-    from std_msgs.msg import Header
-
-    from pose4d_ros.nodes.convert import ns_to_stamp
-
-    return Header(stamp=ns_to_stamp(1_700_000_000_000_000_000 + k * 33_333_334),
-                  frame_id='camera_color_optical_frame')
-
-
-def _parts_msg(k: int, header, *, missing=()):
-    from pose4d_ros.nodes.convert import joints_to_msg
-
-    xyz = np.array([BODY[n] for n in PARTS_10.names]) + [0.002 * k, 0, 0]
-    uv = project(xyz, INTR)
-    src = np.full(10, cj.DETECTED, np.uint8)
-    for name in missing:
-        i = PARTS_10.index(name)
-        uv[i], xyz[i], src[i] = np.nan, np.nan, cj.MISSING
-    return joints_to_msg(JointSet(PARTS_10.names, uv, xyz, source=src,
-                                  confidence=np.where(src == 0, 0.9, 0.0)), header)
 
 
 @pytest.fixture
@@ -57,11 +33,11 @@ def test_tracker_node(ros, info_pub, tmp_path):
         ros.wait_for_subscribers(pub)
         ros.wait_for_subscribers(info_pub)
         ros.wait_for_publishers('pose4d/parts/tracked')
-        sent = [_header(k) for k in range(-1, 20)]
+        sent = [header_at(k) for k in range(-1, 20)]
 
         def send(k: int) -> None:
             info_pub.publish(intrinsics_to_msg(INTR, sent[k + 1]))
-            pub.publish(_parts_msg(k, sent[k + 1], missing=('left_wrist',) if k == 19 else ()))
+            pub.publish(parts_msg(k, sent[k + 1], missing=('left_wrist',) if k == 19 else ()))
 
         # frame -1 again until the answer has 3-D: the camera is known (best effort may lose
         # camera_info); then each frame once its predecessor is answered
@@ -109,12 +85,12 @@ def test_ik_node(ros, info_pub, tmp_path, use_depth):
         ros.wait_for_publishers('pose4d/skeleton')
         ros.wait_for_publishers('/tf')
         depth = np.full((INTR.height, INTR.width), 2500, np.uint16)
-        headers = [_header(k) for k in range(5)]
+        headers = [header_at(k) for k in range(5)]
         elbow = SKELETON_14.index('right_elbow')  # inferred in every frame
 
         def send(k: int) -> None:
             info_pub.publish(intrinsics_to_msg(INTR, headers[k]))
-            pub.publish(_parts_msg(0, headers[k], missing=('left_wrist',) if k == 4 else ()))
+            pub.publish(parts_msg(0, headers[k], missing=('left_wrist',) if k == 4 else ()))
             if use_depth:
                 depth_pub.publish(array_to_image(depth, '16UC1', headers[k]))
 

@@ -174,6 +174,13 @@ def test_layering_no_wrong_way_imports_and_no_cycles():
     assert not _layering_faults(graph)
 
 
+def test_test_modules_share_helpers_not_each_other():
+    """What several tests use lives in helpers.py, harness.py or conftest.py."""
+    offenders = {f.name: sorted(m for m in _imports(f) if m.startswith('test_'))
+                 for f in sorted((REPO / 'test').glob('*.py'))}
+    assert not {k: v for k, v in offenders.items() if v}
+
+
 def test_layering_check_catches_a_violation(tmp_path):
     core = tmp_path / PACKAGE / 'core'
     core.mkdir(parents=True)

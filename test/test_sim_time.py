@@ -12,8 +12,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 from harness import start
-from test_nodes_tracking import _parts_msg
-from test_pipeline_stages import INTR
+from helpers import INTR, parts_msg
 
 from pose4d_ros.datasets import bag
 
@@ -37,7 +36,7 @@ def _parts_bag(path):
             header = Header(stamp=ns_to_stamp(stamp), frame_id='camera_color_optical_frame')
             writer.write('/camera/color/camera_info', stamp,
                          serialize_message(intrinsics_to_msg(INTR, header)))
-            writer.write('/pose4d/parts', stamp, serialize_message(_parts_msg(k, header)))
+            writer.write('/pose4d/parts', stamp, serialize_message(parts_msg(k, header)))
     return path
 
 
