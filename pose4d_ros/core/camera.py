@@ -18,6 +18,7 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
+from numba import njit
 from numpy.typing import NDArray
 
 # CAD-60 / OpenNI constants at 320x240 (the dataset's README; focal lengths double at 640x480).
@@ -186,36 +187,50 @@ def robust_depth(depth_m: NDArray[np.floating], uv: NDArray[np.floating], *,
     if radius < 0:
         raise ValueError(f'radius must be >= 0, got {radius}')
     depth_m = np.asarray(depth_m)
+    if depth_m.ndim != 2:
+        raise ValueError(f'depth image must be 2-D, got shape {depth_m.shape}')
+    if mask is not None and np.shape(mask) != depth_m.shape:
+        raise ValueError(f'mask {np.shape(mask)} and depth {depth_m.shape} differ in shape')
+    return _robust_depth(depth_m, np.zeros((0, 0), bool) if mask is None else
+                         np.asarray(mask, dtype=bool),
+                         np.asarray(uv, dtype=np.float64).reshape(-1, 2), int(radius))
+
+
+@njit(cache=True)
+def _robust_depth(depth_m: NDArray, mask: NDArray[np.bool_], uv: NDArray[np.float64],
+                  radius: int) -> NDArray[np.float64]:
     h, w = depth_m.shape
-    uv = np.asarray(uv, dtype=np.float64).reshape(-1, 2)
     out = np.full(len(uv), np.nan)
-    ok = np.isfinite(uv).all(axis=1)
-    c = np.zeros(len(uv), np.int64)
-    r = np.zeros(len(uv), np.int64)
-    c[ok] = np.rint(uv[ok, 0]).astype(np.int64)
-    r[ok] = np.rint(uv[ok, 1]).astype(np.int64)
-    ok &= (c >= 0) & (c < w) & (r >= 0) & (r < h)
-    if not ok.any():
-        return out
-    off = np.arange(-radius, radius + 1)
-    rows = (r[ok, None, None] + off[None, :, None]).reshape(ok.sum(), -1, 1)
-    cols = (c[ok, None, None] + off[None, None, :]).reshape(ok.sum(), 1, -1)
-    rows, cols = np.broadcast_arrays(rows, cols)
-    rows, cols = rows.reshape(ok.sum(), -1), cols.reshape(ok.sum(), -1)
-    inside = (rows >= 0) & (rows < h) & (cols >= 0) & (cols < w)
-    rc, cc = np.clip(rows, 0, h - 1), np.clip(cols, 0, w - 1)
-    vals = depth_m[rc, cc]
-    valid = inside & np.isfinite(vals) & (vals > 0)
-    if mask is not None:
-        valid &= np.asarray(mask, dtype=bool)[rc, cc]
-    # Median of the valid values: sort with the invalid ones last, then pick the middle.
-    vals = np.sort(np.where(valid, vals, np.inf), axis=1)
-    k = valid.sum(axis=1)
-    rows_k = np.arange(len(k))
-    lo = vals[rows_k, np.maximum((k - 1) // 2, 0)]
-    hi = vals[rows_k, np.maximum(k // 2, 0)]
-    # float32 images: average as numpy's median does (in the image's dtype).
-    med = (lo + hi) / vals.dtype.type(2) if np.issubdtype(vals.dtype, np.floating) else \
-        (lo + hi) / 2.0
-    out[ok] = np.where(k > 0, med, np.nan)
+    buf = np.empty((2 * radius + 1) ** 2, depth_m.dtype)
+    for i in range(len(uv)):
+        if np.isfinite(uv[i, 0]) and np.isfinite(uv[i, 1]):
+            col, row = int(np.rint(uv[i, 0])), int(np.rint(uv[i, 1]))
+            if 0 <= col < w and 0 <= row < h:
+                out[i] = robust_depth_at(depth_m, mask, col, row, radius, buf)
     return out
+
+
+@njit(cache=True)
+def robust_depth_at(depth_m: NDArray, mask: NDArray[np.bool_], col: int, row: int,
+                    radius: int, buf: NDArray) -> float:
+    """`robust_depth` of one pixel (col, row) inside the image, for numba kernels.
+
+    `mask` (H, W) bool, or empty for none; `buf` scratch of (2 radius + 1)^2 of the depth's
+    dtype. The median of the valid values is taken in the image's dtype, as numpy's.
+    """
+    h, w = depth_m.shape
+    k = 0
+    for r in range(max(row - radius, 0), min(row + radius + 1, h)):
+        for c in range(max(col - radius, 0), min(col + radius + 1, w)):
+            d = depth_m[r, c]
+            if not (d > 0 and np.isfinite(d)) or (mask.size > 0 and not mask[r, c]):
+                continue
+            j = k  # insertion sort of the window's valid values
+            while j > 0 and buf[j - 1] > d:
+                buf[j] = buf[j - 1]
+                j -= 1
+            buf[j] = d
+            k += 1
+    if k == 0:
+        return np.nan
+    return float((buf[(k - 1) // 2] + buf[k // 2]) / 2)

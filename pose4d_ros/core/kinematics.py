@@ -40,9 +40,10 @@ from dataclasses import dataclass
 from enum import IntEnum
 
 import numpy as np
+from numba import njit
 from numpy.typing import NDArray
 
-from pose4d_ros.core.camera import Intrinsics, project, robust_depth
+from pose4d_ros.core.camera import Intrinsics, project, robust_depth_at
 from pose4d_ros.core.skeleton import LIMBS, PARTS_10
 
 # Default bone lengths (upper, lower), metres: medians of the Kinect v1 skeletons of UTKinect
@@ -129,19 +130,26 @@ def middle_joint_circle(root: NDArray[np.floating], end: NDArray[np.floating], u
     middle joint stays `upper` from the root.
     """
     r0, e0 = np.asarray(root, dtype=np.float64), np.asarray(end, dtype=np.float64)
-    v = e0 - r0
-    dist = float(np.linalg.norm(v))
     if not (upper > 0 and lower > 0):
         raise ValueError(f'bone lengths must be positive metres, got {upper}, {lower}')
-    reach = dist / (upper + lower)
+    centre, axis, radius = _circle(r0, e0, float(upper), float(lower))
+    return Circle(centre, axis, radius, float(np.linalg.norm(e0 - r0)) / (upper + lower))
+
+
+@njit(cache=True)
+def _circle(r0: NDArray[np.float64], e0: NDArray[np.float64], upper: float, lower: float
+            ) -> tuple[NDArray[np.float64], NDArray[np.float64], float]:
+    """`middle_joint_circle`'s centre, axis and radius."""
+    v = e0 - r0
+    dist = math.sqrt(v[0] * v[0] + v[1] * v[1] + v[2] * v[2])
     if dist < 1e-9:
-        return Circle(r0.copy(), np.array([0.0, 0.0, 1.0]), float(upper), reach)
+        return r0.copy(), np.array([0.0, 0.0, 1.0]), upper
     n = v / dist
     if dist >= upper + lower:
-        return Circle(r0 + v * (upper / (upper + lower)), n, 0.0, reach)
+        return r0 + v * (upper / (upper + lower)), n, 0.0
     c = (dist * dist + upper * upper - lower * lower) / (2.0 * dist)
-    c = float(np.clip(c, -upper, upper))
-    return Circle(r0 + c * n, n, math.sqrt(max(upper * upper - c * c, 0.0)), reach)
+    c = min(max(c, -upper), upper)
+    return r0 + c * n, n, math.sqrt(max(upper * upper - c * c, 0.0))
 
 
 def circle_points(circle: Circle, reference: NDArray[np.floating], angles: NDArray[np.floating]
@@ -150,19 +158,37 @@ def circle_points(circle: Circle, reference: NDArray[np.floating], angles: NDArr
 
     Returns (N, 3) metres; angle 0 is the point closest to ``centre + reference``.
     """
-    u, w = _plane_basis(circle.axis, np.asarray(reference, dtype=np.float64))
-    a = np.asarray(angles, dtype=np.float64)[:, None]
-    return circle.centre + circle.radius * (np.cos(a) * u + np.sin(a) * w)
+    u, w = _plane_basis(circle.axis, np.asarray(reference, dtype=np.float64).reshape(3))
+    return _circle_points(circle.centre, circle.radius, u, w,
+                          np.asarray(angles, dtype=np.float64).reshape(-1))
 
 
+@njit(cache=True)
+def _circle_points(centre: NDArray[np.float64], radius: float, u: NDArray[np.float64],
+                   w: NDArray[np.float64], angles: NDArray[np.float64]) -> NDArray[np.float64]:
+    out = np.empty((len(angles), 3))
+    for i in range(len(angles)):
+        c, s = math.cos(angles[i]), math.sin(angles[i])
+        for j in range(3):
+            out[i, j] = centre[j] + radius * (c * u[j] + s * w[j])
+    return out
+
+
+@njit(cache=True)
 def _plane_basis(axis: NDArray[np.float64], reference: NDArray[np.float64]
                  ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-    """An orthonormal (u, w) of the plane normal to `axis`, u as close to `reference` as can be."""
-    for ref in (reference, np.array([0.0, 0.0, -1.0]), np.array([0.0, 1.0, 0.0])):
-        u = _unit(ref - (ref @ axis) * axis)
-        if u is not None:
-            return u, np.cross(axis, u)
-    raise ValueError(f'cannot build a plane normal to {axis}')  # unreachable for a unit axis
+    """An orthonormal (u, w) of the plane normal to `axis`, u as close to `reference` as can be
+    (else to -z, else to +y: one of them is off a unit axis)."""
+    refs = np.array([[reference[0], reference[1], reference[2]], [0.0, 0.0, -1.0],
+                     [0.0, 1.0, 0.0]])
+    u = refs[2] - refs[2] @ axis * axis
+    for k in range(3):
+        u = refs[k] - (refs[k] @ axis) * axis
+        n = math.sqrt(u @ u)
+        if math.isfinite(n) and n > 1e-9:
+            break
+    u = u / n
+    return u, np.cross(axis, u)
 
 
 # ---------------------------------------------------------------------------------------------
@@ -296,65 +322,185 @@ def prior_direction(limb: str, frame: NDArray[np.floating], config: IkConfig = I
 _MIN_SIN = 0.3
 
 
-def _depth_cost(depth_m: NDArray, root: NDArray, end: NDArray, cands: NDArray,
-                intrinsics: Intrinsics, mask: NDArray | None, config: IkConfig,
-                offset: float) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+@njit(cache=True)
+def _surface_in_front(x: float, y: float, z: float, bx: float, by: float, bz: float,
+                      offset: float) -> float:
+    """How far (in z) before a bone's axis the ray through (x, y, z) enters the bone's cylinder
+    of radius `offset`: ``offset / sin(theta) * ray_z``, theta the angle between the ray and the
+    bone's direction (bx, by, bz)."""
+    norm = max(math.sqrt(x * x + y * y + z * z), 1e-9)
+    rx, ry, rz = x / norm, y / norm, z / norm
+    cx, cy, cz = ry * bz - rz * by, rz * bx - rx * bz, rx * by - ry * bx
+    return offset / max(math.sqrt(cx * cx + cy * cy + cz * cz), _MIN_SIN) * rz
+
+
+@njit(cache=True)
+def _memo_depth(keys: NDArray[np.int64], values: NDArray[np.float64], depth_m: NDArray,
+                mask: NDArray[np.bool_], col: int, row: int, radius: int, buf: NDArray) -> float:
+    """`robust_depth_at`, remembered per pixel in an open-addressing table (`keys` -1 = free;
+    at most half full)."""
+    key = row * depth_m.shape[1] + col
+    slot = (key * 2654435761) & (len(keys) - 1)
+    while keys[slot] != -1:
+        if keys[slot] == key:
+            return values[slot]
+        slot = (slot + 1) & (len(keys) - 1)
+    keys[slot] = key
+    values[slot] = robust_depth_at(depth_m, mask, col, row, radius, buf)
+    return values[slot]
+
+
+@njit(cache=True)
+def _depth_cost(depth_m: NDArray, mask: NDArray[np.bool_], root: NDArray[np.float64],
+                end: NDArray[np.float64], cands: NDArray[np.float64], k: NDArray[np.float64],
+                bone_samples: int, radius: int, offset: float, depth_scale: float,
+                free_w: float, occluded_w: float, unknown_cost: float
+                ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
     """Mean per-sample cost of each candidate middle joint, and its fraction of samples with depth.
 
     Samples: the middle joint and `bone_samples` interior points of each bone it implies. A bone
     is a cylinder of radius `offset` about its axis: the ray through a sample's pixel enters it
     ``offset / sin(theta)`` before the axis, theta being the angle between the ray and the bone
     (capped at 1 / `_MIN_SIN`), so a limb pointing at the camera shows its surface well in front
-    of its axis. At the middle joint the nearer of the two bones' surfaces counts.
+    of its axis. At the middle joint the nearer of the two bones' surfaces counts. A sample's
+    measured depth is `camera.robust_depth`'s (window `radius`, the mask's pixels only; an empty
+    `mask` = none); one without depth costs `unknown_cost`, or `free_w` when it falls inside the
+    image but off the person's mask (the camera saw background there). `k` = (fx, fy, cx, cy).
     """
-    fr = (np.arange(config.bone_samples) + 1.0) / (config.bone_samples + 1.0)
-    up = cands - root
-    lo = end - cands
-    up_dir = up / np.maximum(np.linalg.norm(up, axis=1, keepdims=True), 1e-9)
-    lo_dir = lo / np.maximum(np.linalg.norm(lo, axis=1, keepdims=True), 1e-9)
-    pts = [cands[:, None, :]]
-    dirs = [None]
-    if len(fr):
-        pts.append(root + fr[None, :, None] * up[:, None, :])
-        pts.append(cands[:, None, :] + fr[None, :, None] * lo[:, None, :])
-        dirs += [np.repeat(up_dir[:, None, :], len(fr), axis=1),
-                 np.repeat(lo_dir[:, None, :], len(fr), axis=1)]
-    samples = np.concatenate(pts, axis=1)  # (N, S, 3)
-    n, s = samples.shape[:2]
-    flat = samples.reshape(-1, 3)
-    ray = samples / np.maximum(np.linalg.norm(samples, axis=2, keepdims=True), 1e-9)
+    h, w = depth_m.shape
+    n, n_samples = len(cands), 1 + 2 * bone_samples
+    cost, known = np.zeros(n), np.zeros(n)
+    buf = np.empty((2 * radius + 1) ** 2, depth_m.dtype)
+    # many samples fall on the same pixels: look each pixel's depth up once (a hash table)
+    size = 16
+    while size < 2 * n * n_samples:
+        size *= 2
+    memo_keys = np.full(size, -1, np.int64)
+    memo_values = np.empty(len(memo_keys))
+    for i in range(n):
+        mx, my, mz = cands[i, 0], cands[i, 1], cands[i, 2]
+        ux, uy, uz = mx - root[0], my - root[1], mz - root[2]
+        lx, ly, lz = end[0] - mx, end[1] - my, end[2] - mz
+        nu = max(math.sqrt(ux * ux + uy * uy + uz * uz), 1e-9)
+        nl = max(math.sqrt(lx * lx + ly * ly + lz * lz), 1e-9)
+        total, n_known = 0.0, 0
+        for s in range(n_samples):
+            if s == 0:
+                x, y, z = mx, my, mz
+                in_front = max(_surface_in_front(x, y, z, ux / nu, uy / nu, uz / nu, offset),
+                               _surface_in_front(x, y, z, lx / nl, ly / nl, lz / nl, offset))
+            elif s <= bone_samples:
+                f = s / (bone_samples + 1.0)
+                x, y, z = root[0] + f * ux, root[1] + f * uy, root[2] + f * uz
+                in_front = _surface_in_front(x, y, z, ux / nu, uy / nu, uz / nu, offset)
+            else:
+                f = (s - bone_samples) / (bone_samples + 1.0)
+                x, y, z = mx + f * lx, my + f * ly, mz + f * lz
+                in_front = _surface_in_front(x, y, z, lx / nl, ly / nl, lz / nl, offset)
+            measured, off = math.nan, False
+            if z > 0:
+                u, v = k[2] + k[0] * x / z, k[3] + k[1] * y / z
+                if math.isfinite(u) and math.isfinite(v):
+                    col, row = int(np.rint(u)), int(np.rint(v))
+                    if 0 <= col < w and 0 <= row < h:
+                        measured = _memo_depth(memo_keys, memo_values, depth_m, mask, col, row,
+                                               radius, buf)
+                        off = mask.size > 0 and not mask[row, col]
+            if math.isfinite(measured):
+                resid = measured - (z - in_front)  # > 0: the camera saw past the surface
+                excess = 1.0 - math.exp(-0.5 * (resid / depth_scale) ** 2)
+                total += (free_w if resid > 0 else occluded_w) * excess
+                n_known += 1
+            elif off:
+                total += free_w
+                n_known += 1
+            else:
+                total += unknown_cost
+        cost[i], known[i] = total / n_samples, n_known / n_samples
+    return cost, known
 
-    def entry(d: NDArray[np.float64], r: NDArray[np.float64]) -> NDArray[np.float64]:
-        sin = np.linalg.norm(np.cross(r, d), axis=-1)
-        return offset / np.maximum(sin, _MIN_SIN) * r[..., 2]
 
-    depth_in_front = np.empty((n, s))
-    depth_in_front[:, 0] = np.maximum(entry(up_dir, ray[:, 0]), entry(lo_dir, ray[:, 0]))
-    if len(fr):
-        depth_in_front[:, 1:] = entry(np.concatenate(dirs[1:], axis=1), ray[:, 1:])
-    uv = project(flat, intrinsics)
-    measured = robust_depth(depth_m, uv, radius=config.depth_radius_px, mask=mask)
-    expected = flat[:, 2] - depth_in_front.reshape(-1)
-    resid = measured - expected  # > 0: the camera saw farther than the limb's surface
-    excess = 1.0 - np.exp(-0.5 * (resid / config.depth_scale_m) ** 2)
-    cost = np.where(resid > 0, config.free_space_weight, config.occluded_weight) * excess
-    known = np.isfinite(measured)
-    unknown = np.full(len(flat), config.unknown_cost)
-    if mask is not None:
-        # Off the person's mask, inside the image: the camera saw background there.
-        h, w = mask.shape
-        ok = np.isfinite(uv).all(axis=1)
-        c = np.where(ok, np.rint(np.nan_to_num(uv[:, 0])), -1).astype(np.int64)
-        r = np.where(ok, np.rint(np.nan_to_num(uv[:, 1])), -1).astype(np.int64)
-        inside = ok & (c >= 0) & (c < w) & (r >= 0) & (r < h)
-        off = np.zeros(len(flat), bool)
-        off[inside] = ~np.asarray(mask, bool)[r[inside], c[inside]]
-        unknown = np.where(off, config.free_space_weight, unknown)
-        known |= off
-    cost = np.where(np.isfinite(measured), cost, unknown)
-    return cost.reshape(n, s).mean(axis=1), known.reshape(n, s).mean(axis=1)
+def _depth_search(depth_m: NDArray, r0: NDArray[np.float64], e0: NDArray[np.float64],
+                  upper: float, lower: float, intrinsics: Intrinsics, ref: NDArray[np.float64],
+                  mask: NDArray | None, config: IkConfig, offset: float
+                  ) -> tuple[NDArray[np.float64], float] | None:
+    """The depth-supported middle joint and its confidence, or None if depth does not decide."""
+    c = config
+    found, p, confidence = _depth_search_kernel(
+        np.asarray(depth_m), np.zeros((0, 0), bool) if mask is None else np.asarray(mask, bool),
+        r0, e0, float(upper), float(lower),
+        np.array([intrinsics.fx, intrinsics.fy, intrinsics.cx, intrinsics.cy]), ref,
+        np.asarray(c.length_scales, np.float64), c.n_candidates, c.refine_steps, c.bone_samples,
+        c.depth_radius_px, float(offset), c.depth_scale_m, c.free_space_weight,
+        c.occluded_weight, c.unknown_cost, c.min_valid_fraction, c.ambiguity_margin,
+        c.prior_weight, c.scale_weight, c.confidence_scale_m)
+    return (p, confidence) if found else None
 
 
+@njit(cache=True)
+def _depth_search_kernel(depth_m: NDArray, mask: NDArray[np.bool_], r0: NDArray[np.float64],
+                         e0: NDArray[np.float64], upper: float, lower: float,
+                         k: NDArray[np.float64], ref: NDArray[np.float64],
+                         scales: NDArray[np.float64], n_candidates: int, refine_steps: int,
+                         bone_samples: int, radius: int, offset: float, depth_scale: float,
+                         free_w: float, occluded_w: float, unknown_cost: float,
+                         min_valid: float, margin: float, prior_w: float, scale_w: float,
+                         confidence_scale: float) -> tuple[bool, NDArray[np.float64], float]:
+    """`_depth_search`: candidates on the circle of each length scale (the prior's direction at
+    swivel 0), the best by depth cost + prior + scale penalties, its swivel refined."""
+    angles = _swivel_angles(n_candidates)
+    step = 2.0 * math.pi / n_candidates
+    cands = np.empty((len(scales) * n_candidates, 3))
+    penalty = np.empty(len(cands))
+    scale_of, angle_of = np.empty(len(cands)), np.empty(len(cands))
+    v = e0 - r0
+    dist = math.sqrt(v @ v)
+    n = 0
+    for scale in scales:
+        if dist < abs(upper - lower) * scale:  # too close for these lengths
+            continue
+        centre, axis, rad = _circle(r0, e0, upper * scale, lower * scale)
+        scale_cost = scale_w * abs(math.log(scale))
+        if rad < 1e-6:
+            cands[n], penalty[n], scale_of[n], angle_of[n] = centre, scale_cost, scale, math.nan
+            n += 1
+            continue
+        u, w = _plane_basis(axis, ref)
+        m = len(angles)
+        cands[n:n + m] = _circle_points(centre, rad, u, w, angles)
+        penalty[n:n + m] = scale_cost + prior_w * 0.5 * (1.0 - np.cos(angles))
+        scale_of[n:n + m], angle_of[n:n + m] = scale, angles
+        n += m
+    if n == 0:
+        return False, r0, 0.0
+    cands, penalty = cands[:n], penalty[:n]
+    cost, known = _depth_cost(depth_m, mask, r0, e0, cands, k, bone_samples, radius, offset,
+                              depth_scale, free_w, occluded_w, unknown_cost)
+    if known.mean() < min_valid or cost.max() - cost.min() <= margin:
+        return False, r0, 0.0
+    total = cost + penalty
+    best = int(np.argmin(total))
+    p = cands[best].copy()
+    angle, scale = angle_of[best], scale_of[best]
+    if refine_steps > 0 and math.isfinite(angle):
+        centre, axis, rad = _circle(r0, e0, upper * scale, lower * scale)
+        u, w = _plane_basis(axis, ref)
+        fine = angle + np.arange(-refine_steps, refine_steps + 1) * (step / (refine_steps + 1))
+        fpts = _circle_points(centre, rad, u, w, fine)
+        fcost, _ = _depth_cost(depth_m, mask, r0, e0, fpts, k, bone_samples, radius, offset,
+                               depth_scale, free_w, occluded_w, unknown_cost)
+        ftotal = fcost + scale_w * abs(math.log(scale)) + prior_w * 0.5 * (1.0 - np.cos(fine))
+        p = fpts[int(np.argmin(ftotal))].copy()
+    # Uncertainty: how far the candidates about as good as the best lie from it.
+    near = total <= total.min() + margin
+    spread = 0.0
+    for i in np.flatnonzero(near):
+        d = cands[i] - p
+        spread += math.sqrt(d @ d)
+    return True, p, math.exp(-spread / near.sum() / confidence_scale)
+
+
+@njit(cache=True)
 def _swivel_angles(n: int) -> NDArray[np.float64]:
     """n swivel angles in (-pi, pi], 0 (the prior's direction) included."""
     angles = np.arange(n) * (2.0 * math.pi / n)
@@ -426,60 +572,6 @@ def solve_limb(depth_m: NDArray[np.floating] | None, root: NDArray[np.floating],
     p = circle.centre + config.prior_shrink[k] * circle.radius * u
     spread = circle.radius * config.prior_angle_std_rad
     return finish(p, math.exp(-spread / config.confidence_scale_m), IkFlag.PRIOR)
-
-
-def _depth_search(depth_m: NDArray, r0: NDArray[np.float64], e0: NDArray[np.float64],
-                  upper: float, lower: float, intrinsics: Intrinsics, ref: NDArray[np.float64],
-                  mask: NDArray | None, config: IkConfig, offset: float
-                  ) -> tuple[NDArray[np.float64], float] | None:
-    """The depth-supported middle joint and its confidence, or None if depth does not decide."""
-    angles = _swivel_angles(config.n_candidates)
-    step = 2.0 * math.pi / config.n_candidates
-    pts, penalty, keys = [], [], []
-    for scale in config.length_scales:
-        circle = middle_joint_circle(r0, e0, upper * scale, lower * scale)
-        too_close = np.linalg.norm(e0 - r0) < abs(upper - lower) * scale
-        if too_close:
-            continue
-        scale_cost = config.scale_weight * abs(math.log(scale))
-        if circle.radius < 1e-6:
-            pts.append(circle.centre[None])
-            penalty.append(np.array([scale_cost]))
-            keys.append((scale, np.array([math.nan])))
-            continue
-        pts.append(circle_points(circle, ref, angles))
-        penalty.append(scale_cost + config.prior_weight * 0.5 * (1.0 - np.cos(angles)))
-        keys.append((scale, angles))
-    if not pts:
-        return None
-    cands = np.concatenate(pts)
-    cost, known = _depth_cost(depth_m, r0, e0, cands, intrinsics, mask, config, offset)
-    if known.mean() < config.min_valid_fraction or \
-            float(cost.max() - cost.min()) <= config.ambiguity_margin:
-        return None
-    total = cost + np.concatenate(penalty)
-    best = int(np.argmin(total))
-    p = cands[best]
-    # Which circle and angle the best candidate came from, to refine its swivel.
-    first = 0
-    for scale, angs in keys:
-        if best < first + len(angs):
-            angle = float(angs[best - first])
-            if config.refine_steps > 0 and math.isfinite(angle):
-                circle = middle_joint_circle(r0, e0, upper * scale, lower * scale)
-                fine = angle + np.arange(-config.refine_steps, config.refine_steps + 1) * \
-                    (step / (config.refine_steps + 1))
-                fpts = circle_points(circle, ref, fine)
-                fcost, _ = _depth_cost(depth_m, r0, e0, fpts, intrinsics, mask, config, offset)
-                ftotal = fcost + config.scale_weight * abs(math.log(scale)) + \
-                    config.prior_weight * 0.5 * (1.0 - np.cos(fine))
-                p = fpts[int(np.argmin(ftotal))]
-            break
-        first += len(angs)
-    # Uncertainty: how far the candidates about as good as the best lie from it.
-    near = total <= total.min() + config.ambiguity_margin
-    spread = float(np.mean(np.linalg.norm(cands[near] - p, axis=1)))
-    return p, math.exp(-spread / config.confidence_scale_m)
 
 
 # ---------------------------------------------------------------------------------------------
