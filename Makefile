@@ -18,6 +18,8 @@ PY := $(BIN)/python
 # DDS stays on this machine: without this, Fast DDS announces itself by multicast on the network.
 # On a robot's network, unset it (see README).
 export ROS_AUTOMATIC_DISCOVERY_RANGE ?= LOCALHOST
+# Fast DDS with a shared-memory segment that holds VGA RGB-D frames (see config/fastdds.xml).
+export FASTRTPS_DEFAULT_PROFILES_FILE ?= $(CURDIR)/config/fastdds.xml
 # The venv is the ROS underlay: ament index, CMake packages, our executables.
 export AMENT_PREFIX_PATH := $(VENV)
 export CMAKE_PREFIX_PATH := $(VENV)

@@ -1,6 +1,7 @@
 """Test set-up shared by the whole suite.
 
-Before anything imports rclpy: DDS stays on this machine (ROS_AUTOMATIC_DISCOVERY_RANGE), and
+Before anything imports rclpy: DDS stays on this machine (ROS_AUTOMATIC_DISCOVERY_RANGE), Fast
+DDS uses the project's profile (config/fastdds.xml, as the Makefile and the demo do), and
 this test run gets a ROS_DOMAIN_ID of its own, held by a lock file, so parallel runs on the same
 machine cannot hear each other. AMENT_PREFIX_PATH defaults to this interpreter's prefix (the
 project venv), where `make setup` installed the packages.
@@ -18,6 +19,9 @@ from pathlib import Path
 import pytest
 
 os.environ['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
+# The graph's Fast DDS profile: VGA frames published best effort get through (config/fastdds.xml)
+os.environ.setdefault('FASTRTPS_DEFAULT_PROFILES_FILE',
+                      str(Path(__file__).resolve().parents[1] / 'config' / 'fastdds.xml'))
 os.environ.setdefault('AMENT_PREFIX_PATH', sys.prefix)
 os.environ.setdefault('RCUTILS_COLORIZED_OUTPUT', '0')
 

@@ -28,7 +28,7 @@ def test_package_found_through_ament_index():
     share = Path(get_package_share_directory(PACKAGE))
     assert (prefix / 'share' / 'ament_index' / 'resource_index' / 'packages' / PACKAGE).is_file()
     assert (share / 'package.xml').is_file()
-    for cfg in sorted((REPO / 'config').glob('*.yaml')):
+    for cfg in sorted((REPO / 'config').glob('*.[xy]*')):  # the nodes' YAML, the DDS profile
         assert (share / 'config' / cfg.name).read_text() == cfg.read_text(), \
             f'installed {cfg.name} is stale: run make setup'
 

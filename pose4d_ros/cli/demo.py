@@ -49,13 +49,19 @@ CONNECTIONS = {
 }
 
 
-def default_bag() -> Path:
-    """The bundled sample bag: installed share/pose4d_ros/bags/sample, else the checkout's."""
+def share_path(relative: str) -> Path:
+    """A file of the package's share directory (installed share/pose4d_ros/<relative>, else
+    the checkout's)."""
     for prefix in [*os.environ.get('AMENT_PREFIX_PATH', '').split(os.pathsep), sys.prefix]:
-        path = Path(prefix) / 'share' / 'pose4d_ros' / 'bags' / 'sample'
-        if prefix and (path / 'metadata.yaml').is_file():
+        path = Path(prefix) / 'share' / 'pose4d_ros' / relative
+        if prefix and path.exists():
             return path
-    return Path(__file__).resolve().parents[2] / 'bags' / 'sample'
+    return Path(__file__).resolve().parents[2] / relative
+
+
+def default_bag() -> Path:
+    """The bundled sample bag."""
+    return share_path('bags/sample')
 
 
 def add_parser(subparsers: argparse._SubParsersAction) -> None:
@@ -174,6 +180,8 @@ def run_graph(bag_path: Path, out: Path, *, rate: float = 1.0, model: str = 'rgb
     from pose4d_ros.nodes.convert import stamp_to_ns
 
     frames = bag.topics(bag_path)[cad60_bag.COLOR_TOPIC].count
+    # this process and the nodes: Fast DDS with room for large frames (config/fastdds.xml)
+    os.environ.setdefault('FASTRTPS_DEFAULT_PROFILES_FILE', str(share_path('config/fastdds.xml')))
     out.mkdir(parents=True, exist_ok=True)
     recorded = out / ('pipeline_run' if pipeline else 'graph_run')
     if recorded.exists():
