@@ -56,7 +56,7 @@ from __future__ import annotations
 
 import math
 import threading
-from dataclasses import dataclass, field, fields
+from dataclasses import dataclass, field, fields, replace
 
 import cv2
 import numpy as np
@@ -146,6 +146,11 @@ class ForegroundConfig:
     previous_bonus : with `previous`, score added to a region whose box overlaps the previous
         box by more than 0.3 (intersection over union); 0 = no temporal preference.
     seed : RANSAC random seed (the result is a function of the input).
+    working_height_px : larger depth images are segmented on every f-th pixel of every f-th
+        row, f the largest integer factor that keeps at least this many rows (640x480 and
+        848x480 at 320x240 and 424x240), and the mask is brought back to full size: the
+        parameters in pixels hold at the resolution they were tuned at (CAD-60's 240 rows)
+        and the cost does not grow with the camera's resolution.
     """
 
     depth_near_m: float = 0.4
@@ -187,6 +192,7 @@ class ForegroundConfig:
     stability_weight: float = 50.0
     previous_bonus: float = 0.5
     seed: int = 0
+    working_height_px: int = 240
 
     def __post_init__(self) -> None:
         for f in fields(self):
@@ -228,7 +234,7 @@ class ForegroundConfig:
         if not self.merge_slack >= 1.0:
             raise ValueError(f'merge_slack must be >= 1, got {self.merge_slack}')
         for name in ('floor_sample_step', 'floor_iterations', 'floor_min_inliers',
-                     'max_candidates', 'edge_rows'):
+                     'max_candidates', 'edge_rows', 'working_height_px'):
             if getattr(self, name) < 1:
                 raise ValueError(f'{name} must be >= 1, got {getattr(self, name)}')
         for name in ('floor_inlier_m', 'floor_tolerance_m'):
@@ -678,6 +684,9 @@ def segment(depth_m: NDArray[np.floating], intrinsics: Intrinsics, *,
     if (intrinsics.width, intrinsics.height) != (w, h):
         raise ValueError(f'depth image is {w}x{h} but the intrinsics are '
                          f'{intrinsics.width}x{intrinsics.height}')
+    f = max(h // config.working_height_px, 1)
+    if f > 1:
+        return _subsampled_segment(depth, intrinsics, f, config, previous)
     depth = depth_to_metres(depth)  # new float32 array: inputs are never touched
     valid = np.isfinite(depth)
     if not valid.any():
@@ -701,6 +710,83 @@ def segment(depth_m: NDArray[np.floating], intrinsics: Intrinsics, *,
     return ForegroundResult(mask=mask, box=best.box, depth_m=float(np.median(zr)), found=True,
                             reason=REASON_OK, stability=best.variation, level=best.lo,
                             floor=floor)
+
+
+def _subsampled_segment(depth: NDArray, intrinsics: Intrinsics, f: int,
+                        config: ForegroundConfig, previous: ForegroundResult | None
+                        ) -> ForegroundResult:
+    """`segment` on every f-th pixel of every f-th row, its mask brought back to full size
+    (each pixel takes the value of the one it was represented by)."""
+    h, w = depth.shape
+    small = np.ascontiguousarray(depth[::f, ::f])
+    k = intrinsics
+    small_k = Intrinsics(k.fx / f, k.fy / f, k.cx / f, k.cy / f, small.shape[1], small.shape[0])
+    if previous is not None and previous.box is not None:
+        x0, y0, x1, y1 = previous.box
+        previous = replace(previous, box=(x0 // f, y0 // f, -(-x1 // f), -(-y1 // f)))
+    out = segment(small, small_k, config=config, previous=previous)
+    if not out.found:
+        return replace(out, mask=np.zeros((h, w), bool))
+    floor = np.full(4, np.nan) if out.floor is None else out.floor
+    depth = np.asarray(depth)
+    mask = _upsample_mask(out.mask, depth_to_metres(small), depth,
+                          0.001 if depth.dtype == np.uint16 else 1.0, f,
+                          np.array([k.fx, k.fy, k.cx, k.cy]), floor,
+                          config.floor_tolerance_m, config.mser_delta * config.metres_per_level)
+    rows, cols = np.flatnonzero(mask.any(axis=1)), np.flatnonzero(mask.any(axis=0))
+    box = (int(cols[0]), int(rows[0]), int(cols[-1]) + 1, int(rows[-1]) + 1)
+    return replace(out, mask=mask, box=box)
+
+
+@njit(cache=True)
+def _upsample_mask(small_mask: NDArray[np.bool_], small_depth: NDArray[np.float32],
+                   depth: NDArray, scale: float, f: int, k: NDArray[np.float64],
+                   floor: NDArray[np.float64], floor_tolerance: float, tolerance: float
+                   ) -> NDArray[np.bool_]:
+    """The full-size mask of a mask found on every f-th pixel of every f-th row.
+
+    Inside and outside the mask a pixel takes its representative's value; along the mask's
+    edge (a representative with neighbours on both sides) a pixel with depth is the person's
+    when it is within `tolerance` of the depth of a neighbouring person pixel and, with a floor
+    (nx, ny, nz, d; NaN = none), at least `floor_tolerance` above it. `depth` is the full-size
+    image, `scale` metres per unit (uint16 millimetres: 0.001); 0 or NaN = no reading.
+    """
+    h, w = depth.shape
+    sh, sw = small_mask.shape
+    out = np.zeros((h, w), np.bool_)
+    rows, cols = np.flatnonzero(small_mask.sum(axis=1)), np.flatnonzero(small_mask.sum(axis=0))
+    if len(rows) == 0:
+        return out
+    for r in range(max(rows[0] - 1, 0), min(rows[-1] + 2, sh)):
+        for c in range(max(cols[0] - 1, 0), min(cols[-1] + 2, sw)):
+            inside = small_mask[r, c]
+            edge = False
+            for dr in range(-1, 2):
+                for dc in range(-1, 2):
+                    rr, cc = r + dr, c + dc
+                    if 0 <= rr < sh and 0 <= cc < sw and small_mask[rr, cc] != inside:
+                        edge = True
+            for y in range(r * f, min(r * f + f, h)):
+                for x in range(c * f, min(c * f + f, w)):
+                    if not edge:
+                        out[y, x] = inside
+                        continue
+                    z = depth[y, x] * scale
+                    if not (z > 0 and np.isfinite(z)):
+                        out[y, x] = inside  # no reading: as its representative
+                        continue
+                    if np.isfinite(floor[0]):
+                        height = (floor[0] * (x - k[2]) / k[0] * z
+                                  + floor[1] * (y - k[3]) / k[1] * z + floor[2] * z + floor[3])
+                        if height < floor_tolerance:
+                            continue
+                    for dr in range(-1, 2):
+                        for dc in range(-1, 2):
+                            rr, cc = r + dr, c + dc
+                            if 0 <= rr < sh and 0 <= cc < sw and small_mask[rr, cc] and \
+                                    abs(small_depth[rr, cc] - z) <= tolerance:
+                                out[y, x] = True
+    return out
 
 
 @dataclass(frozen=True)
