@@ -75,6 +75,8 @@ def test_bad_arguments(kwargs):
 class _Counter:
     """Stands in for the StageMonitor: counts what the queue drops."""
 
+    stage = 'test'
+
     def __init__(self) -> None:
         self.drops = 0
 
@@ -82,18 +84,79 @@ class _Counter:
         self.drops += n
 
 
-def test_frame_queue_processes_a_burst_in_order_and_drops_the_oldest_beyond_its_size(ros):
+def test_frame_queue_works_on_the_newest_frame_and_counts_the_dropped(ros):
+    import threading
+
     from pose4d_ros.nodes.common import FrameQueue
 
     done: list[int] = []
+    busy = threading.Event()
+
+    def process(frame: int) -> None:
+        busy.wait(5.0)  # the stage is busy until the test lets it go
+        done.append(frame)
+
     monitor = _Counter()
-    queue = FrameQueue(ros.node, done.append, monitor, size=3)
-    for frame in range(3):  # a burst: three frames before the executor runs
-        queue.submit(frame)
-    ros.spin_until(lambda: len(done) == 3, 5.0, 'the burst')
-    assert done == [0, 1, 2] and monitor.drops == 0
-    for frame in range(3, 8):  # more than fit: the two oldest go
-        queue.submit(frame)
-    ros.spin_until(lambda: len(done) == 6, 5.0, 'the overflow')
-    ros.spin_for(0.2)
-    assert done == [0, 1, 2, 5, 6, 7] and monitor.drops == 2
+    queue = FrameQueue(ros.node, process, monitor)  # size 1: the newest waits
+    try:
+        queue.submit(0)
+        ros.spin_for(0.2)  # frame 0 is in hand
+        for frame in range(1, 5):  # four frames while it is busy: only the newest waits
+            queue.submit(frame)
+        busy.set()
+        ros.spin_until(lambda: len(done) == 2, 5.0, 'the newest frame')
+        ros.spin_for(0.2)
+        assert done == [0, 4] and monitor.drops == 3
+        queue.submit(5)  # idle: a frame is processed at once
+        ros.spin_until(lambda: done[-1] == 5, 5.0, 'the next frame')
+        assert monitor.drops == 3
+    finally:
+        queue.close()
+
+
+def test_frame_queue_keeps_a_burst_in_order_up_to_its_size(ros):
+    import threading
+
+    from pose4d_ros.nodes.common import FrameQueue
+
+    done: list[int] = []
+    busy = threading.Event()
+    monitor = _Counter()
+    queue = FrameQueue(ros.node, lambda f: (busy.wait(5.0), done.append(f)), monitor, size=3)
+    try:
+        for frame in range(6):  # 0 in hand, 1-2 dropped, 3-5 wait
+            queue.submit(frame)
+            ros.spin_for(0.05)
+        busy.set()
+        ros.spin_until(lambda: len(done) == 4, 5.0, 'the burst')
+        assert done == [0, 3, 4, 5] and monitor.drops == 2
+    finally:
+        queue.close()
+
+
+def test_frame_queue_survives_an_error_in_a_frame(ros):
+    from pose4d_ros.nodes.common import FrameQueue
+
+    done: list[int] = []
+
+    def process(frame: int) -> None:
+        if frame == 0:
+            raise RuntimeError('broken frame')
+        done.append(frame)
+
+    class Monitor(_Counter):
+        bad = 0
+
+        def bad_input(self, text: str) -> None:
+            self.bad += 1
+
+    monitor = Monitor()
+    queue = FrameQueue(ros.node, process, monitor)
+    try:
+        queue.submit(0)
+        ros.spin_for(0.1)
+        queue.submit(1)
+        ros.spin_until(lambda: done == [1], 5.0, 'the frame after the error')
+        assert monitor.bad == 1
+    finally:
+        queue.close()

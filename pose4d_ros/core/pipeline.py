@@ -29,7 +29,12 @@ import numpy as np
 from numpy.typing import NDArray
 
 from pose4d_ros.core import joints as cj
-from pose4d_ros.core.camera import Intrinsics, backproject, project, robust_depth
+from pose4d_ros.core.camera import (
+    Intrinsics,
+    backproject,
+    project,
+    robust_depth,
+)
 from pose4d_ros.core.dpm.infer import Detector, SearchConfig
 from pose4d_ros.core.dpm.model import PartModel
 from pose4d_ros.core.foreground import ForegroundConfig, ForegroundResult, apply_mask, segment
@@ -100,12 +105,14 @@ class ForegroundStage:
         self.previous = None
 
     def warm_up(self, intrinsics: Intrinsics) -> None:
-        """Run on `warm_up_frame` twice (the second time with a previous frame), then forget
-        it, so the kernels are compiled."""
-        color, depth, _ = warm_up_frame(intrinsics)
-        for _ in range(2):
-            self.step(color, depth, intrinsics)
-        self.reset()
+        """Run on `warm_up_frame` twice (the second time with a previous frame), at the
+        camera's size and at twice it (the working-resolution path of larger images), then
+        forget it, so the kernels are compiled."""
+        for k in (intrinsics, intrinsics.scaled(2 * intrinsics.width, 2 * intrinsics.height)):
+            color, depth, _ = warm_up_frame(k)
+            for _ in range(2):
+                self.step(color, depth, k)
+            self.reset()
 
     def step(self, color: NDArray[np.uint8], depth_m: NDArray[np.floating],
              intrinsics: Intrinsics
@@ -322,6 +329,26 @@ class IkStage:
     def lengths(self) -> dict[str, tuple[float, float]]:
         return self.learner.as_dict() if self.learn else dict(self.learner.defaults)
 
+    def warm_up(self, intrinsics: Intrinsics) -> None:
+        """Run once on the person of `warm_up_frame` so the kernels are compiled; what it
+        learned is forgotten."""
+        _, depth, mask = warm_up_frame(intrinsics)
+        # shoulders, wrists, hips and ankles of the synthetic person 2.8 m away (camera frame)
+        xyz = np.array([[x, y, 2.8] for x, y in ((0.2, -0.35), (0.25, 0.15), (0.1, 0.3),
+                                                  (0.1, 1.0))], float)
+        names, points = [], []
+        for side, sign in (('left', 1.0), ('right', -1.0)):
+            for joint, p in zip(('shoulder', 'wrist', 'hip', 'ankle'), xyz, strict=True):
+                names.append(f'{side}_{joint}')
+                points.append(p * [sign, 1.0, 1.0])
+        points = np.array(points)
+        source = np.full(len(names), cj.DETECTED, np.uint8)
+        self.step(JointSet(tuple(names), project(points, intrinsics), points, source=source,
+                           confidence=np.ones(len(names), np.float32)),
+                  depth, intrinsics, mask=mask)
+        self.learner = LimbLengths(self.defaults)
+        self.track_id = None
+
     def step(self, tracked: JointSet, depth_m: NDArray[np.floating] | None,
              intrinsics: Intrinsics | None, *, mask: NDArray[np.bool_] | None = None
              ) -> JointSet:
@@ -441,6 +468,7 @@ class FramePipeline:
 
     def warm_up(self, intrinsics: Intrinsics) -> None:
         """Compile the kernels on a synthetic frame, then forget it (`warm_up_frame`)."""
+        self.foreground.warm_up(intrinsics)
         color, depth, _ = warm_up_frame(intrinsics)
         self.step(color, depth, intrinsics, 0.0)
         self.reset()

@@ -15,6 +15,7 @@ such frames out of its latency figures.
 
 from __future__ import annotations
 
+import threading
 from collections import deque
 from collections.abc import Callable
 
@@ -65,6 +66,8 @@ def run(factory: Callable[[], Node], args: list[str] | None = None,
         code = 2
     finally:
         if node is not None:
+            for queue in node.__dict__.get('frame_queues', []):
+                queue.close()
             close = getattr(node, 'close', None)
             if close is not None:
                 close()
@@ -78,7 +81,8 @@ class StageMonitor:
 
     `frame(stamp_ns, processing_s)` after each processed frame; `dropped(n)` for frames skipped
     on purpose; `bad_input(text)` for refused input (logged, throttled, counted). Diagnostics
-    are published on the wall clock (a paused sim clock does not silence them).
+    are published on the wall clock (a paused sim clock does not silence them). Safe to call
+    from a `FrameQueue`'s worker thread while the executor publishes.
     """
 
     def __init__(self, node: Node, stage: str, *, window: int = 300,
@@ -95,11 +99,16 @@ class StageMonitor:
         self._last_stamp_ns: int | None = None
         self.clock_offset_s: float | None = None  # of the last frame, if from another clock
         self._clock_warned = False
+        self._lock = threading.Lock()
         self._pub = node.create_publisher(DiagnosticArray, DIAGNOSTICS_TOPIC, 10)
         self._timer = node.create_timer(period_s, self.publish,
                                         clock=Clock(clock_type=ClockType.STEADY_TIME))
 
     def frame(self, stamp_ns: int, processing_s: float) -> None:
+        with self._lock:
+            self._frame(stamp_ns, processing_s)
+
+    def _frame(self, stamp_ns: int, processing_s: float) -> None:
         self.frames += 1
         self._proc.append(processing_s)
         if self._last_stamp_ns is not None and stamp_ns > self._last_stamp_ns:
@@ -132,13 +141,16 @@ class StageMonitor:
                                         throttle_duration_sec=5.0)
 
     def publish(self) -> None:
+        with self._lock:
+            times, proc, latency, steps = (list(d) for d in (
+                self._times, self._proc, self._latency, self._steps))
         rate = 0.0
-        if len(self._times) >= 2 and self._times[-1] > self._times[0]:
-            rate = (len(self._times) - 1) / (self._times[-1] - self._times[0])
+        if len(times) >= 2 and times[-1] > times[0]:
+            rate = (len(times) - 1) / (times[-1] - times[0])
         values = {'frames': self.frames, 'dropped': self.dropped_frames,
                   'bad_inputs': self.bad_inputs, 'rate_hz': round(rate, 2)}
-        for key, data in (('processing_ms', self._proc), ('latency_ms', self._latency),
-                          ('time_step_ms', self._steps)):
+        for key, data in (('processing_ms', proc), ('latency_ms', latency),
+                          ('time_step_ms', steps)):
             if data:
                 p50, p95 = np.percentile(np.asarray(data) * 1e3, [50, 95])
                 values[f'{key}_p50'] = round(float(p50), 2)
@@ -163,35 +175,61 @@ class StageMonitor:
 
 
 class FrameQueue:
-    """Process frames in arrival order, keeping at most `size` waiting.
+    """Frames processed in a worker thread, in arrival order, at most `size` waiting (1: the
+    newest).
 
-    `submit(item)` queues `item` (when `size` frames already wait, the oldest is dropped and
-    counted on the monitor) and wakes the executor through a guard condition, whose callback
-    processes one frame and wakes it again while frames wait, so subscriptions are served in
-    between. A burst (two frames in one executor turn, a slow first frame) is absorbed; a stage
-    slower than its input on average drops frames instead of building latency.
+    `submit(item)` (in the executor's thread) queues `item`; when `size` frames already wait,
+    the oldest is dropped and counted on the monitor. The worker thread processes them one at a
+    time, so the executor keeps taking messages from DDS while a frame is processed: a stage
+    slower than its input always works on the newest frame, drops the ones that came while it
+    was busy, and latency stays bounded (about two processing times per stage) instead of
+    building a backlog in its DDS reader queues. Dropped frames are not lost to the tracker,
+    which predicts through them from the stamps. An unexpected error in `process` is logged
+    (throttled) and counted as a bad input, and the queue goes on. `run` stops the worker
+    (`close`) before the node is destroyed.
     """
 
     def __init__(self, node: Node, process: Callable[[object], None],
-                 monitor: StageMonitor, size: int = 3) -> None:
+                 monitor: StageMonitor, size: int = 1) -> None:
         self._process = process
         self._monitor = monitor
         self._waiting: deque[object] = deque()
         self._size = size
-        self._guard = node.create_guard_condition(self._run)
+        self._ready = threading.Condition()
+        self._closed = False
+        self._worker = threading.Thread(target=self._work, name=f'{monitor.stage} frames',
+                                        daemon=True)
+        # the node's queues, for `run` to close
+        node.__dict__.setdefault('frame_queues', []).append(self)
+        self._worker.start()
 
     def submit(self, item: object) -> None:
-        if len(self._waiting) >= self._size:
-            self._waiting.popleft()
-            self._monitor.dropped()
-        self._waiting.append(item)
-        self._guard.trigger()
+        with self._ready:
+            if len(self._waiting) >= self._size:
+                self._waiting.popleft()
+                self._monitor.dropped()
+            self._waiting.append(item)
+            self._ready.notify()
 
-    def _run(self) -> None:
-        if self._waiting:
-            self._process(self._waiting.popleft())
-        if self._waiting:
-            self._guard.trigger()
+    def close(self) -> None:
+        """Stop the worker after the frame in hand (frames still waiting are dropped)."""
+        with self._ready:
+            self._closed = True
+            self._ready.notify()
+        self._worker.join(timeout=10.0)
+
+    def _work(self) -> None:
+        while True:
+            with self._ready:
+                while not self._waiting and not self._closed:
+                    self._ready.wait()
+                if self._closed:
+                    return
+                item = self._waiting.popleft()
+            try:
+                self._process(item)
+            except Exception as exc:  # the live node keeps serving frames
+                self._monitor.bad_input(f'frame failed: {type(exc).__name__}: {exc}')
 
 
 class PairedInputs:

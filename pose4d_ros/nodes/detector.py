@@ -3,8 +3,8 @@
 Finds the person's parts (the paper's reduced 10-part model by default) with the trained
 mixture-of-parts model, searching only the foreground's box at the 1-3 scales its depth allows,
 and lifts each part to 3-D with a robust depth look-up. Inputs are paired by stamp and
-processed in order; at most 3 frames wait, so a detector slower than the camera drops the
-oldest (drops are counted) instead of falling behind.
+processed in order; a detector slower than the camera works on the newest frame and drops
+the others (counted) instead of falling behind.
 
 Subscriptions
     pose4d/foreground/color (sensor_msgs/Image, rgb8/bgr8)

@@ -33,6 +33,7 @@ from std_msgs.msg import Header
 from tf2_msgs.msg import TFMessage
 from visualization_msgs.msg import MarkerArray
 
+from pose4d_ros.core.camera import cad60_intrinsics
 from pose4d_ros.core.joints import JointSet
 from pose4d_ros.core.kinematics import DEFAULT_LIMB_LENGTHS_M
 from pose4d_ros.core.pipeline import IkStage, limb_bones
@@ -128,6 +129,7 @@ class IkNode(Node):
         self.params = NodeParams(self, PARAMS, check=ik_settings)
         p = self.params.values
         self.stage = ik_stage(p)
+        self.stage.warm_up(cad60_intrinsics())  # compile before the first frame
         self.monitor = StageMonitor(self, 'ik')
         self.camera = LatestIntrinsics(self, self.monitor)
         self.outputs = SkeletonOutputs(self, p)

@@ -3,8 +3,8 @@
 The same stages as the `foreground`, `detector`, `tracker` and `ik` nodes (the same core
 objects, the same parameters), called one after the other in one callback per frame, without
 the serialisation and transport of images between processes. Colour, depth and camera_info are
-paired by stamp and processed in order; at most 3 frames wait, so a pipeline slower than the
-camera drops the oldest (drops are counted).
+paired by stamp and processed in order; a pipeline slower than the camera works on the
+newest frame and drops the others (counted).
 
 Subscriptions
     camera/color/image_raw, camera/depth/image_raw (sensor_msgs/Image),
