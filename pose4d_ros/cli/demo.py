@@ -174,6 +174,7 @@ def run_graph(bag_path: Path, out: Path, *, rate: float = 1.0, model: str = 'rgb
     it (or the single `pipeline` process), with a recorder; stop everything cleanly."""
     import rclpy
     from pose4d_msgs.msg import JointArray
+    from rclpy.qos import QoSProfile, ReliabilityPolicy
     from sensor_msgs.msg import CameraInfo
 
     from pose4d_ros.nodes import qos
@@ -195,10 +196,12 @@ def run_graph(bag_path: Path, out: Path, *, rate: float = 1.0, model: str = 'rgb
         JointArray, 'pose4d/skeleton',
         lambda m: left.setdefault(stamp_to_ns(m.header.stamp), time.monotonic()),
         qos.OUTPUT_QOS)
+    # best effort (as the replay may publish), with room for every frame of a few seconds: a
+    # moment without the CPU must not cost this probe a frame the graph itself got
     node.create_subscription(
         CameraInfo, 'camera/color/camera_info',
         lambda m: entered.setdefault(stamp_to_ns(m.header.stamp), time.monotonic()),
-        qos.SENSOR_QOS)
+        QoSProfile(depth=300, reliability=ReliabilityPolicy.BEST_EFFORT))
     stages = ('pipeline',) if pipeline else STAGES
     connections = PIPELINE_CONNECTIONS if pipeline else CONNECTIONS
     try:
