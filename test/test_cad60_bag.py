@@ -62,6 +62,29 @@ def test_converter_writes_the_driver_topics_and_ground_truth(tmp_path, storage):
     assert_allclose(uv, project(xyz, intr), atol=1e-6)  # pixels agree with the 3-D joints
 
 
+def test_a_vga_directory_carries_its_own_camera(tmp_path):
+    """640x480 frames: camera_info, the frames' intrinsics and the ground-truth pixels are
+    those of the true size, from the bag and from the directory alike."""
+    import cv2
+
+    vga = tmp_path / 'vga'
+    shutil.copytree(FIXTURE, vga)
+    for png in vga.rglob('*.png'):
+        img = cv2.imread(str(png), cv2.IMREAD_UNCHANGED)
+        cv2.imwrite(str(png), cv2.resize(img, (640, 480), interpolation=cv2.INTER_NEAREST))
+    intr = cad60_intrinsics(640, 480)
+    out = tmp_path / 'bag'
+    cad60_bag.convert(vga, out)
+    info = bag.deserialize(next(iter(bag.read_messages(out, [cad60_bag.INFO_TOPIC]))))
+    assert (info.width, info.height) == (640, 480)
+    assert_allclose(info.k, intr.k.ravel())
+    for frames in (list(cad60_bag.read_frames(out)), list(cad60.read_frames(vga))):
+        assert len(frames) == 2
+        for f in frames:
+            assert f.intrinsics == intr and f.color.shape == (480, 640, 3), f.intrinsics
+            assert_allclose(f.truth.uv, project(f.truth.xyz, intr), atol=1e-6)
+
+
 def test_bag_is_self_describing_for_mcap(tmp_path):
     from mcap.reader import make_reader
 

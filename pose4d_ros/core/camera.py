@@ -86,8 +86,16 @@ class Intrinsics:
 
 
 def cad60_intrinsics(width: int = 320, height: int = 240) -> Intrinsics:
-    """The OpenNI perspective model used by CAD-60, at `width` x `height`."""
-    return Intrinsics(CAD60_FX, CAD60_FY, CAD60_CX, CAD60_CY, 320, 240).scaled(width, height)
+    """The OpenNI perspective model used by CAD-60, at `width` x `height`.
+
+    Focal lengths scale with the height (the vertical field of view is the sensor's) and the
+    principal point is the image centre: 640x480 is 320x240 with doubled focal lengths, and a
+    wider image (848x480) sees more on the sides with the same square pixels, as cameras that
+    offer both sizes do.
+    """
+    s = height / 240.0
+    return Intrinsics(CAD60_FX * s, CAD60_FY * s, CAD60_CX * width / 320.0,
+                      CAD60_CY * s, width, height)
 
 
 def project(points: NDArray[np.floating], intrinsics: Intrinsics) -> NDArray[np.float64]:
