@@ -454,9 +454,10 @@ def update(state: TrackState, uv: NDArray[np.floating], confidence: NDArray[np.f
         s = cov[np.ix_(idx, idx)] + r
         gain = np.linalg.solve(s, ph.T).T
         x = x + gain @ y
-        ikh = np.eye(len(x))
-        ikh[:, idx] -= gain
-        cov = ikh @ cov @ ikh.T + gain @ r @ gain.T
+        # Joseph form (I - K H) P (I - K H)^T + K R K^T, with H picking the rows `idx`: the
+        # same products restricted to the columns H touches (K H P = K P[idx])
+        m = cov - gain @ cov[idx, :]
+        cov = m - m[:, idx] @ gain.T + (gain * np.diag(r)) @ gain.T
         cov = 0.5 * (cov + cov.T)
         source[accepted] = Source.DETECTED
         missed[accepted] = 0
