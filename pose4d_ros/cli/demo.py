@@ -169,9 +169,11 @@ class GraphRun:
 
 
 def run_graph(bag_path: Path, out: Path, *, rate: float = 1.0, model: str = 'rgbd_10',
-              timeout: float = 60.0, pipeline: bool = False) -> GraphRun:
+              timeout: float = 60.0, pipeline: bool = False, best_effort: bool = False
+              ) -> GraphRun:
     """Replay `bag_path` through the graph, each node its own process as `ros2 run` starts
-    it (or the single `pipeline` process), with a recorder; stop everything cleanly."""
+    it (or the single `pipeline` process), with a recorder; stop everything cleanly.
+    `best_effort`: the replay publishes best effort, as camera drivers do."""
     import rclpy
     from pose4d_msgs.msg import JointArray
     from rclpy.qos import QoSProfile, ReliabilityPolicy
@@ -225,6 +227,7 @@ def run_graph(bag_path: Path, out: Path, *, rate: float = 1.0, model: str = 'rgb
         # the replay plays once it has matched every subscriber seen here (this one too)
         played = [t.lstrip('/') for t in bag.topics(bag_path) if t.startswith('/camera/')]
         graph.start('replay', {'replay.bag': str(bag_path), 'replay.rate': rate,
+                               'replay.best_effort': best_effort,
                                'replay.topics': played, 'replay.delay_s': 0.5,
                                'replay.wait_for_subscribers': [
                                    f'{t}={node.count_subscribers(t)}' for t in played]})

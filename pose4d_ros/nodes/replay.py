@@ -69,6 +69,9 @@ PARAMS = (
     Param('replay.topics', ['*'], 'Topics to play: names or shell patterns (camera/*), '
           'without leading slash.',
           restart='the bag is opened and its publishers made at start-up'),
+    Param('replay.best_effort', False, 'Publish every topic best effort (keep last 5), as '
+          'camera drivers do, whatever QoS the bag recorded.',
+          restart='the bag is opened and its publishers made at start-up'),
     Param('replay.publish_clock', False, 'Publish /clock with the bag time of each message '
           '(for use_sim_time).', restart='the bag is opened and its publishers made at start-up'),
     Param('replay.wait_for_subscribers', ['*=0'], 'Before playing, wait until the played '
@@ -105,7 +108,8 @@ class ReplayNode(Node):
         self.publishers_: dict[str, Any] = {}
         for name in self.selected:
             info = infos[name]
-            profile = qos.from_bag(info.qos[0]) if info.qos else qos.OUTPUT_QOS
+            profile = (qos.SENSOR_QOS if p['replay.best_effort'] else
+                       qos.from_bag(info.qos[0]) if info.qos else qos.OUTPUT_QOS)
             self.publishers_[name] = self.create_publisher(
                 message_type(info.msgtype), name.lstrip('/'), profile)
         self.clock_pub = (self.create_publisher(Clock, '/clock', 10)
