@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import itertools
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -183,7 +184,7 @@ def tenpart_model(channels: str = 'rgbd') -> PartModel:
 
 
 def test_model_save_load_round_trip(tmp_path: Path) -> None:
-    m = tenpart_model()
+    m = replace(tenpart_model(), depth_offset_m=np.linspace(0.0, 0.09, 10, dtype=np.float32))
     path = tmp_path / 'm.npz'
     save_model(m, path)
     back = load_model(path)
@@ -260,6 +261,18 @@ def test_detect_finds_a_pose_and_maps_it_into_the_box() -> None:
     # the search box is the mask's box plus a margin of 0.6 person scales
     margin = 0.6 * 285.171 * 0.5 / 2.5 + 10
     assert (p.uv[:, 0] > 130 - margin).all() and (p.uv[:, 0] < 190 + margin).all()
+
+
+def test_scale_factor_searches_a_person_that_much_larger() -> None:
+    rng = np.random.default_rng(0)
+    col, depth, mask = person_frame(rng)
+    det = Detector(tenpart_model())
+    base = det.plan(col.shape[:2], depth, mask=mask)
+    big = det.plan(col.shape[:2], depth, mask=mask, scale=2 ** 0.4)
+    assert_allclose(base.scales[0] / big.scales[0], 2 ** 0.4)  # a larger person: a smaller level
+    assert big.x0 < base.x0 and big.x1 > base.x1  # and a margin as much larger
+    (pose,) = det.detect(col, depth, mask=mask, scale=2 ** 0.4)
+    assert_allclose(pose.scale, big.scales[0])
 
 
 def test_bad_inputs_give_flagged_or_empty_results() -> None:

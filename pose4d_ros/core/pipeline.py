@@ -7,7 +7,8 @@ offline evaluation and a live run of the graph give the same answers on the same
 - `ForegroundStage`: the person's mask from the depth image (`core.foreground`: floor removal
   and MSER), applied to colour and depth.
 - `DetectorStage`: the 4D deformable part model (`core.dpm`) on the masked frame; each part's
-  pixel is lifted to 3-D with the robust depth of the person's pixels around it.
+  pixel is lifted to 3-D with the robust depth of the person's pixels around it, plus the
+  model's learned depth offset from the visible surface to the joint centre.
 - `TrackerStage`: the SLQE Kalman filter (`core.slqe`, eqs. 6-16) on the detected parts' pixels,
   plus each part's depth carried from its last detection, so tracked parts have a 3-D position
   too (back-projected with the camera's intrinsics).
@@ -37,6 +38,7 @@ from pose4d_ros.core.camera import (
 )
 from pose4d_ros.core.dpm.infer import Detector, SearchConfig
 from pose4d_ros.core.dpm.model import PartModel
+from pose4d_ros.core.dpm.scale import PersonScale, ScaleConfig
 from pose4d_ros.core.foreground import ForegroundConfig, ForegroundResult, apply_mask, segment
 from pose4d_ros.core.joints import JointSet
 from pose4d_ros.core.kinematics import IkConfig, IkFlag, LimbLengths, infer_middle_joints
@@ -137,26 +139,33 @@ class DetectorStage:
     model : a trained part model (`core.dpm.model.load_model`); its channels say whether the
         depth HOG is used ('rgbd') or not ('rgb', the Yang & Ramanan baseline).
     search : where and at which scales to search (`core.dpm.infer.SearchConfig`).
+    scale : how the person's own scale is chosen per track (`core.dpm.scale`; with an RGB
+        model, or without depth, the depth-free search covers every scale anyway).
     depth_radius_px : half-size of the window of the robust depth look-up, pixels.
     min_confidence : parts less confident than this are reported MISSING.
     """
 
     def __init__(self, model: PartModel, *, search: SearchConfig | None = None,
-                 depth_radius_px: int = DEPTH_RADIUS_PX, min_confidence: float = 0.0) -> None:
+                 scale: ScaleConfig | None = None, depth_radius_px: int = DEPTH_RADIUS_PX,
+                 min_confidence: float = 0.0) -> None:
         self.model = model
         self.detector = Detector(model, search)
+        self.person_scale = PersonScale(scale)
         self.last_flags: tuple[str, ...] = ()
-        self.configure(search=search, depth_radius_px=depth_radius_px,
+        self.configure(search=search, scale=scale, depth_radius_px=depth_radius_px,
                        min_confidence=min_confidence)
 
-    def configure(self, *, search: SearchConfig | None = None,
+    def configure(self, *, search: SearchConfig | None = None, scale: ScaleConfig | None = None,
                   depth_radius_px: int = DEPTH_RADIUS_PX, min_confidence: float = 0.0) -> None:
-        """New settings (as in the constructor), used from the next frame on."""
+        """New settings (as in the constructor), used from the next frame on (new person scale
+        settings start the choice of scale anew)."""
         if depth_radius_px < 0:
             raise ValueError(f'depth_radius_px must be >= 0, got {depth_radius_px}')
         if not 0.0 <= min_confidence <= 1.0:
             raise ValueError(f'min_confidence must be in [0, 1], got {min_confidence}')
         self.detector.config = search or SearchConfig()
+        if (scale or ScaleConfig()) != self.person_scale.config:
+            self.person_scale = PersonScale(scale)
         self.depth_radius_px = depth_radius_px
         self.min_confidence = min_confidence
 
@@ -164,33 +173,53 @@ class DetectorStage:
     def names(self) -> tuple[str, ...]:
         return self.model.part_names
 
+    def reset(self) -> None:
+        """Forget the person (the next frame starts a new track)."""
+        self.person_scale.reset()
+
     def warm_up(self, intrinsics: Intrinsics) -> None:
-        """Run once on a synthetic frame so the kernels are compiled (`warm_up_frame`)."""
+        """Run once on a synthetic frame so the kernels are compiled (`warm_up_frame`), then
+        forget it."""
         color, depth, mask = warm_up_frame(intrinsics)
         self.step(color, depth, intrinsics, mask=mask)
+        self.reset()
 
     def step(self, color: NDArray[np.uint8], depth_m: NDArray[np.floating] | None,
-             intrinsics: Intrinsics | None, *, mask: NDArray[np.bool_] | None = None
-             ) -> JointSet:
+             intrinsics: Intrinsics | None, *, mask: NDArray[np.bool_] | None = None,
+             stamp_s: float | None = None) -> JointSet:
         """The detected parts of one frame (all MISSING when there is no person to search).
 
+        `stamp_s` (the frame's time, seconds) tells the person's scale when a new track starts
+        (`core.dpm.scale.PersonScale`); without it, only losing the person does.
         `last_flags` tells why a result is doubtful ('no_person', 'low_score', 'no_depth').
         ValueError when `intrinsics` are for another image size.
         """
         if intrinsics is not None:
             intrinsics.check_size(np.shape(color))
-        poses = self.detector.detect(color, depth_m, mask=mask, intrinsics=intrinsics)
-        if not poses:
+        scaled = depth_m is not None and self.model.channels == 'rgbd'
+        factors = self.person_scale.factors(stamp_s) if scaled else (1.0,)
+        found = {f: self.detector.detect(color, depth_m, mask=mask, intrinsics=intrinsics,
+                                         scale=f) for f in factors}
+        if not any(found.values()):
+            self.person_scale.reset()
             self.last_flags = ('no_person',)
             return JointSet.missing(self.names)
-        pose = poses[0]
+        if scaled:
+            chosen = self.person_scale.update(
+                {f: poses[0].score if poses else math.nan for f, poses in found.items()})
+            pose = found[chosen][0]
+        else:
+            pose = found[1.0][0]
         self.last_flags = pose.flags
         conf = pose.confidence.astype(np.float32)
         src = np.where(conf >= self.min_confidence, cj.DETECTED, cj.MISSING).astype(np.uint8)
         uv = np.where(src[:, None] == cj.DETECTED, pose.uv, np.nan)
         xyz = np.full((len(self.names), 3), np.nan)
         if depth_m is not None and intrinsics is not None:
+            # the joint centre lies behind the surface the camera sees (learned per part)
             z = robust_depth(depth_m, uv, radius=self.depth_radius_px, mask=mask)
+            if self.model.depth_offset_m is not None:
+                z = z + self.model.depth_offset_m
             xyz = backproject(uv, z, intrinsics)
         return JointSet(self.names, uv, xyz, confidence=np.where(src == cj.DETECTED, conf, 0),
                         source=src, score=float(pose.score))
@@ -440,6 +469,7 @@ class FramePipeline:
     def reset(self) -> None:
         """Forget the previous frames (the next one starts a new track)."""
         self.foreground.reset()
+        self.detector.reset()
         self.tracker.reset()
 
     def step(self, color: NDArray[np.uint8], depth_m: NDArray[np.floating] | None,
@@ -456,7 +486,7 @@ class FramePipeline:
         clock.append((time.process_time(), time.perf_counter()))
         # the detector sees what the detector node receives: the masked frame and the mask
         parts = self.detector.step(color_m, depth_mm, intrinsics,
-                                   mask=fg.mask if fg is not None else None)
+                                   mask=fg.mask if fg is not None else None, stamp_s=stamp_s)
         clock.append((time.process_time(), time.perf_counter()))
         tracked = self.tracker.step(parts, stamp_s, intrinsics)
         clock.append((time.process_time(), time.perf_counter()))

@@ -1,10 +1,10 @@
 """`detector`: 4D deformable part model (HOG on colour and depth) on the masked frame.
 
-Finds the person's parts (the paper's reduced 10-part model by default) with the trained
-mixture-of-parts model, searching only the foreground's box at the 1-3 scales its depth allows,
-and lifts each part to 3-D with a robust depth look-up. Inputs are paired by stamp and
-processed in order; a detector slower than the camera works on the newest frame and drops
-the others (counted) instead of falling behind.
+Finds the person's parts with the trained mixture-of-parts model, searching only the
+foreground's box at the scale its depth gives (times the person's own scale factor, chosen per
+track: `core.dpm.scale`), and lifts each part to 3-D with a robust depth look-up. Inputs are
+paired by stamp and processed in order; a detector slower than the camera works on the newest
+frame and drops the others (counted) instead of falling behind.
 
 Subscriptions
     pose4d/foreground/color (sensor_msgs/Image, rgb8/bgr8)
@@ -14,7 +14,8 @@ Subscriptions
 Publications
     pose4d/parts (pose4d_msgs/JointArray: parts DETECTED or MISSING, input header), /diagnostics
 Parameters (config/detector.yaml)
-    detector.model, detector.n_levels, detector.margin, detector.depth_radius_px,
+    detector.model, detector.n_levels, detector.margin, detector.person_scales,
+    detector.scale_warm_up_frames, detector.scale_probe_every, detector.depth_radius_px,
     detector.min_confidence
 """
 
@@ -31,6 +32,7 @@ from sensor_msgs.msg import Image
 from pose4d_ros.core.camera import cad60_intrinsics
 from pose4d_ros.core.dpm.infer import SearchConfig
 from pose4d_ros.core.dpm.model import load_model
+from pose4d_ros.core.dpm.scale import ScaleConfig
 from pose4d_ros.core.pipeline import DetectorStage
 from pose4d_ros.models import model_path
 from pose4d_ros.nodes import qos
@@ -45,12 +47,21 @@ from pose4d_ros.nodes.convert import (
 from pose4d_ros.nodes.params import NodeParams, Param, ParameterError
 
 _S = SearchConfig()
+_C = ScaleConfig()
 
 
 def _model_exists(value: str) -> str | None:
     try:
         model_path(value)
     except FileNotFoundError as exc:
+        return str(exc)
+    return None
+
+
+def _scale_factors(value: list[float]) -> str | None:
+    try:
+        ScaleConfig(factors=tuple(value))
+    except ValueError as exc:
         return str(exc)
     return None
 
@@ -63,6 +74,15 @@ PARAMS = (
           "person's depth predicts.", range=(1, 9), live=True),
     Param('detector.margin', _S.margin, 'Search margin around the foreground box, in person '
           'scales.', range=(0.0, 5.0), live=True),
+    Param('detector.person_scales', list(_C.factors), "Factors on the person scale that depth "
+          "predicts, for people larger or smaller than the model's training bodies: each is "
+          'searched in the first frames of a track and the best-scoring one kept (then one level '
+          'a frame); [1.0] searches only the predicted scale.', check=_scale_factors, live=True),
+    Param('detector.scale_warm_up_frames', _C.warm_up_frames, 'Frames at the start of a track '
+          'in which every person scale is searched.', range=(1, 1000), live=True),
+    Param('detector.scale_probe_every', _C.probe_every, 'After the warm-up, a neighbouring '
+          'person scale is also searched every this many frames (0 = never).',
+          range=(0, 100000), live=True),
     Param('detector.depth_radius_px', 3, 'Half-size of the window of the robust depth look-up '
           "that lifts a part to 3-D, pixels.", range=(0, 20), live=True),
     Param('detector.min_confidence', 0.0, 'Parts less confident than this are MISSING.',
@@ -74,6 +94,9 @@ def detector_settings(p: dict[str, Any]) -> dict[str, Any]:
     """The live settings of the detector stage (`DetectorStage.configure`) from the
     parameters (also used by the pipeline node)."""
     return {'search': SearchConfig(n_levels=p['detector.n_levels'], margin=p['detector.margin']),
+            'scale': ScaleConfig(factors=tuple(p['detector.person_scales']),
+                                 warm_up_frames=p['detector.scale_warm_up_frames'],
+                                 probe_every=p['detector.scale_probe_every']),
             'depth_radius_px': p['detector.depth_radius_px'],
             'min_confidence': p['detector.min_confidence']}
 
@@ -121,7 +144,8 @@ class DetectorNode(Node):
             if not color.shape[:2] == depth.shape == mask.shape:
                 raise ValueError(f'colour {color.shape[:2]}, depth {depth.shape} and mask '
                                  f'{mask.shape} differ in size')
-            parts = self.stage.step(color, depth, self.camera.intrinsics, mask=mask)
+            parts = self.stage.step(color, depth, self.camera.intrinsics, mask=mask,
+                                    stamp_s=stamp * 1e-9)
         except ValueError as exc:
             self.monitor.bad_input(f'frame at {stamp} ns refused: {exc}')
             return

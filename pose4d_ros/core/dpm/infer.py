@@ -383,9 +383,10 @@ class Detector:
     # ---------------------------------------------------------------- planning
     def plan(self, shape: tuple[int, int], depth_m: NDArray | None, *,
              mask: NDArray[np.bool_] | None = None, box: tuple | None = None,
-             intrinsics: Intrinsics | None = None) -> SearchPlan | None:
+             intrinsics: Intrinsics | None = None, scale: float = 1.0) -> SearchPlan | None:
         """Choose the crop and the levels for a frame of `shape` = (H, W); None if there is
-        nothing to search (empty mask, frame too small)."""
+        nothing to search (empty mask, frame too small). `scale` multiplies the person scale
+        that depth predicts (`core.dpm.scale`: a person larger than the training bodies)."""
         h, w = shape
         m, cfg = self.model, self.config
         if mask is not None:
@@ -424,7 +425,7 @@ class Detector:
             # model was trained on is searched at the nearest trained scale, never on a pyramid
             # blown up by a depth or focal length no camera gives.
             lo, hi = m.scale_range_px
-            s_pred = float(np.clip(k.fx * m.scale_length_m / z, lo / _SCALE_SLACK,
+            s_pred = float(np.clip(k.fx * m.scale_length_m / z * scale, lo / _SCALE_SLACK,
                                    hi * _SCALE_SLACK))
             f0 = m.canonical_scale_px / s_pred
             n = cfg.n_levels
@@ -475,7 +476,8 @@ class Detector:
     # ---------------------------------------------------------------- detection
     def detect(self, color: NDArray, depth_m: NDArray | None = None, *,
                mask: NDArray[np.bool_] | None = None, box: tuple | None = None,
-               intrinsics: Intrinsics | None = None, top_k: int = 1) -> list[Pose]:
+               intrinsics: Intrinsics | None = None, top_k: int = 1, scale: float = 1.0
+               ) -> list[Pose]:
         """The best `top_k` poses in a frame.
 
         Parameters
@@ -488,6 +490,7 @@ class Detector:
         box : (x0, y0, x1, y1) pixels, used when no mask is given.
         intrinsics : the colour camera; default CAD-60's at the image size.
         top_k : poses returned at most (non-maximum suppressed by pose-box overlap).
+        scale : factor on the person scale that depth predicts (see `plan`).
 
         Returns
         -------
@@ -499,7 +502,8 @@ class Detector:
             raise ValueError(f'color must be (H, W, 3) or (H, W), got shape {color.shape}')
         if top_k < 1:
             raise ValueError(f'top_k must be >= 1, got {top_k}')
-        plan = self.plan(color.shape[:2], depth_m, mask=mask, box=box, intrinsics=intrinsics)
+        plan = self.plan(color.shape[:2], depth_m, mask=mask, box=box, intrinsics=intrinsics,
+                         scale=scale)
         if plan is None:
             return []
         flags: tuple[str, ...] = ()

@@ -70,6 +70,8 @@ class PartModel:
         foreground mask (as the foreground stage publishes them); the detector then blanks its
         input outside the mask it is given, so raw and pre-masked frames give the same answer.
     metadata : free-form strings (data, command, seed, time, git commit, ...).
+    depth_offset_m : (P,) float32 how far behind the visible surface each part's joint centre
+        lies, metres (rgbd models: learned with the calibration); None = on the surface.
     """
 
     part_names: tuple[str, ...]
@@ -88,6 +90,7 @@ class PartModel:
     calibration: NDArray[np.float32] | None = None
     masked_input: bool = False
     metadata: Mapping[str, str] = field(default_factory=dict)
+    depth_offset_m: NDArray[np.float32] | None = None
 
     def __post_init__(self) -> None:
         p = len(self.part_names)
@@ -118,6 +121,10 @@ class PartModel:
         if self.calibration is not None and self.calibration.shape != (p, 3):
             raise ValueError(f'calibration must have shape ({p}, 3), got '
                              f'{self.calibration.shape}')
+        offset = self.depth_offset_m
+        if offset is not None and (offset.shape != (p,) or not (np.abs(offset) < 1.0).all()):
+            raise ValueError(f'depth_offset_m must be ({p},) metres within +-1, got '
+                             f'{np.asarray(offset).tolist()}')
         if p > 1 and not ((self.springs[1:, :, 1] > 0).all()
                           and (self.springs[1:, :, 3] > 0).all()):
             raise ValueError('spring weights w_dx2 and w_dy2 must be > 0')
@@ -152,6 +159,7 @@ class PartModel:
 
 
 _ARRAYS = ('filters', 'springs', 'anchors', 'bias')
+_OPTIONAL = ('calibration', 'depth_offset_m')  # float32 arrays a model may have
 
 
 def save_model(model: PartModel, path: str | Path) -> None:
@@ -167,8 +175,9 @@ def save_model(model: PartModel, path: str | Path) -> None:
         'metadata': dict(model.metadata),
     }
     arrays = {name: getattr(model, name) for name in _ARRAYS}
-    if model.calibration is not None:
-        arrays['calibration'] = model.calibration
+    for name in _OPTIONAL:
+        if getattr(model, name) is not None:
+            arrays[name] = getattr(model, name)
     buffer = io.BytesIO()
     np.savez_compressed(buffer, header=np.array(json.dumps(header)), **arrays)
     write_atomic(path, buffer.getvalue())
@@ -205,8 +214,8 @@ def load_model(path: str | Path) -> PartModel:
             scale_range_px=tuple(float(x) for x in header['scale_range_px']),
             depth_encoding=str(header['depth_encoding']),
             depth_range_m=tuple(float(x) for x in header['depth_range_m']),
-            calibration=(contents['calibration'].astype(np.float32)
-                         if 'calibration' in contents else None),
+            **{name: contents[name].astype(np.float32) for name in _OPTIONAL
+               if name in contents},
             masked_input=bool(header.get('masked_input', False)),
             metadata={str(k): str(v) for k, v in header.get('metadata', {}).items()},
         )

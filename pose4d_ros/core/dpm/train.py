@@ -33,7 +33,9 @@
    inference, the loss decomposes over parts), over the labelled frames; violated constraints
    join a bounded cache from which easy ones are dropped; a few rounds of mine-and-solve.
 5. Calibration: per part, a logistic map from (part score, pose score) to the probability that
-   the part is within the PCK@0.1 radius, fitted on detections of training frames.
+   the part is within the PCK@0.1 radius, fitted on detections of training frames; and, for
+   an RGB-D model, how far behind the visible surface each joint centre lies (the depth
+   offset that lifts a part to its joint in 3-D).
 
 Modules: `samples` (the settings, step 1's positives and the background crops), `solver` (the
 QP of step 4: weight layout, constraint cache, whitening, dual coordinate descent), `mining`
@@ -53,6 +55,7 @@ from dataclasses import asdict, dataclass, field, replace
 import numpy as np
 from numpy.typing import NDArray
 
+from pose4d_ros.core.camera import robust_depth
 from pose4d_ros.core.dpm.infer import Detector
 from pose4d_ros.core.dpm.mining import mine_background, mine_structural
 from pose4d_ros.core.dpm.model import PartModel
@@ -205,16 +208,24 @@ def calibrate(model: PartModel, samples: Sequence, *, use_depth: bool,
               progress: Progress | None = None, alpha: float = 0.1) -> PartModel:
     """Fit the per-part logistic confidence on detections of `samples` (a part is 'right' when
     within alpha * the size of the ground-truth joints' box). With `use_depth` the frames are
-    searched as at run time (depth, the sample's mask); else without depth."""
+    searched as at run time (depth, the sample's mask); else without depth.
+
+    With depth, also the per-part depth offset (`PartModel.depth_offset_m`): the median, over
+    the parts detected right whose ground truth has a 3-D position, of the joint's depth less
+    the robust depth of the person's surface at the detected pixel (`camera.robust_depth`, as
+    the detector lifts its parts): how far behind the visible surface the joint centre lies.
+    """
     det = Detector(model)
     xs, ys = [], []
+    behind: list[list[float]] = [[] for _ in model.part_names]
     it: Iterable = samples
     if progress is not None:
         it = progress(it, 'calibration', len(samples))
     for s in it:
-        uv, vis = part_joints(s, model.part_names)
+        uv, xyz, vis = s.truth.labelled(model.part_names)
         if vis.sum() < 2:
             continue
+        mask = None
         if use_depth and s.depth_m is not None:
             mask = s.mask
             box = None
@@ -228,10 +239,14 @@ def calibrate(model: PartModel, samples: Sequence, *, use_depth: bool,
             continue
         p = poses[0]
         size = np.max(np.ptp(uv[vis], axis=0))
-        dist = np.hypot(*(p.uv - uv).T)
+        right = vis & (np.hypot(*(p.uv - uv).T) <= alpha * size)
         for i in np.flatnonzero(vis):
             xs.append((i, p.part_scores[i], p.score))
-            ys.append(float(dist[i] <= alpha * size))
+            ys.append(float(right[i]))
+        if use_depth and s.depth_m is not None:
+            surface = robust_depth(s.depth_m, p.uv, mask=mask)
+            for i in np.flatnonzero(right & np.isfinite(surface) & np.isfinite(xyz[:, 2])):
+                behind[i].append(float(xyz[i, 2] - surface[i]))
     cal = np.zeros((model.n_parts, 3), np.float32)
     if xs:
         arr = np.asarray(xs)
@@ -243,7 +258,10 @@ def calibrate(model: PartModel, samples: Sequence, *, use_depth: bool,
             elif sel.any():
                 rate = float(np.clip(yv[sel].mean(), 0.01, 0.99))
                 cal[i] = (0.0, 0.0, np.log(rate / (1 - rate)))
-    return replace(model, calibration=cal)
+    offset = None
+    if any(behind):
+        offset = np.array([np.median(b) if b else 0.0 for b in behind], np.float32)
+    return replace(model, calibration=cal, depth_offset_m=offset)
 
 
 @dataclass
