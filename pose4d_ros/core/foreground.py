@@ -1061,7 +1061,24 @@ def apply_mask(color: NDArray[np.uint8], depth_m: NDArray[np.floating],
     depth = depth_to_metres(np.asarray(depth_m))
     if depth.shape != mask.shape:
         raise ValueError(f'depth shape {depth.shape} does not match the mask {mask.shape}')
-    keep = mask if color.ndim == 2 else mask[..., None]
-    color_masked = np.where(keep, color, np.zeros((), color.dtype))
-    depth[~mask] = np.nan  # depth_to_metres returned a new array
+    color_masked = np.empty(color.shape, color.dtype)
+    _blank_outside(np.ascontiguousarray(color).reshape(*mask.shape, -1),
+                   color_masked.reshape(*mask.shape, -1), depth, mask)
     return color_masked, depth
+
+
+@njit(cache=True)
+def _blank_outside(color: NDArray[np.uint8], out: NDArray[np.uint8],
+                   depth: NDArray[np.float32], mask: NDArray[np.bool_]) -> None:
+    """`apply_mask` in one pass: `out` = `color` inside the mask, 0 outside; `depth` NaN
+    outside (in place)."""
+    h, w, c = color.shape
+    for r in range(h):
+        for x in range(w):
+            if mask[r, x]:
+                for k in range(c):
+                    out[r, x, k] = color[r, x, k]
+            else:
+                for k in range(c):
+                    out[r, x, k] = 0
+                depth[r, x] = np.nan

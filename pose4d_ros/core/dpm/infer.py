@@ -34,6 +34,7 @@ from numpy.typing import NDArray
 from pose4d_ros.core.camera import Intrinsics, cad60_intrinsics
 from pose4d_ros.core.dpm.dt import dt2d
 from pose4d_ros.core.dpm.model import PartModel
+from pose4d_ros.core.foreground import apply_mask
 from pose4d_ros.core.hog import Level, depth_image, feature_pyramid
 
 
@@ -459,15 +460,16 @@ class Detector:
         if col.ndim == 2:
             col = col[:, :, None]
         dep = None
+        keep = mask[sl] if m.masked_input and mask is not None else None
         if m.channels == 'rgbd':
             dcrop = (np.full(col.shape[:2], np.nan, np.float32) if depth_m is None
                      else np.asarray(depth_m, np.float32)[sl])
-            if m.masked_input and mask is not None:
-                dcrop = np.where(mask[sl], dcrop, np.float32(np.nan))
+            if keep is not None:
+                col, dcrop = apply_mask(col, dcrop, keep)
             dep = depth_image(dcrop, m.depth_encoding, near_m=m.depth_range_m[0],
                               far_m=m.depth_range_m[1])
-        if m.masked_input and mask is not None:
-            col = np.where(mask[sl][:, :, None], col, np.zeros((), col.dtype))
+        elif keep is not None:
+            col, _ = apply_mask(col, np.zeros(keep.shape, np.float32), keep)
         fh, fw = m.filter_shape
         pad = (fh // 2 + 1, fw // 2 + 1)
         return feature_pyramid(col, dep, plan.scales, sbin=m.sbin, pad=pad,
