@@ -269,6 +269,8 @@ def test_pose4d_synth_writes_cad60_that_reads_back(tmp_path: Path) -> None:
     (['--frames', '0'], '--frames must be >= 1'),
     (['--occluders', '1.5'], '--occluders must be in'),
     (['--start', '100'], 'beyond the take'),
+    (['--actions', 'fly'], 'none of the takes has any of them'),
+    (['--turn', '45', '4'], 'turn_deg must be lo <= hi'),
 ])
 def test_pose4d_synth_bad_input_exits_2_and_leaves_nothing(tmp_path: Path, capsys, extra,
                                                            message: str) -> None:
@@ -367,3 +369,17 @@ def test_pose4d_synth_staging_options(tmp_path: Path) -> None:
     assert info['stature_m'] == [1.8, 1.8] and info['turn_deg'] == [45.0, 45.0]
     video = info['videos'][0]
     assert video['stature_m'] == 1.8 and 3.2 < video['distance_m'] < 3.8
+
+
+def test_windows_spread_over_the_named_actions(tmp_path: Path) -> None:
+    ut = tmp_path / 'ut'
+    write_utkinect(ut)
+    motion = synth_video.load_takes(ut, ['s01_e01'])[0]
+    a0, b = motion.actions['waveHands']
+    plans = synth_video.plan_videos(motion, seed=4, videos=3, frames=5, stride=2,
+                                    actions=['waveHands', 'pickUp'])  # s01_e01 never picks up
+    assert [p.window for p in plans] == [0, 1, 2]
+    assert all(a0 <= p.indices[0] and p.indices[-1] <= b for p in plans)
+    assert plans[0].indices[0] == a0 and plans[-1].indices[-1] == b
+    assert {p.activity for p in plans} == {'waveHands'}
+    assert synth_video.plan_videos(motion, seed=4, actions=['sitDown']) == []

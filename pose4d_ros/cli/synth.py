@@ -46,6 +46,9 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
                    help='seconds into each take where the first window starts')
     p.add_argument('--videos-per-take', type=int, default=1,
                    help='windows per take, spread evenly from --start to the end')
+    p.add_argument('--actions', default=None,
+                   help='comma list of UTKinect actions (waveHands, sitDown, ...): the windows '
+                        'of each take are spread over each of these actions instead')
     p.add_argument('--body-per', choices=('video', 'subject'), default='video',
                    help='a new random body for every video, or one per UTKinect subject')
     # defaults: `synth.video.Staging` (imported in `run`, to keep `pose4d --help` fast)
@@ -140,7 +143,9 @@ def run(args: argparse.Namespace) -> int:
     motions = video.load_takes(args.utkinect, names)
     plans = [plan for m in motions for plan in video.plan_videos(
         m, seed=args.seed, videos=args.videos_per_take, frames=args.frames, stride=args.stride,
-        start_s=args.start)]
+        start_s=args.start, actions=args.actions.split(',') if args.actions else None)]
+    if not plans:
+        raise ValueError(f'--actions {args.actions}: none of the takes has any of them')
     by_take = {m.name: m for m in motions}
     total = sum(p.n_frames for p in plans)
 
@@ -183,6 +188,7 @@ def run(args: argparse.Namespace) -> int:
             'command': ' '.join(sys.argv),
             'seed': args.seed, 'takes': names, 'frames': args.frames, 'stride': args.stride,
             'start_s': args.start, 'videos_per_take': args.videos_per_take,
+            'actions': args.actions,
             'body_per': args.body_per, 'occluders': args.occluders,
             'stature_m': list(staging.stature_m), 'distance_m': list(staging.distance_m),
             'turn_deg': list(staging.turn_deg),

@@ -19,7 +19,7 @@ Video ids (10 digits): subject (2), take (2), window (2), seed modulo 10000 (4).
 
 from __future__ import annotations
 
-from collections.abc import Callable, Iterator
+from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -198,9 +198,12 @@ class VideoPlan:
 
 
 def plan_videos(motion: TakeMotion, *, seed: int, videos: int = 1, frames: int = 60,
-                stride: int = 1, start_s: float = 0.0) -> list[VideoPlan]:
+                stride: int = 1, start_s: float = 0.0,
+                actions: Sequence[str] | None = None) -> list[VideoPlan]:
     """Split a take into `videos` windows of `frames` frames (every `stride`-th at 30 fps),
-    spread evenly from `start_s` seconds to the end (windows shrink if the take is short)."""
+    spread evenly from `start_s` seconds to the end (windows shrink if the take is short).
+    With `actions`, `videos` windows are spread over each named action of the take instead
+    (from `start_s` on; actions the take lacks give none), numbered one after the other."""
     if videos < 1 or frames < 1 or stride < 1:
         raise ValueError(f'videos, frames and stride must be >= 1, got {videos}, {frames}, '
                          f'{stride}')
@@ -211,20 +214,25 @@ def plan_videos(motion: TakeMotion, *, seed: int, videos: int = 1, frames: int =
     if first >= total:
         raise ValueError(f'{motion.name}: start {start_s} s is beyond the take '
                          f'({total / FPS:.1f} s)')
-    n = min(frames, (total - 1 - first) // stride + 1)
-    span = (n - 1) * stride + 1
-    free = total - first - span
-    plans = []
-    for w in range(videos):
-        start = first + (int(round(w * free / (videos - 1))) if videos > 1 else 0)
-        window = (start, start + span - 1)
-        overlap = {a: min(b, window[1]) - max(a0, window[0]) + 1
-                   for a, (a0, b) in motion.actions.items()}
-        best = max(overlap, key=overlap.get, default=None)
-        activity = best if best is not None and overlap[best] > 0 else 'random'
-        vid = f'{motion.subject:02d}{motion.take:02d}{w % 100:02d}{seed % 10000:04d}'
-        plans.append(VideoPlan(motion.name, motion.subject, motion.take, w, start, n, stride,
-                               seed, vid, activity))
+    spans = [(first, total - 1)] if actions is None else [
+        (max(a0, first), b) for a in actions if a in motion.actions
+        for a0, b in [motion.actions[a]] if b >= max(a0, first)]
+    plans: list[VideoPlan] = []
+    for lo, hi in spans:
+        n = min(frames, (hi - lo) // stride + 1)
+        span = (n - 1) * stride + 1
+        free = hi + 1 - lo - span
+        for k in range(videos):
+            w = len(plans)
+            start = lo + (int(round(k * free / (videos - 1))) if videos > 1 else 0)
+            window = (start, start + span - 1)
+            overlap = {a: min(b, window[1]) - max(a0, window[0]) + 1
+                       for a, (a0, b) in motion.actions.items()}
+            best = max(overlap, key=overlap.get, default=None)
+            activity = best if best is not None and overlap[best] > 0 else 'random'
+            vid = f'{motion.subject:02d}{motion.take:02d}{w % 100:02d}{seed % 10000:04d}'
+            plans.append(VideoPlan(motion.name, motion.subject, motion.take, w, start, n,
+                                   stride, seed, vid, activity))
     return plans
 
 
