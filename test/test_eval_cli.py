@@ -133,6 +133,8 @@ def test_eval_on_an_lspet_layout_scores_elbows_and_knees(tmp_path: Path) -> None
     (['eval', '{tmp}/nothing', '--json', '{tmp}/t.json'], 'nothing'),
     (['train', '{set}', '--out', '{tmp}/m.txt'], 'must end in .npz'),
     (['bench', '{set}', '--json', '{tmp}/b.json', '--frames', '0'], '--frames'),
+    (['eval', '{set}', '--json', '{tmp}/t.json', '--person-scales', '1.2,1'],
+     'factors must be ascending'),
 ])
 def test_errors_name_the_file_and_exit_2(tiny_set: Path, tmp_path: Path, capsys, argv,
                                          message: str) -> None:

@@ -22,6 +22,7 @@ from dataclasses import dataclass, field
 from pose4d_ros.cli._dpm import ms_stats
 from pose4d_ros.core.dpm.infer import SearchConfig
 from pose4d_ros.core.dpm.model import PartModel
+from pose4d_ros.core.dpm.scale import ScaleConfig
 from pose4d_ros.core.joints import MISSING, JointSet
 from pose4d_ros.core.metrics import score_joint_sets
 from pose4d_ros.core.pipeline import STAGES, DetectorStage, FramePipeline
@@ -52,11 +53,11 @@ class Row:
 
 
 def pipeline_rows(frames: Iterable[Frame], model: PartModel, *, name: str | None = None,
-                  search: SearchConfig | None = None, sequence: bool = True
-                  ) -> dict[str, Row]:
+                  search: SearchConfig | None = None, scale: ScaleConfig | None = None,
+                  sequence: bool = True) -> dict[str, Row]:
     """The rows of a part model over the frames ({`name` (default: its channels) + suffix:
     row}); `sequence` False puts each frame on its own."""
-    pipeline = FramePipeline(DetectorStage(model, search=search))
+    pipeline = FramePipeline(DetectorStage(model, search=search, scale=scale))
     depth = model.channels == 'rgbd'
     suffixes = tuple(ROW_STAGES) if depth and sequence else ('',)
     rows = {s: Row() for s in suffixes}

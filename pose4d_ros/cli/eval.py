@@ -37,6 +37,7 @@ from pose4d_ros.cli._pipeline_eval import Row, peer_rows, pipeline_rows, score_r
 from pose4d_ros.cli._progress import progress
 from pose4d_ros.core.dpm.infer import SearchConfig
 from pose4d_ros.core.dpm.model import PartModel, load_model
+from pose4d_ros.core.dpm.scale import ScaleConfig
 from pose4d_ros.core.dpm.threads import set_blas_threads
 from pose4d_ros.core.files import write_json
 from pose4d_ros.core.skeleton import JOINT_GROUPS
@@ -85,6 +86,14 @@ def default_models(kind: str) -> list[str]:
     return ['lspet_rgb_14'] if kind == 'lspet' else ['rgbd_10', 'rgb_10']
 
 
+def _factors(text: str) -> tuple[float, ...]:
+    """'0.87,1,1.15' -> (0.87, 1.0, 1.15)"""
+    try:
+        return tuple(float(v) for v in text.split(','))
+    except ValueError:
+        raise argparse.ArgumentTypeError(f'{text!r} is not a comma list of numbers') from None
+
+
 def add_parser(subparsers: argparse._SubParsersAction) -> None:
     p = subparsers.add_parser(
         'eval', help="run the core over a labelled set and print the paper's table",
@@ -101,6 +110,9 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument('--max-frames', type=int, default=None)
     p.add_argument('--levels', type=int, default=SearchConfig.n_levels,
                    help='pyramid levels searched around the depth-predicted scale (1-3)')
+    p.add_argument('--person-scales', type=_factors, default=ScaleConfig.factors,
+                   metavar='F,F,...', help="factors on the depth-predicted person scale, one "
+                   'chosen per track (core.dpm.scale); 1 = the predicted scale only')
     p.add_argument('--blas-threads', type=int, default=1)
     p.add_argument('--peer', choices=PEERS,
                    help='one more row: the peer on the same frames (needs `make peer`)')
@@ -142,7 +154,8 @@ def table_rows(args: argparse.Namespace, kind: str, models: list[PartModel],
         while name in rows:
             name += "'"
         rows.update(pipeline_rows(progress(frames, name), m, name=name, sequence=sequence,
-                                  search=SearchConfig(n_levels=args.levels)))
+                                  search=SearchConfig(n_levels=args.levels),
+                                  scale=ScaleConfig(factors=args.person_scales)))
     if peer is not None:
         rows.update(peer_rows(progress(frames, peer.name), peer, sequence=sequence))
     for name, row in rows.items():
