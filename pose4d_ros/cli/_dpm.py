@@ -3,6 +3,7 @@ and thread facts, training metadata."""
 
 from __future__ import annotations
 
+import argparse
 import os
 import platform
 import subprocess
@@ -19,6 +20,14 @@ from pose4d_ros.datasets.sources import open_source, parse_range
 
 def log(message: str) -> None:
     print(message, file=sys.stderr, flush=True)
+
+
+def factor_list(text: str) -> tuple[float, ...]:
+    """argparse type: '0.87,1,1.15' -> (0.87, 1.0, 1.15)."""
+    try:
+        return tuple(float(v) for v in text.split(','))
+    except ValueError:
+        raise argparse.ArgumentTypeError(f'{text!r} is not a comma list of numbers') from None
 
 
 def load_frames(sources: list[str], *, frame_range: str | None = None, stride: int = 1,

@@ -37,11 +37,12 @@ from pathlib import Path
 
 import numpy as np
 
-from pose4d_ros.cli._dpm import load_frames, machine, ms_stats
+from pose4d_ros.cli._dpm import factor_list, load_frames, machine, ms_stats
 from pose4d_ros.cli._progress import progress
 from pose4d_ros.cli.eval import default_models
 from pose4d_ros.core.dpm.infer import SearchConfig
 from pose4d_ros.core.dpm.model import load_model
+from pose4d_ros.core.dpm.scale import ScaleConfig
 from pose4d_ros.core.dpm.threads import set_blas_threads
 from pose4d_ros.core.files import write_json
 from pose4d_ros.datasets.frame import Frame
@@ -64,6 +65,9 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument('--warmup', type=int, default=10, help='frames run before timing')
     p.add_argument('--levels', type=int, default=SearchConfig.n_levels,
                    help='pyramid levels searched around the depth-predicted scale (1-3)')
+    p.add_argument('--person-scales', type=factor_list, default=ScaleConfig.factors,
+                   metavar='F,F,...', help="factors on the depth-predicted person scale, one "
+                   'chosen per track (core.dpm.scale); 1 = the predicted scale only')
     p.add_argument('--blas-threads', type=int, default=1, help='OpenBLAS threads')
     p.add_argument('--peer', choices=PEERS,
                    help='also time the peer on the same frames (needs `make peer`)')
@@ -93,7 +97,8 @@ def run(args: argparse.Namespace) -> int:
         use_depth = model.channels == 'rgbd'
         if use_depth and any(f.depth_m is None for f in frames):
             raise ValueError(f'{args.source}: no depth images for the rgbd model')
-        pipeline = FramePipeline(DetectorStage(model, search=SearchConfig(n_levels=args.levels)))
+        pipeline = FramePipeline(DetectorStage(model, search=SearchConfig(n_levels=args.levels),
+                                               scale=ScaleConfig(factors=args.person_scales)))
         # per clock: each stage's ms per frame, and their sum (one frame through all four)
         ms = {clock: {k: [] for k in (*STAGES, 'total')} for clock in ('cpu', 'wall')}
         for i, f in enumerate(progress(frames, 'bench')):

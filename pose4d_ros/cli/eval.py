@@ -32,7 +32,7 @@ from pathlib import Path
 
 import numpy as np
 
-from pose4d_ros.cli._dpm import load_frames, log
+from pose4d_ros.cli._dpm import factor_list, load_frames, log
 from pose4d_ros.cli._pipeline_eval import Row, peer_rows, pipeline_rows, score_rows
 from pose4d_ros.cli._progress import progress
 from pose4d_ros.core.dpm.infer import SearchConfig
@@ -86,14 +86,6 @@ def default_models(kind: str) -> list[str]:
     return ['lspet_rgb_14'] if kind == 'lspet' else ['rgbd_10', 'rgb_10']
 
 
-def _factors(text: str) -> tuple[float, ...]:
-    """'0.87,1,1.15' -> (0.87, 1.0, 1.15)"""
-    try:
-        return tuple(float(v) for v in text.split(','))
-    except ValueError:
-        raise argparse.ArgumentTypeError(f'{text!r} is not a comma list of numbers') from None
-
-
 def add_parser(subparsers: argparse._SubParsersAction) -> None:
     p = subparsers.add_parser(
         'eval', help="run the core over a labelled set and print the paper's table",
@@ -110,7 +102,7 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument('--max-frames', type=int, default=None)
     p.add_argument('--levels', type=int, default=SearchConfig.n_levels,
                    help='pyramid levels searched around the depth-predicted scale (1-3)')
-    p.add_argument('--person-scales', type=_factors, default=ScaleConfig.factors,
+    p.add_argument('--person-scales', type=factor_list, default=ScaleConfig.factors,
                    metavar='F,F,...', help="factors on the depth-predicted person scale, one "
                    'chosen per track (core.dpm.scale); 1 = the predicted scale only')
     p.add_argument('--blas-threads', type=int, default=1)
