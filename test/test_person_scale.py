@@ -66,3 +66,15 @@ def test_nothing_found_at_the_chosen_factor_uses_what_was_found():
 def test_bad_configuration_is_refused(bad: dict):
     with pytest.raises(ValueError):
         ScaleConfig(**bad)
+
+
+def test_a_few_frames_without_the_person_keep_the_track():
+    scale = PersonScale(CFG)
+    _run(scale, lambda f: f, 9)
+    for k in range(9, 14):  # 5 frames (0.17 s) in which the person is not found
+        scale.factors(k / 30)
+    assert scale.factors(14 / 30) == (1.25,)
+    scale.update({1.25: 1.0})
+    for k in range(15, 45):  # then a whole second without the person: a new track
+        scale.factors(k / 30)
+    assert scale.factors(45 / 30) == CFG.factors

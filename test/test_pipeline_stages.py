@@ -149,3 +149,21 @@ def test_reorder_and_bones():
     assert js.source[SKELETON_14.index('head')] == cj.DETECTED
     bones = limb_bones()
     assert len(bones) == 14 and all(0 <= a < 14 and 0 <= b < 14 for a, b in bones)
+
+
+def test_foreground_holds_the_person_through_a_frame_or_two_without_one(monkeypatch):
+    from pose4d_ros.core import foreground
+    from pose4d_ros.core import pipeline as pl
+    from pose4d_ros.core.pipeline import ForegroundStage, warm_up_frame
+
+    color, depth, person = warm_up_frame(INTR)
+    stage = ForegroundStage()
+    first, _, _ = stage.step(color, depth, INTR)
+    assert first.found and (first.mask & person).sum() > 0.9 * person.sum()
+    monkeypatch.setattr(pl, 'segment', lambda depth_m, intrinsics, **kw: foreground.segment(
+        np.full_like(depth_m, np.nan), intrinsics, **kw))  # the segmentation fails
+    held = [stage.step(color, depth, INTR)[0] for _ in range(ForegroundStage.HOLD_FRAMES + 1)]
+    assert all(fg.found for fg in held[:-1]) and not held[-1].found
+    assert (held[0].mask & person).sum() > 0.9 * person.sum()
+    assert held[0].mask.sum() < 1.5 * first.mask.sum()  # grown a little, not the background
+    assert held[0].depth_m == pytest.approx(first.depth_m, abs=0.05)

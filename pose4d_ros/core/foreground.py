@@ -1036,6 +1036,30 @@ def _region(g: NDArray[np.uint8], level: int, seed: tuple[int, int], connectivit
     return ff[ry + 1:ry + rh + 1, rx + 1:rx + rw + 1] > 0, (rx, ry, rx + rw, ry + rh)
 
 
+def hold(previous: ForegroundResult, depth_m: NDArray[np.floating], *, grow_px: int = 3,
+         depth_tol_m: float = 0.4, keep: float = 0.6) -> ForegroundResult:
+    """The previous frame's person carried into a frame in which `segment` found none (its
+    regions fail a rule for a frame or two, seen on held-out videos): the previous mask grown
+    by `grow_px`, where this frame's depth lies within `depth_tol_m` of the previous person's
+    median depth. Not found when that keeps less than `keep` of the previous mask's pixels.
+
+    Parameters
+    ----------
+    previous : a found result of an earlier frame.
+    depth_m : (H, W) float32 metres, NaN = no reading: this frame's depth.
+    """
+    k = 2 * grow_px + 1
+    grown = cv2.dilate(previous.mask.astype(np.uint8), np.ones((k, k), np.uint8)) > 0
+    with np.errstate(invalid='ignore'):
+        mask = grown & (np.abs(np.asarray(depth_m) - previous.depth_m) <= depth_tol_m)
+    if not np.count_nonzero(mask) >= keep * previous.area_px:
+        return _not_found(mask.shape, REASON_NO_PERSON)
+    rows, cols = np.flatnonzero(mask.any(axis=1)), np.flatnonzero(mask.any(axis=0))
+    return replace(previous, mask=mask, box=(int(cols[0]), int(rows[0]), int(cols[-1]) + 1,
+                                             int(rows[-1]) + 1),
+                   depth_m=float(np.nanmedian(np.asarray(depth_m)[mask])))
+
+
 def apply_mask(color: NDArray[np.uint8], depth_m: NDArray[np.floating],
                mask: NDArray[np.bool_]) -> tuple[NDArray[np.uint8], NDArray[np.float32]]:
     """Blank colour and depth outside the person's mask.

@@ -39,7 +39,13 @@ from pose4d_ros.core.camera import (
 from pose4d_ros.core.dpm.infer import Detector, SearchConfig
 from pose4d_ros.core.dpm.model import PartModel
 from pose4d_ros.core.dpm.scale import PersonScale, ScaleConfig
-from pose4d_ros.core.foreground import ForegroundConfig, ForegroundResult, apply_mask, segment
+from pose4d_ros.core.foreground import (
+    ForegroundConfig,
+    ForegroundResult,
+    apply_mask,
+    hold,
+    segment,
+)
 from pose4d_ros.core.joints import JointSet
 from pose4d_ros.core.kinematics import IkConfig, IkFlag, LimbLengths, infer_middle_joints
 from pose4d_ros.core.skeleton import LIMBS, PARTS_10, SKELETON_14, PartTree, tree_for
@@ -90,12 +96,17 @@ class ForegroundStage:
     Parameters
     ----------
     config : the foreground configuration (`core.foreground.ForegroundConfig`).
-    temporal : pass each frame's result (its floor and its box) to the next frame.
+    temporal : pass each frame's result (its floor and its box) to the next frame, and hold
+        the person (`core.foreground.hold`) for up to `HOLD_FRAMES` frames in which
+        `segment` finds none.
     """
+
+    HOLD_FRAMES = 2
 
     def __init__(self, config: ForegroundConfig | None = None, *, temporal: bool = True) -> None:
         self.configure(config, temporal=temporal)
         self.previous: ForegroundResult | None = None
+        self.held = 0
 
     def configure(self, config: ForegroundConfig | None = None, *, temporal: bool = True
                   ) -> None:
@@ -105,6 +116,7 @@ class ForegroundStage:
 
     def reset(self) -> None:
         self.previous = None
+        self.held = 0
 
     def warm_up(self, intrinsics: Intrinsics) -> None:
         """Run on `warm_up_frame` twice (the second time with a previous frame), at the
@@ -127,7 +139,13 @@ class ForegroundStage:
                              f'{depth_m.shape[1]}x{depth_m.shape[0]} (not registered?)')
         fg = segment(depth_m, intrinsics, config=self.config,
                      previous=self.previous if self.temporal else None)
-        self.previous = fg if fg.found else None
+        if fg.found or not self.temporal:
+            self.previous, self.held = (fg if fg.found else None), 0
+        elif self.previous is not None and self.held < self.HOLD_FRAMES:
+            fg = hold(self.previous, depth_m)
+            self.held += 1
+        else:
+            self.previous = None
         return (fg, *apply_mask(color, depth_m, fg.mask))
 
 
@@ -190,7 +208,8 @@ class DetectorStage:
         """The detected parts of one frame (all MISSING when there is no person to search).
 
         `stamp_s` (the frame's time, seconds) tells the person's scale when a new track starts
-        (`core.dpm.scale.PersonScale`); without it, only losing the person does.
+        (`core.dpm.scale.PersonScale`: the person unseen for a while); without it, only
+        `reset` does.
         `last_flags` tells why a result is doubtful ('no_person', 'low_score', 'no_depth').
         ValueError when `intrinsics` are for another image size.
         """
@@ -201,7 +220,6 @@ class DetectorStage:
         found = {f: self.detector.detect(color, depth_m, mask=mask, intrinsics=intrinsics,
                                          scale=f) for f in factors}
         if not any(found.values()):
-            self.person_scale.reset()
             self.last_flags = ('no_person',)
             return JointSet.missing(self.names)
         if scaled:

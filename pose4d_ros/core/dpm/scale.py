@@ -57,7 +57,8 @@ class ScaleConfig:
 class PersonScale:
     """The scale factor of the tracked person: `factors(stamp)` says which factors to search
     in a frame, `update(scores)` takes their best pose scores and returns the factor whose pose
-    to use. `reset()` when the person is lost."""
+    to use. A frame without the person (no `update`) changes nothing: the track ends when
+    the person has not been seen for `max_gap_s`, or on `reset()`."""
 
     def __init__(self, config: ScaleConfig | None = None) -> None:
         self.config = config or ScaleConfig()
@@ -66,17 +67,18 @@ class PersonScale:
     def reset(self) -> None:
         self.mean: dict[float, float] = {}
         self.frames = 0
-        self.stamp: float | None = None
+        self.seen: float | None = None  # when the person was last seen
+        self.stamp: float | None = None  # this frame's time
         self.chosen = 1.0 if 1.0 in self.config.factors else self.config.factors[0]
 
     def factors(self, stamp_s: float | None = None) -> tuple[float, ...]:
-        """The factors to search in this frame (a gap of more than `max_gap_s`, or time going
-        back, starts a new track first)."""
+        """The factors to search in this frame (more than `max_gap_s` since the person was
+        last seen, or time going back, starts a new track first)."""
         cfg = self.config
-        if stamp_s is not None:
-            if self.stamp is not None and not 0.0 <= stamp_s - self.stamp <= cfg.max_gap_s:
-                self.reset()
-            self.stamp = stamp_s
+        if stamp_s is not None and self.seen is not None and \
+                not 0.0 <= stamp_s - self.seen <= cfg.max_gap_s:
+            self.reset()
+        self.stamp = stamp_s
         if self.frames < cfg.warm_up_frames:
             return cfg.factors
         k = self.frames - cfg.warm_up_frames + 1
@@ -93,6 +95,8 @@ class PersonScale:
         (the chosen factor, unless it found nothing in this frame)."""
         warm = self.frames < self.config.warm_up_frames
         now = [f for f, s in scores.items() if math.isfinite(s)]
+        if now and self.stamp is not None:
+            self.seen = self.stamp
         for f in now:
             old = self.mean.get(f)
             # the plain mean while warming up (every factor searched), then a running mean

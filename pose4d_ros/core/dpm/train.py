@@ -204,6 +204,11 @@ def _fit_logistic(x: NDArray[np.float64], y: NDArray[np.float64], l2: float = 1e
     return beta
 
 
+# Fewest right and fewest wrong detections of a part for its logistic confidence (fewer: the
+# part's rate of being right)
+MIN_OUTCOMES = 30
+
+
 def calibrate(model: PartModel, samples: Sequence, *, use_depth: bool,
               progress: Progress | None = None, alpha: float = 0.1) -> PartModel:
     """Fit the per-part logistic confidence on detections of `samples` (a part is 'right' when
@@ -253,7 +258,9 @@ def calibrate(model: PartModel, samples: Sequence, *, use_depth: bool,
         yv = np.asarray(ys)
         for i in range(model.n_parts):
             sel = arr[:, 0] == i
-            if sel.sum() >= 10 and 0 < yv[sel].mean() < 1:
+            # a logistic needs both outcomes often enough: fitted on a handful of misses (a
+            # head is almost always right) it gives right parts a confidence near 0
+            if min(yv[sel].sum(), (1 - yv[sel]).sum()) >= MIN_OUTCOMES:
                 cal[i] = _fit_logistic(arr[sel, 1:], yv[sel])
             elif sel.any():
                 rate = float(np.clip(yv[sel].mean(), 0.01, 0.99))
