@@ -8,7 +8,6 @@ import numpy as np
 import pytest
 from numpy.testing import assert_allclose
 
-from pose4d_ros.cli._motion_eval import splat_capsules
 from pose4d_ros.core.camera import cad60_intrinsics, robust_depth
 from pose4d_ros.core.kinematics import (
     DEFAULT_LIMB_LENGTHS_M,
@@ -22,6 +21,7 @@ from pose4d_ros.core.kinematics import (
     solve_limb,
 )
 from pose4d_ros.core.skeleton import PARTS_10
+from pose4d_ros.synth.render import capsule_depth
 
 K = cad60_intrinsics()
 UPPER, LOWER = 0.28, 0.25
@@ -80,8 +80,8 @@ def arm_scene(rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray, np.ndar
         if mid[0] > shoulder[0] - 0.05 and end[0] > shoulder[0] - 0.1 and 0.6 < bend < 2.2:
             break
     torso = [[shoulder[0] - 0.2, shoulder[1] + 0.05, 2.22], [shoulder[0] - 0.2, 0.3, 2.22]]
-    depth = splat_capsules(np.array([[root, mid], [mid, end], torso]),
-                           np.array([0.045, 0.04, 0.13]), K, rng=rng)
+    depth = capsule_depth(np.array([[root, mid], [mid, end], torso]),
+                          np.array([0.045, 0.04, 0.13]), K, rng=rng)
     return root, mid, end, depth
 
 

@@ -383,3 +383,15 @@ def test_windows_spread_over_the_named_actions(tmp_path: Path) -> None:
     assert plans[0].indices[0] == a0 and plans[-1].indices[-1] == b
     assert {p.activity for p in plans} == {'waveHands'}
     assert synth_video.plan_videos(motion, seed=4, actions=['sitDown']) == []
+
+
+def test_capsule_depth() -> None:
+    k = cad60_intrinsics()
+    depth = synth.capsule_depth(np.array([[[0.0, -0.2, 2.0], [0.0, 0.2, 2.0]]]),
+                                np.array([0.05]), k)
+    assert depth.dtype == np.float32
+    u = int(round(k.cx))
+    assert_allclose(depth[int(round(k.cy)), u], 1.95, atol=0.002)  # the front surface
+    assert np.isnan(depth[5, 5])
+    width = np.isfinite(depth[int(round(k.cy))]).sum()
+    assert abs(width - 2 * k.fx * 0.05 / 2.0) <= 2

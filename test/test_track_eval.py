@@ -12,7 +12,6 @@ from numpy.testing import assert_allclose
 
 from pose4d_ros.cli import _motion_eval as me
 from pose4d_ros.cli.main import main
-from pose4d_ros.core.camera import cad60_intrinsics
 from pose4d_ros.core.kinematics import IkConfig
 from pose4d_ros.core.slqe import CvConfig, SlqeConfig
 from pose4d_ros.datasets.utkinect import UTKINECT_JOINTS, Take
@@ -103,24 +102,12 @@ def test_trackers_reduce_error_on_synthetic_motion(utkinect_dir: Path) -> None:
     assert res['cv']['coverage'] == 1.0
 
 
-def test_splat_capsules_depth() -> None:
-    k = cad60_intrinsics()
-    depth = me.splat_capsules(np.array([[[0.0, -0.2, 2.0], [0.0, 0.2, 2.0]]]),
-                              np.array([0.05]), k)
-    assert depth.dtype == np.float32
-    u = int(round(k.cx))
-    assert_allclose(depth[int(round(k.cy)), u], 1.95, atol=0.002)  # the front surface
-    assert np.isnan(depth[5, 5])
-    width = np.isfinite(depth[int(round(k.cy))]).sum()
-    assert abs(width - 2 * k.fx * 0.05 / 2.0) <= 2
-
-
 def test_ik_on_synthetic_motion(utkinect_dir: Path) -> None:
     segs = me.load_segments(utkinect_dir)
     lengths = me.take_lengths(segs, 'take')
     assert_allclose(lengths['s01_e01']['left_leg'], (0.45, 0.4), atol=0.01)
     prior = me.evaluate_ik(segs, lengths, stride=5)
-    depth = me.evaluate_ik(segs, lengths, depth='splat', stride=10,
+    depth = me.evaluate_ik(segs, lengths, depth='capsules', stride=10,
                            config=IkConfig(length_scales=(1.0,)))
     assert prior['flags']['missing'] == 0 and depth['flags']['depth'] > 0
     assert depth['average'] < 40.0, depth
@@ -144,7 +131,7 @@ def test_track_eval_command(utkinect_dir: Path, tmp_path: Path) -> None:
         assert table['slqe']['average'] < table['input']['average']
     assert set(res['ik']['test']) == {'prior, lengths take', 'prior, lengths fixed',
                                       'prior shrunk, lengths take',
-                                      'depth splat, lengths take'}
+                                      'depth capsules, lengths take'}
     assert not list(out.parent.glob('.track.json.*'))  # no temporary file left
 
 
@@ -168,7 +155,7 @@ def test_targets_on_real_motion_subset() -> None:
     assert res['slqe']['average'] < res['cv']['average']
     lengths = me.take_lengths(segs, 'take')
     prior = me.evaluate_ik(segs, lengths, stride=15)
-    depth = me.evaluate_ik(segs, lengths, depth='splat', stride=30)
+    depth = me.evaluate_ik(segs, lengths, depth='capsules', stride=30)
     # The IK target (<= 60 mm) holds on the whole test set, not on every take: here only
     # that depth support beats the prior alone.
     assert depth['average'] < prior['average'], (depth, prior)

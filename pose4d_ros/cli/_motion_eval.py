@@ -54,8 +54,7 @@ from pose4d_ros.datasets.utkinect import (
     resample,
     to_optical,
 )
-from pose4d_ros.synth.kinect import KinectModel
-from pose4d_ros.synth.render import PARENTS, random_body, render
+from pose4d_ros.synth.render import PARENTS, capsule_depth, random_body, render
 
 # Index of each UTKinect joint by name.
 _UT = {n: i for i, n in enumerate(UTKINECT_JOINTS)}
@@ -420,7 +419,7 @@ LIMB_JOINTS: dict[str, tuple[str, str, str]] = {
 }
 
 # Bones of the stand-in depth body: (joint a, joint b, radius in metres).
-SPLAT_BONES: tuple[tuple[str, str, float], ...] = (
+CAPSULE_BONES: tuple[tuple[str, str, float], ...] = (
     ('head', 'shoulder_center', 0.09), ('shoulder_center', 'spine', 0.13),
     ('spine', 'hip_center', 0.13), ('left_shoulder', 'right_shoulder', 0.06),
     ('left_hip', 'right_hip', 0.08), ('left_shoulder', 'left_hip', 0.08),
@@ -436,82 +435,14 @@ SPLAT_BONES: tuple[tuple[str, str, float], ...] = (
 )
 
 
-def splat_capsules(ends: NDArray[np.floating], radii: NDArray[np.floating],
-                   intrinsics: Intrinsics, *, step_m: float = 0.01,
-                   rng: np.random.Generator | None = None) -> NDArray[np.float32]:
-    """Render capsules into a depth image by splatting spheres along their axes (z-buffer).
-
-    A simple stand-in for a body renderer: each capsule is a chain of spheres every `step_m`;
-    a sphere of radius R at depth z covers the pixels within ``f R / z`` of its centre's
-    projection with the depth of its front surface.
-
-    Parameters
-    ----------
-    ends : (K, 2, 3) float metres, optical frame: the two ends of each capsule's axis.
-    radii : (K,) float metres.
-    intrinsics : the camera.
-    step_m : spacing of the spheres, metres.
-    rng : if given, the renderer's Kinect v1 axial noise (`KinectModel.axial_noise_m`) is
-        added.
-
-    Returns
-    -------
-    (H, W) float32 metres, NaN where nothing was rendered.
-    """
-    ends = np.asarray(ends, dtype=np.float64).reshape(-1, 2, 3)
-    radii = np.asarray(radii, dtype=np.float64).reshape(-1)
-    if len(radii) != len(ends):
-        raise ValueError(f'{len(ends)} capsules but {len(radii)} radii')
-    h, w = intrinsics.height, intrinsics.width
-    centres, rads = [], []
-    for (a, b), rad in zip(ends, radii, strict=True):
-        if not (np.isfinite(a).all() and np.isfinite(b).all()):
-            continue
-        n = max(int(np.ceil(np.linalg.norm(b - a) / step_m)), 1)
-        t = np.linspace(0.0, 1.0, n + 1)[:, None]
-        centres.append(a + t * (b - a))
-        rads.append(np.full(n + 1, rad))
-    zbuf = np.full(h * w, np.inf)
-    if centres:
-        c = np.concatenate(centres)
-        r = np.concatenate(rads)
-        front = c[:, 2] > r
-        c, r = c[front], r[front]
-        uv = project(c, intrinsics)
-        half = np.ceil(intrinsics.fx * r / c[:, 2]).astype(np.int64)
-        # Spheres of one patch size at a time, so small spheres do not pay for big patches.
-        for size in np.unique(half):
-            sel = np.flatnonzero(half == size)
-            off = np.arange(-size, size + 1)
-            du, dv = np.meshgrid(off, off)
-            du, dv = du.reshape(-1), dv.reshape(-1)
-            cu = np.rint(uv[sel, 0])[:, None] + du[None]
-            cv = np.rint(uv[sel, 1])[:, None] + dv[None]
-            # Metric offset of each pixel's ray from the sphere centre, at the centre's depth.
-            z = c[sel, 2][:, None]
-            dx = (cu - intrinsics.cx) * z / intrinsics.fx - c[sel, 0][:, None]
-            dy = (cv - intrinsics.cy) * z / intrinsics.fy - c[sel, 1][:, None]
-            rho2 = dx * dx + dy * dy
-            rr = r[sel][:, None]
-            ok = (rho2 < rr * rr) & (cu >= 0) & (cu < w) & (cv >= 0) & (cv < h)
-            depth = z - np.sqrt(np.maximum(rr * rr - rho2, 0.0))
-            idx = (cv[ok] * w + cu[ok]).astype(np.int64)
-            np.minimum.at(zbuf, idx, depth[ok])
-    out = np.where(np.isfinite(zbuf), zbuf, np.nan).reshape(h, w)
-    if rng is not None:
-        hit = np.isfinite(out)
-        out[hit] += rng.normal(0.0, 1.0, int(hit.sum())) * KinectModel().axial_noise_m(out[hit])
-    return out.astype(np.float32)
-
-
-def splat_body(joints: NDArray[np.floating], intrinsics: Intrinsics, *,
+def capsule_body(joints: NDArray[np.floating], intrinsics: Intrinsics, *,
                rng: np.random.Generator | None = None) -> NDArray[np.float32]:
     """A depth image of a capsule body on a UTKinect skeleton (20, 3), metres, optical frame."""
     j = np.asarray(joints, dtype=np.float64)
     idx = {n: i for i, n in enumerate(UTKINECT_JOINTS)}
-    ends = np.stack([[j[idx[a]], j[idx[b]]] for a, b, _ in SPLAT_BONES])
-    radii = np.array([r for _, _, r in SPLAT_BONES])
-    return splat_capsules(ends, radii, intrinsics, rng=rng)
+    ends = np.stack([[j[idx[a]], j[idx[b]]] for a, b, _ in CAPSULE_BONES])
+    radii = np.array([r for _, _, r in CAPSULE_BONES])
+    return capsule_depth(ends, radii, intrinsics, rng=rng)
 
 
 def take_lengths(segments: Sequence[Segment], mode: str) -> dict[str, dict[str, tuple]]:
@@ -700,13 +631,13 @@ def ik_frames(segments: Sequence[Segment], *, depth: str = 'none', stride: int =
               renderer: Callable | None = None) -> Iterator[IkFrame]:
     """The frames of an IK evaluation: (take, depth_m or None, mask or None, truth (20, 3)).
 
-    depth : 'none' (joint-limit prior only), 'splat' (a capsule body splatted on the real
-        skeleton with Kinect noise, `splat_body`; the real joints are the truth) or 'render'
+    depth : 'none' (joint-limit prior only), 'capsules' (capsules ray-cast on the real
+        skeleton with Kinect noise, `capsule_body`; the real joints are the truth) or 'render'
         (``renderer(take, joints (20, 3), rng) -> (depth_m, mask, truth (20, 3))``, e.g.
         `synth_renderer`, whose joints are the truth of its depth image).
     """
-    if depth not in ('none', 'splat', 'render'):
-        raise ValueError(f"depth must be 'none', 'splat' or 'render', got {depth!r}")
+    if depth not in ('none', 'capsules', 'render'):
+        raise ValueError(f"depth must be 'none', 'capsules' or 'render', got {depth!r}")
     if depth == 'render' and renderer is None:
         raise ValueError("depth='render' needs a renderer")
     if stride < 1:
@@ -716,8 +647,8 @@ def ik_frames(segments: Sequence[Segment], *, depth: str = 'none', stride: int =
         rng = segment_rng(seed, seg)
         take = seg.name.partition('/')[0]
         for frame in seg.joints[::stride]:
-            if depth == 'splat':
-                depth_m = splat_body(frame, intrinsics, rng=rng)
+            if depth == 'capsules':
+                depth_m = capsule_body(frame, intrinsics, rng=rng)
                 yield take, depth_m, np.isfinite(depth_m), frame
             elif depth == 'render':
                 depth_m, mask, truth = renderer(take, frame, rng)  # type: ignore[misc]

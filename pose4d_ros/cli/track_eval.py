@@ -6,7 +6,7 @@ input, a plain constant-velocity Kalman filter, the same filter with the innovat
 SLQE are scored by mean pixel error against the clean projection, on the training subjects and
 on the test subjects separately. IK: elbows and knees are hidden and inferred from the 3-D
 shoulders, hips, wrists and ankles, with the joint-limit prior alone and with depth support
-(a capsule body splatted on the real skeleton; the synthetic body renderer), scored in mm.
+(capsules ray-cast on the real skeleton; the synthetic body renderer), scored in mm.
 """
 
 from __future__ import annotations
@@ -175,7 +175,7 @@ def _run_ik(args: argparse.Namespace, train: list, test: list, say) -> dict:
         config = replace(config, arm_prior=prior['arm'][0], leg_prior=prior['leg'][0])
         out['prior_fit'] = prior
         say('tuning the depth cost on training frames (minutes)')
-        frames = list(me.ik_frames(train, depth='splat', stride=30, seed=args.seed))
+        frames = list(me.ik_frames(train, depth='capsules', stride=30, seed=args.seed))
         config, log = me.tune_ik_depth(frames, lengths['train']['take'], config,
                                        progress=say)
         out['tuning_log'] = log
@@ -198,9 +198,9 @@ def _run_ik(args: argparse.Namespace, train: list, test: list, say) -> dict:
                 segs, lengths[name][mode], config=config, stride=args.ik_stride)
         rows['prior shrunk, lengths take'] = me.evaluate_ik(
             segs, lengths[name]['take'], config=shrunk, stride=args.ik_stride)
-        say(f'IK on the {name} subjects, depth (splatted capsules on the real skeleton)')
-        rows['depth splat, lengths take'] = me.evaluate_ik(
-            segs, lengths[name]['take'], depth='splat', config=config,
+        say(f'IK on the {name} subjects, depth (capsules ray-cast on the real skeleton)')
+        rows['depth capsules, lengths take'] = me.evaluate_ik(
+            segs, lengths[name]['take'], depth='capsules', config=config,
             stride=args.depth_stride, seed=args.seed)
         if renderer is not None:
             render, render_lengths = renderer[name]

@@ -202,7 +202,7 @@ class IkConfig:
     The prior's directions (`arm_prior`, `leg_prior`) were fitted and the depth cost
     (`surface_offset_m`, `depth_scale_m`, `occluded_weight`, `unknown_cost`, `prior_weight`,
     `length_scales`, `scale_weight`) tuned on real Kinect motion of UTKinect subjects s01-s06
-    (`cli._motion_eval.fit_swivel_prior`, `tune_ik_depth`; depth from capsules splatted on the
+    (`cli._motion_eval.fit_swivel_prior`, `tune_ik_depth`; depth from capsules around the
     recorded skeletons): what ``pose4d track-eval --tune --seed 0`` finds, rounded.
 
     Attributes

@@ -245,6 +245,57 @@ class Primitives:
     mat: NDArray[np.int64]  # material per primitive, capsules first
 
 
+def _perpendiculars(cap_a: NDArray[np.float64], cap_b: NDArray[np.float64],
+                    fwd: NDArray[np.float64], up: NDArray[np.float64]) -> NDArray[np.float64]:
+    """Unit vectors perpendicular to each capsule's axis: `fwd` made perpendicular, or `up`
+    where the axis runs along `fwd` (the s = 0 direction of the capsules' texture)."""
+    axes = cap_b - cap_a
+    axes /= np.maximum(np.linalg.norm(axes, axis=1, keepdims=True), 1e-9)
+    e1 = fwd[None, :] - (axes @ fwd)[:, None] * axes
+    bad = np.linalg.norm(e1, axis=1) < 1e-3
+    e1[bad] = up - (axes[bad] @ up)[:, None] * axes[bad]
+    e1 /= np.maximum(np.linalg.norm(e1, axis=1, keepdims=True), 1e-9)
+    return e1
+
+
+def capsule_depth(ends: NDArray[np.floating], radii: NDArray[np.floating],
+                  intrinsics: Intrinsics, *, rng: np.random.Generator | None = None
+                  ) -> NDArray[np.float32]:
+    """The exact depth of a few capsules alone, ray-cast as the bodies are.
+
+    Parameters
+    ----------
+    ends : (K, 2, 3) float metres, optical frame: the two ends of each capsule's axis.
+    radii : (K,) float metres.
+    intrinsics : the camera.
+    rng : if given, the Kinect v1 axial noise (`KinectModel.axial_noise_m`) is added, without
+        the sensor's holes and quantisation (`render` has the whole sensor model).
+
+    Returns
+    -------
+    (H, W) float32 metres, NaN where nothing was hit.
+    """
+    ends = np.asarray(ends, dtype=np.float64).reshape(-1, 2, 3)
+    radii = np.asarray(radii, dtype=np.float64).reshape(-1)
+    if len(radii) != len(ends):
+        raise ValueError(f'{len(ends)} capsules but {len(radii)} radii')
+    keep = np.isfinite(ends).all(axis=(1, 2))
+    cap_a, cap_b, radii = ends[keep, 0], ends[keep, 1], radii[keep]
+    e1 = _perpendiculars(cap_a, cap_b, np.array([0.0, 0.0, -1.0]), np.array([0.0, -1.0, 0.0]))
+    h, w = intrinsics.height, intrinsics.width
+    zbuf = np.full((h, w), np.inf, np.float32)
+    raycast_body(intrinsics.fx, intrinsics.fy, intrinsics.cx, intrinsics.cy, zbuf,
+                 cap_a, cap_b, radii, e1, np.zeros((0, 3)), np.zeros((0, 3, 3)),
+                 np.zeros((0, 3)), np.full((h, w), -1, np.int32),
+                 np.zeros((h, w, 3), np.float32), np.zeros((h, w, 2), np.float32))
+    out = np.where(np.isfinite(zbuf), zbuf, np.float32(np.nan))
+    if rng is not None:
+        hit = np.isfinite(out)
+        out[hit] += (rng.normal(0.0, 1.0, int(hit.sum()))
+                     * KinectModel().axial_noise_m(out[hit])).astype(np.float32)
+    return out
+
+
 def body_primitives(joints: NDArray[np.float64], body: Body) -> Primitives:
     """The capsules and ellipsoids of `body` posed at `joints` ((20, 3) metres, optical)."""
     j = joints
@@ -270,12 +321,7 @@ def body_primitives(joints: NDArray[np.float64], body: Body) -> Primitives:
                      j[ft] + 0.03 * foot_dir, r['foot'], SHOES))
     cap_a = np.array([c[0] for c in caps])
     cap_b = np.array([c[1] for c in caps])
-    axes = cap_b - cap_a
-    axes /= np.maximum(np.linalg.norm(axes, axis=1, keepdims=True), 1e-9)
-    e1 = fwd[None, :] - (axes @ fwd)[:, None] * axes
-    bad = np.linalg.norm(e1, axis=1) < 1e-3
-    e1[bad] = up - (axes[bad] @ up)[:, None] * axes[bad]
-    e1 /= np.maximum(np.linalg.norm(e1, axis=1, keepdims=True), 1e-9)
+    e1 = _perpendiculars(cap_a, cap_b, fwd, up)
 
     ells: list[tuple[NDArray, NDArray, NDArray, int]] = []
     h_up = head_dir
