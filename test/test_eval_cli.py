@@ -5,10 +5,12 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
+import cv2
 import numpy as np
 import pytest
 from helpers import write_utkinect
 
+from pose4d_ros.cli import _plot
 from pose4d_ros.cli.main import main as pose4d_main
 from pose4d_ros.core.dpm import PartModel, load_model, save_model
 from pose4d_ros.core.skeleton import PARTS_10, PARTS_14
@@ -47,12 +49,19 @@ def test_eval_writes_the_table_json(tiny_set: Path, tmp_path: Path, capsys) -> N
     rgbd, rgb = tmp_path / 'rgbd.npz', tmp_path / 'rgb.npz'
     save_model(random_model(PARTS_10, 'rgbd', 0), rgbd)
     save_model(random_model(PARTS_10, 'rgb', 1), rgb)
-    out = tmp_path / 'table.json'
+    out, plot = tmp_path / 'table.json', tmp_path / 'plots' / 'pck.png'
     code = pose4d_main(['eval', str(tiny_set), '--json', str(out), '--model', str(rgbd),
-                        '--model', str(rgb)])
+                        '--model', str(rgb), '--plot', str(plot)])
     assert code == 0
     table = json.loads(out.read_text())
     assert table['frames'] == 8
+    figure = cv2.imread(str(plot))
+    assert figure is not None and figure.shape[1] == 3 * _plot.PANEL[0]
+    panels = figure[100:]  # below the title and the legend
+    for colour in _plot.COLOURS[:4]:  # a curve for every row (4 rows)
+        assert (panels == colour).all(axis=2).any(), colour
+    assert not (panels == _plot.COLOURS[4]).all(axis=2).any()  # and no other
+    assert not list(plot.parent.glob('.*'))  # no temporary file left
     # the rgbd model runs as the graph does: detector, + Kalman filter, + IK (elbows, knees)
     assert list(table['rows']) == ['rgbd', 'rgbd_kf', 'rgbd_kf_ik', 'rgb']
     for name, row in table['rows'].items():

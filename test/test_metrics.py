@@ -9,7 +9,7 @@ from numpy.testing import assert_allclose
 
 from pose4d_ros.core import joints as cj
 from pose4d_ros.core.joints import JointSet
-from pose4d_ros.core.metrics import reference_size, score_groups, score_joint_sets
+from pose4d_ros.core.metrics import curves, reference_size, score_groups, score_joint_sets
 from pose4d_ros.core.skeleton import SKELETON_14
 
 NAMES = ('head', 'left_shoulder', 'right_shoulder')
@@ -67,6 +67,25 @@ def test_3d_scores_the_joints_pck_counts() -> None:
     assert_allclose(table['error_mm']['head'], 30.0, atol=1e-9)
     assert_allclose(table['error_mm']['shoulder'], np.inf)  # 120 mm and inf: median inf
     assert_allclose(table['within_10cm']['shoulder'], 0.0)
+
+
+def test_curves_by_hand_and_equal_to_the_table_at_each_alpha() -> None:
+    case = three_joints()
+    # reference size: the box of the visible joints is 100 x 100 px in both frames; move the
+    # head 15 px off in frame 0 and the left shoulder 30 px off in frame 1
+    case['pred'][0, 0] += (15.0, 0.0)
+    case['pred'][1, 1] += (0.0, 30.0)
+    c = curves(**case, names=NAMES, alphas=np.array([0.0, 0.1, 0.2, 0.5]))
+    assert_allclose(c['pck']['head'], [50.0, 50.0, 100.0, 100.0])  # 0 px, then 15 px off
+    assert_allclose(c['pck']['shoulder'], [200 / 3, 200 / 3, 200 / 3, 100.0])  # 3 counted
+    for alpha in (0.1, 0.2, 0.5):
+        table = score_groups(**case, names=NAMES, alphas=(alpha,))
+        k = [0.0, 0.1, 0.2, 0.5].index(alpha)
+        for g in ('head', 'shoulder', 'average'):
+            assert_allclose(c['pck'][g][k], table['pck'][g])
+    # the 3-D distances behind within_10cm: head 30, 50 mm; shoulders 40, 120 mm and inf
+    assert_allclose(c['distance_mm']['head'], [30.0, 50.0], atol=1e-9)
+    assert_allclose(c['distance_mm']['shoulder'], [40.0, 120.0, np.inf], atol=1e-9)
 
 
 def test_without_3d_there_are_no_3d_metrics() -> None:

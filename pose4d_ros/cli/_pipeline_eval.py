@@ -19,12 +19,14 @@ from __future__ import annotations
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field
 
+import numpy as np
+
 from pose4d_ros.cli._dpm import ms_stats
 from pose4d_ros.core.dpm.infer import SearchConfig
 from pose4d_ros.core.dpm.model import PartModel
 from pose4d_ros.core.dpm.scale import ScaleConfig
 from pose4d_ros.core.joints import MISSING, JointSet
-from pose4d_ros.core.metrics import score_joint_sets
+from pose4d_ros.core.metrics import curves, joint_arrays, score_groups
 from pose4d_ros.core.pipeline import STAGES, DetectorStage, FramePipeline
 from pose4d_ros.core.skeleton import SKELETON_14
 from pose4d_ros.core.slqe import SlqeConfig
@@ -96,13 +98,27 @@ def score_rows(rows: dict[str, Row], frames: Sequence[Frame]
     read from a recording has none). A row scores the joints of the 14-joint skeleton it
     predicts (an `_ik` row all 14, elbows and knees included); ground truth outside the image
     is not scored."""
-    truths = [f.truth for f in frames]
-    sizes = [(f.color.shape[1], f.color.shape[0]) for f in frames]
     tables = {}
     for name, row in rows.items():
-        names = SKELETON_14 if name.endswith('_ik') else tuple(
-            n for n in SKELETON_14 if row.preds and n in row.preds[0].names)
-        tables[name] = score_joint_sets(row.preds, truths, names, image_sizes=sizes)
+        names, arrays = _arrays(name, row, frames)
+        tables[name] = score_groups(names=names, **arrays)
         if row.cpu_ms:
             tables[name]['cpu_ms'] = ms_stats(row.cpu_ms)
     return tables
+
+
+def curve_rows(rows: dict[str, Row], frames: Sequence[Frame], alphas: Sequence[float]
+               ) -> dict[str, dict]:
+    """`core.metrics.curves` of each row at `alphas`, on the joints `score_rows` scores."""
+    out = {}
+    for name, row in rows.items():
+        names, arrays = _arrays(name, row, frames)
+        out[name] = curves(names=names, alphas=np.asarray(alphas), **arrays)
+    return out
+
+
+def _arrays(name: str, row: Row, frames: Sequence[Frame]) -> tuple[tuple[str, ...], dict]:
+    names = SKELETON_14 if name.endswith('_ik') else tuple(
+        n for n in SKELETON_14 if row.preds and n in row.preds[0].names)
+    sizes = [(f.color.shape[1], f.color.shape[0]) for f in frames]
+    return names, joint_arrays(row.preds, [f.truth for f in frames], names, image_sizes=sizes)

@@ -1,6 +1,7 @@
 """`pose4d eval`: run the perception core over a labelled set and print the paper's table.
 
     pose4d eval SOURCE --json FILE [--model M ...] [--range A-B] [--peer mediapipe]
+                [--plot FILE.png]
 
 SOURCE is a CAD-60 directory (real or synthetic), a rosbag2 with ground truth (`pose4d
 cad60-to-bag`) or an LSPET root (with --range). Every row runs the live pipeline's own stages
@@ -30,16 +31,18 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+import cv2
 import numpy as np
 
+from pose4d_ros.cli import _plot
 from pose4d_ros.cli._dpm import factor_list, load_frames, log
-from pose4d_ros.cli._pipeline_eval import Row, peer_rows, pipeline_rows, score_rows
+from pose4d_ros.cli._pipeline_eval import Row, curve_rows, peer_rows, pipeline_rows, score_rows
 from pose4d_ros.cli._progress import progress
 from pose4d_ros.core.dpm.infer import SearchConfig
 from pose4d_ros.core.dpm.model import PartModel, load_model
 from pose4d_ros.core.dpm.scale import ScaleConfig
 from pose4d_ros.core.dpm.threads import set_blas_threads
-from pose4d_ros.core.files import write_json
+from pose4d_ros.core.files import write_atomic, write_json
 from pose4d_ros.core.skeleton import JOINT_GROUPS
 from pose4d_ros.datasets.sources import source_kind
 from pose4d_ros.models import model_path
@@ -108,6 +111,9 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument('--blas-threads', type=int, default=1)
     p.add_argument('--peer', choices=PEERS,
                    help='one more row: the peer on the same frames (needs `make peer`)')
+    p.add_argument('--plot', type=Path, metavar='FILE.png',
+                   help='also draw PCK against the threshold (0 to 0.5) per joint group, one '
+                        'curve per row, and the 3-D error distribution')
     p.set_defaults(func=run)
 
 
@@ -119,8 +125,10 @@ def run(args: argparse.Namespace) -> int:
     models = [load_model(model_path(m)) for m in (args.model or default_models(kind))]
     # the peer first: without its venv, stop before any work
     peer = MediaPipePeer() if args.peer else None
+    if args.plot is not None and args.plot.suffix.lower() != '.png':
+        raise ValueError(f'--plot {args.plot}: the figure is a PNG file (.png)')
     try:
-        rows, frames = table_rows(args, kind, models, peer)
+        rows, frames, curves = table_rows(args, kind, models, peer)
     finally:
         if peer is not None:
             peer.close()
@@ -129,12 +137,20 @@ def run(args: argparse.Namespace) -> int:
     if peer is not None:
         out['peer'] = peer.description
     write_json(args.json, out)
+    if args.plot is not None:
+        figure = _plot.draw(curves, f'{args.source}: {frames} frames')
+        ok, png = cv2.imencode('.png', figure)
+        if not ok:
+            raise ValueError(f'could not encode the figure {figure.shape}')
+        write_atomic(args.plot, png.tobytes())
+        log(f'wrote {args.plot}')
     return 0
 
 
 def table_rows(args: argparse.Namespace, kind: str, models: list[PartModel],
-               peer: MediaPipePeer | None) -> tuple[dict[str, dict], int]:
-    """Every model's rows and the peer's ({row name: table}), and the number of frames."""
+               peer: MediaPipePeer | None) -> tuple[dict[str, dict], int, dict[str, dict]]:
+    """Every model's rows and the peer's ({row name: table}), the number of frames, and the
+    rows' accuracy curves (`_pipeline_eval.curve_rows` at `_plot.ALPHAS`)."""
     frames = load_frames([args.source], frame_range=args.frame_range, stride=args.stride,
                          max_frames=args.max_frames)
     sequence = kind in ('cad60', 'bag') and args.max_frames is None
@@ -153,4 +169,4 @@ def table_rows(args: argparse.Namespace, kind: str, models: list[PartModel],
     for name, row in rows.items():
         if row.no_pose:
             log(f'{name}: no pose in {row.no_pose} of {len(frames)} frames')
-    return score_rows(rows, frames), len(frames)
+    return score_rows(rows, frames), len(frames), curve_rows(rows, frames, _plot.ALPHAS)

@@ -143,17 +143,12 @@ def score_groups(pred: NDArray, scores: NDArray, gt: NDArray, visible: NDArray,
         raise ValueError(f'{len(names)} names for {np.shape(gt)[1]} joints')
     predicted = np.isfinite(np.asarray(pred, np.float64)).all(axis=2)
     dist = _distances(pred, gt)
-    groups = {g: [names.index(n) for n in members if n in names]
-              for g, members in JOINT_GROUPS.items()}
-    groups = {g: idx for g, idx in groups.items() if idx}
+    groups = _groups(names)
 
     table: dict[str, dict[str, float]] = {}
     for k, alpha in enumerate(alphas):
         hit, counted = correct(pred, gt, visible, alpha=alpha)
-        pck = {g: 100.0 * float(hit[:, idx].sum()) / max(int(counted[:, idx].sum()), 1)
-               for g, idx in groups.items()}
-        table['pck' if k == 0 else f'pck@{alpha:g}'] = {
-            **_with_average(pck), 'average7': _mean([pck.get(g, np.nan) for g in JOINT_GROUPS])}
+        table['pck' if k == 0 else f'pck@{alpha:g}'] = _pck(hit, counted, groups)
         if k == 0:
             counted_main = counted
             apk = {}
@@ -176,16 +171,39 @@ def score_groups(pred: NDArray, scores: NDArray, gt: NDArray, visible: NDArray,
     return table
 
 
+def _groups(names: list[str] | tuple[str, ...]) -> dict[str, list[int]]:
+    """The joint groups present in `names`: {group: indices into names}."""
+    groups = {g: [names.index(n) for n in members if n in names]
+              for g, members in JOINT_GROUPS.items()}
+    return {g: idx for g, idx in groups.items() if idx}
+
+
+def _pck(hit: NDArray[np.bool_], counted: NDArray[np.bool_], groups: dict[str, list[int]]
+         ) -> dict[str, float]:
+    """PCK per group in percent, with its `average` and `average7`."""
+    pck = {g: 100.0 * float(hit[:, idx].sum()) / max(int(counted[:, idx].sum()), 1)
+           for g, idx in groups.items()}
+    return {**_with_average(pck), 'average7': _mean([pck.get(g, np.nan) for g in JOINT_GROUPS])}
+
+
+def _distances_3d(pred_xyz: NDArray[np.float64], gt_xyz: NDArray[np.float64],
+                  counted: NDArray[np.bool_], groups: dict[str, list[int]]
+                  ) -> dict[str, NDArray[np.float64]]:
+    """3-D distances in metres per group, over the counted joints with a 3-D ground truth;
+    a joint without a predicted 3-D position is infinitely far (never close enough)."""
+    scored = counted & np.isfinite(gt_xyz).all(axis=2)
+    dist = np.linalg.norm(pred_xyz - gt_xyz, axis=2)
+    dist[~np.isfinite(dist)] = np.inf
+    return {g: dist[:, idx][scored[:, idx]] for g, idx in groups.items()}
+
+
 def _errors_3d(pred_xyz: NDArray[np.float64], gt_xyz: NDArray[np.float64],
                counted: NDArray[np.bool_], groups: dict[str, list[int]]
                ) -> dict[str, dict[str, float]]:
     """`error_mm` and `within_10cm` per group (see the module docstring)."""
-    scored = counted & np.isfinite(gt_xyz).all(axis=2)
-    dist = np.linalg.norm(pred_xyz - gt_xyz, axis=2)
-    dist[~np.isfinite(dist)] = np.inf  # no predicted 3-D position: never close enough
+    dist = _distances_3d(pred_xyz, gt_xyz, counted, groups)
     error_mm, within = {}, {}
-    for g, idx in groups.items():
-        d = dist[:, idx][scored[:, idx]]
+    for g, d in dist.items():
         error_mm[g] = 1e3 * float(np.median(d)) if d.size else float('nan')
         within[g] = 100.0 * float(np.mean(d <= WITHIN_M)) if d.size else float('nan')
     scored_groups = [g for g in groups if not np.isnan(error_mm[g])]
@@ -206,11 +224,11 @@ def _with_average(values: dict[str, float]) -> dict[str, float]:
     return out
 
 
-def score_joint_sets(predictions: list[JointSet | None], truths: list[JointSet],
-                     names: tuple[str, ...], *, alphas: tuple[float, ...] = (0.1, 0.2),
-                     image_sizes: Sequence[tuple[int, int]] | None = None
-                     ) -> dict[str, dict[str, float]]:
-    """The table of `score_groups` for frame-aligned predictions and ground truths.
+def joint_arrays(predictions: list[JointSet | None], truths: list[JointSet],
+                 names: tuple[str, ...], *,
+                 image_sizes: Sequence[tuple[int, int]] | None = None
+                 ) -> dict[str, NDArray]:
+    """Frame-aligned predictions and ground truths as the arrays of `score_groups`.
 
     Parameters
     ----------
@@ -223,8 +241,12 @@ def score_joint_sets(predictions: list[JointSet | None], truths: list[JointSet],
     image_sizes : (width, height) of each frame; ground-truth joints outside the image are not
         visible.
 
-    The 3-D errors are scored when the ground truth has 3-D positions and the predictions
-    have any (a row without 3-D output, such as the RGB-only baseline, has none).
+    Returns
+    -------
+    {'pred', 'scores', 'gt', 'visible', 'pred_xyz', 'gt_xyz'}: the keyword arguments of
+    `score_groups` (with `names`); the 3-D pair is None unless the ground truth has 3-D
+    positions and the predictions have any (a row without 3-D output, such as the RGB-only
+    baseline, has none).
     """
     if len(predictions) != len(truths):
         raise ValueError(f'{len(predictions)} predictions for {len(truths)} frames')
@@ -248,6 +270,43 @@ def score_joint_sets(predictions: list[JointSet | None], truths: list[JointSet],
                 pred_xyz[k, i] = p.xyz[pi]
                 scores[k, i] = p.confidence[pi]
     with_3d = np.isfinite(gt_xyz).any() and np.isfinite(pred_xyz).any()
-    return score_groups(pred, scores, gt, visible, names, alphas=alphas,
-                        pred_xyz=pred_xyz if with_3d else None,
-                        gt_xyz=gt_xyz if with_3d else None)
+    return {'pred': pred, 'scores': scores, 'gt': gt, 'visible': visible,
+            'pred_xyz': pred_xyz if with_3d else None, 'gt_xyz': gt_xyz if with_3d else None}
+
+
+def score_joint_sets(predictions: list[JointSet | None], truths: list[JointSet],
+                     names: tuple[str, ...], *, alphas: tuple[float, ...] = (0.1, 0.2),
+                     image_sizes: Sequence[tuple[int, int]] | None = None
+                     ) -> dict[str, dict[str, float]]:
+    """The table of `score_groups` for frame-aligned predictions and ground truths (see
+    `joint_arrays`)."""
+    arrays = joint_arrays(predictions, truths, names, image_sizes=image_sizes)
+    return score_groups(names=names, alphas=alphas, **arrays)
+
+
+def curves(pred: NDArray, gt: NDArray, visible: NDArray, names: list[str] | tuple[str, ...],
+           alphas: NDArray[np.floating], *, pred_xyz: NDArray | None = None,
+           gt_xyz: NDArray | None = None, **_: object) -> dict[str, dict[str, list[float]]]:
+    """PCK against the threshold per group, and the 3-D distances behind `within_10cm`.
+
+    Takes the arrays of `joint_arrays` (its `scores` ignored). At each alpha of `alphas` the
+    PCK of each group is the `pck` of `score_groups` at that alpha (the same rule, `correct`),
+    and 'average' and 'average7' as there.
+
+    Returns
+    -------
+    {'pck': {group: [percent per alpha], 'average': [...], 'average7': [...]}, and with 3-D
+    'distance_mm': {group: sorted distances in mm (inf = no 3-D prediction)}} over the joints
+    PCK counts at the first alpha (the counted joints do not depend on alpha).
+    """
+    groups = _groups(names)
+    per_alpha = [_pck(*correct(pred, gt, visible, alpha=float(alpha)), groups)
+                 for alpha in np.asarray(alphas, np.float64)]
+    out: dict[str, dict[str, list[float]]] = {
+        'pck': {k: [row[k] for row in per_alpha] for k in per_alpha[0]} if per_alpha else {}}
+    if pred_xyz is not None and gt_xyz is not None:
+        _, counted = correct(pred, gt, visible)
+        dist = _distances_3d(np.asarray(pred_xyz, np.float64), np.asarray(gt_xyz, np.float64),
+                             counted, groups)
+        out['distance_mm'] = {g: sorted(1e3 * d) for g, d in dist.items()}
+    return out
