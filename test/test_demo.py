@@ -36,6 +36,16 @@ def test_demo_runs_the_graph_and_scores_it(tmp_path):
     assert {'elbow', 'knee'} <= set(results['graph']['pck'])  # IK completes them
     overlay = cv2.imread(str(tmp_path / 'overlay.png'))
     assert overlay is not None and overlay.shape[1] == 4 * 640
+    video = cv2.VideoCapture(str(tmp_path / 'overlay.mp4'))  # one video frame per skeleton
+    n, first = 0, None
+    while True:
+        ok, img = video.read()
+        if not ok:
+            break
+        n, first = n + 1, img if first is None else first
+    assert n == results['skeletons_out']
+    assert first.shape[1] == 640 and first.shape[0] > 480  # the frame at 2x and the legend
+    assert not list(tmp_path.glob('.overlay*'))  # no temporary file left
     for exe in ('replay', 'recorder', 'foreground', 'detector', 'tracker', 'ik'):
         assert (tmp_path / 'logs' / f'{exe}.log').is_file()
     assert 'frames in 45' in run.stdout

@@ -5,7 +5,9 @@ node graph, each stage its own process started exactly as `ros2 run` starts it (
 files): replay -> foreground -> detector -> tracker -> ik, and a recorder. Then it scores the
 recorded /pose4d/skeleton against the bag's ground truth, runs the same core offline over the
 same bag (what `pose4d eval` does) for comparison, checks the joints the graph put on /tf
-against the skeletons, and writes out/overlay.png and out/results.json.
+against the skeletons, and writes out/overlay.mp4 (a video frame per skeleton out: the skeleton
+drawn by joint source, the ground truth, the frame's latency), out/overlay.png (four of those
+frames) and out/results.json.
 """
 
 from __future__ import annotations
@@ -17,6 +19,7 @@ import signal
 import subprocess
 import sys
 import time
+from collections.abc import Iterable
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -305,8 +308,15 @@ def report(bag_path: Path, result: GraphRun, args: argparse.Namespace) -> int:
     if not ok:
         raise ValueError(f'could not encode the overlay picture ({overlay.shape})')
     write_atomic(args.out / 'overlay.png', png.tobytes())
+    latencies = {s: (result.left[s] - result.entered[s]) * 1e3 for s in result.left
+                 if s in result.entered}
+    shown = [(f, skeletons[f.stamp_ns], latencies.get(f.stamp_ns)) for f in frames
+             if f.stamp_ns in skeletons]
+    write_video(args.out / 'overlay.mp4', (overlay_frame(*x) for x in shown),
+                fps=result.input_rate_hz())
     write_json(args.out / 'results.json', results, indent=1)
-    print(f'wrote {args.out / "overlay.png"} and {args.out / "results.json"}')
+    print(f'wrote {args.out / "overlay.mp4"} ({len(shown)} frames), '
+          f'{args.out / "overlay.png"} and {args.out / "results.json"}')
     return 0 if len(skeletons) else 1
 
 
@@ -328,6 +338,45 @@ def tf_per_skeleton(recorded: Path, skeletons: dict[int, JointSet], *,
         matching += sorted(frames.get(stamp, [])) == sorted(want)
     return {'skeletons': len(skeletons), 'matching': matching,
             'transforms': sum(len(f) for f in frames.values())}
+
+
+def overlay_frame(frame: Frame, skeleton: JointSet, latency_ms: float | None) -> np.ndarray:
+    """One video frame (RGB): the skeleton by joint source on the frame, the ground truth
+    crossed, the frame's latency from camera to /pose4d/skeleton, and the legend."""
+    img = draw_skeleton(frame.color, skeleton, limb_bones(), truth_uv=frame.truth.uv)
+    text = f'latency {latency_ms:.0f} ms' if latency_ms is not None else 'latency unknown'
+    for colour, width in (((0, 0, 0), 3), ((255, 255, 255), 1)):
+        cv2.putText(img, text, (8, 22), cv2.FONT_HERSHEY_SIMPLEX, 0.6, colour, width,
+                    cv2.LINE_AA)
+    return np.vstack([img, legend(img.shape[1])])
+
+
+def write_video(path: Path, frames: Iterable[np.ndarray], *, fps: float) -> int:
+    """RGB frames of one size into an MPEG-4 video (OpenCV's `mp4v`, which OpenCV, ffmpeg and
+    common players read), written under a temporary name and renamed when complete; returns
+    the number of frames. `fps` that is not finite and positive becomes 30."""
+    fps = fps if np.isfinite(fps) and fps > 0 else 30.0
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_name(f'.{path.stem}.{os.getpid()}.tmp{path.suffix}')
+    writer, n = None, 0
+    try:
+        for img in frames:
+            if writer is None:
+                h, w = img.shape[:2]
+                writer = cv2.VideoWriter(str(tmp), cv2.VideoWriter_fourcc(*'mp4v'), fps, (w, h))
+                if not writer.isOpened():
+                    raise OSError(f'{path}: OpenCV cannot write an mp4v video here')
+            writer.write(np.ascontiguousarray(img[:, :, ::-1]))
+            n += 1
+        if writer is None:
+            raise ValueError(f'{path}: no frames to write')
+        writer.release()
+        os.replace(tmp, path)
+    finally:
+        if writer is not None:
+            writer.release()
+        tmp.unlink(missing_ok=True)
+    return n
 
 
 def overlay_picture(frames: list[Frame], skeletons: list[JointSet], n: int = 4) -> np.ndarray:
