@@ -30,7 +30,8 @@ setup(
     data_files=[
         ('share/ament_index/resource_index/packages', [f'resource/{PACKAGE}']),
         (f'share/{PACKAGE}', ['package.xml']),
-        (f'share/{PACKAGE}/config', sorted(glob('config/*.yaml') + glob('config/*.xml'))),
+        (f'share/{PACKAGE}/config',
+         sorted(glob('config/*.yaml') + glob('config/*.xml') + glob('config/*.rviz'))),
         *[
             (f'share/{PACKAGE}/{d}', sorted(f for f in glob(f'{d}/*')))
             for d in sorted(glob('bags/*'))

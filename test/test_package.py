@@ -28,7 +28,7 @@ def test_package_found_through_ament_index():
     share = Path(get_package_share_directory(PACKAGE))
     assert (prefix / 'share' / 'ament_index' / 'resource_index' / 'packages' / PACKAGE).is_file()
     assert (share / 'package.xml').is_file()
-    for cfg in sorted((REPO / 'config').glob('*.[xy]*')):  # the nodes' YAML, the DDS profile
+    for cfg in sorted((REPO / 'config').iterdir()):  # the nodes' YAML, DDS profile, RViz set-up
         assert (share / 'config' / cfg.name).read_text() == cfg.read_text(), \
             f'installed {cfg.name} is stale: run make setup'
 
@@ -216,3 +216,45 @@ def test_yaml_defaults_equal_code_defaults(exe):
         assert p.description, f'{exe}: parameter {p.name} has no description'
         assert p.validate(p.default) is None or p.name.endswith(('.bag', '.output')), \
             f'{exe}: default of {p.name} breaks its own rule'
+
+
+def published_topics() -> set[str]:
+    """Every topic a node of ours publishes (the topic strings of `create_publisher` calls in
+    pose4d_ros/nodes), and the camera topics the replay plays into the foreground node."""
+    from pose4d_ros.nodes.foreground import CAMERA_TOPICS
+
+    topics = {'/' + topic.lstrip('/') for _, topic, _ in CAMERA_TOPICS}
+    for path in (REPO / 'pose4d_ros' / 'nodes').glob('*.py'):
+        for node in ast.walk(ast.parse(path.read_text())):
+            if (isinstance(node, ast.Call) and isinstance(node.func, ast.Attribute)
+                    and node.func.attr == 'create_publisher' and len(node.args) >= 2
+                    and isinstance(node.args[1], ast.Constant)):
+                topics.add('/' + node.args[1].value.lstrip('/'))
+    return topics
+
+
+def test_rviz_config_shows_what_the_graph_publishes():
+    from pose4d_ros.datasets.cad60_bag import FRAME_ID
+
+    rviz = yaml.safe_load((REPO / 'config' / 'pose4d.rviz').read_text())
+    manager = rviz['Visualization Manager']
+    assert manager['Global Options']['Fixed Frame'] == FRAME_ID  # the camera's, as in the bags
+    displays = {d['Class'].split('/')[-1]: d for d in manager['Displays']}
+    assert {'Image', 'PointCloud2', 'MarkerArray', 'TF'} <= set(displays)
+    published = published_topics()
+    assert {'/pose4d/skeleton/markers', '/tf', '/camera/color/image_raw'} <= published
+    for display in manager['Displays']:
+        if 'Topic' in display:
+            assert display['Topic']['Value'] in published, display['Name']
+    # a sensor stream is best effort; a reliable subscription would not match the driver's
+    assert displays['Image']['Topic']['Reliability Policy'] == 'Best Effort'
+
+
+def test_written_files_get_the_usual_permissions(tmp_path):
+    from pose4d_ros.core.files import write_atomic
+
+    mask = os.umask(0o022)
+    os.umask(mask)
+    write_atomic(tmp_path / 'out' / 'a.json', b'{}')
+    assert (tmp_path / 'out' / 'a.json').stat().st_mode & 0o777 == 0o666 & ~mask
+    assert [p.name for p in (tmp_path / 'out').iterdir()] == ['a.json']

@@ -138,8 +138,8 @@ def run(args: argparse.Namespace) -> int:
         out['peer'] = peer.description
     write_json(args.json, out)
     if args.plot is not None:
-        figure = _plot.draw(curves, f'{args.source}: {frames} frames')
-        ok, png = cv2.imencode('.png', figure)
+        figure = _plot.draw(curves, f'{Path(args.source).name}: {frames} frames')
+        ok, png = cv2.imencode('.png', figure, [cv2.IMWRITE_PNG_COMPRESSION, 9])
         if not ok:
             raise ValueError(f'could not encode the figure {figure.shape}')
         write_atomic(args.plot, png.tobytes())
