@@ -31,10 +31,10 @@ MSG_SOURCES := pose4d_msgs/CMakeLists.txt pose4d_msgs/package.xml pose4d_msgs/cm
 	$(wildcard pose4d_msgs/msg/*.msg)
 TF2_SOURCES := $(wildcard ros_wheels/tf2_msgs/*.* ros_wheels/tf2_msgs/msg/*.msg) pose4d_msgs/cmake/wheel_include_dirs.cmake
 
-.PHONY: help setup test lint demo bench peer sample-bag clean
+.PHONY: fuzz help setup test lint demo bench peer sample-bag clean
 
 help:
-	@echo 'make demo | make test | make setup | make lint | make bench | make peer | make sample-bag | make clean'
+	@echo 'make demo | make test | make setup | make lint | make bench | make fuzz | make peer | make sample-bag | make clean'
 
 setup: $(VENV)/.stamp-pkg
 
@@ -86,6 +86,13 @@ test: setup
 
 demo: setup
 	$(BIN)/pose4d demo
+
+# Malformed messages to every input-consuming node (FUZZ_N per node, FUZZ_NODES to choose):
+# out/fuzz.json (crashes, hangs, liveness failures, memory).
+FUZZ_N ?= 10000
+FUZZ_NODES ?= foreground,detector,tracker,ik,pipeline
+fuzz: setup
+	cd test && $(PY) fuzz.py --n $(FUZZ_N) --nodes $(FUZZ_NODES) --out $(CURDIR)/out/fuzz.json
 
 bench: setup
 	$(BIN)/pose4d bench bags/sample --json out/bench.json --graph
