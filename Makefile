@@ -31,10 +31,10 @@ MSG_SOURCES := pose4d_msgs/CMakeLists.txt pose4d_msgs/package.xml pose4d_msgs/cm
 	$(wildcard pose4d_msgs/msg/*.msg)
 TF2_SOURCES := $(wildcard ros_wheels/tf2_msgs/*.* ros_wheels/tf2_msgs/msg/*.msg) pose4d_msgs/cmake/wheel_include_dirs.cmake
 
-.PHONY: fuzz help setup test lint demo bench peer sample-bag clean
+.PHONY: fuzz soak help setup test lint demo bench peer sample-bag clean
 
 help:
-	@echo 'make demo | make test | make setup | make lint | make bench | make fuzz | make peer | make sample-bag | make clean'
+	@echo 'make demo | make test | make setup | make lint | make bench | make fuzz | make soak | make peer | make sample-bag | make clean'
 
 setup: $(VENV)/.stamp-pkg
 
@@ -93,6 +93,12 @@ FUZZ_N ?= 10000
 FUZZ_NODES ?= foreground,detector,tracker,ik,pipeline
 fuzz: setup
 	cd test && $(PY) fuzz.py --n $(FUZZ_N) --nodes $(FUZZ_NODES) --out $(CURDIR)/out/fuzz.json
+
+# The graph on a looping bag for SOAK_S seconds into the recorder: out/soak.json (messages lost,
+# memory growth per node, latency over the run).
+SOAK_S ?= 600
+soak: setup
+	cd test && $(PY) soak.py --seconds $(SOAK_S) --out $(CURDIR)/out/soak.json
 
 bench: setup
 	$(BIN)/pose4d bench bags/sample --json out/bench.json --graph
