@@ -117,9 +117,7 @@ def soak(bag_path: Path, seconds: float, work: Path) -> dict[str, object]:
         node.destroy_node()
         rclpy.try_shutdown()
         codes = graph.stop()
-    bad = {exe: code for exe, code in codes.items() if code != 0}
-    if bad:
-        raise OSError(f'processes did not exit cleanly: {bad}')
+    graph.raise_unless_clean(codes)
     skeletons = [bag.deserialize(m) for m in bag.read_messages(recorded, ['/pose4d/skeleton'])]
     coords = [abs(c) for s in skeletons for j in s.joints
               for c in (j.u, j.v, j.position.x, j.position.y, j.position.z) if np.isfinite(c)]

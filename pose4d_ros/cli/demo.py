@@ -120,6 +120,13 @@ class _Graph:
                 continue
         return out
 
+    def raise_unless_clean(self, codes: dict[str, int]) -> None:
+        """OSError naming each process whose exit status (`stop`'s) is not 0."""
+        bad = {exe: code for exe, code in codes.items() if code != 0}
+        if bad:
+            raise OSError('processes did not exit cleanly: ' + ', '.join(
+                f'{exe} ({code}, see {self.logs[exe]})' for exe, code in bad.items()))
+
     def stop(self) -> dict[str, int]:
         """SIGINT every process (the recorder last, so it closes its bag after the graph)."""
         codes = {}
@@ -253,10 +260,7 @@ def run_graph(bag_path: Path, out: Path, *, rate: float = 1.0, model: str = 'rgb
         node.destroy_node()
         rclpy.try_shutdown()
         codes = graph.stop()
-    bad = {exe: code for exe, code in codes.items() if code != 0}
-    if bad:
-        raise OSError('processes did not exit cleanly: ' + ', '.join(
-            f'{exe} ({code}, see {graph.logs[exe]})' for exe, code in bad.items()))
+    graph.raise_unless_clean(codes)
     return GraphRun(recorded, frames, entered, left, dict(graph.logs), cpu)
 
 
