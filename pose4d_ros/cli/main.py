@@ -24,6 +24,8 @@ def build_parser() -> argparse.ArgumentParser:
         description='pose4d_ros offline tools: make data, train, evaluate, benchmark, demo.',
     )
     parser.add_argument('--version', action='version', version=f'pose4d {__version__}')
+    parser.add_argument('--debug', action='store_true',
+                        help='on an error, show the whole traceback, not only its one line')
     subparsers = parser.add_subparsers(dest='verb', metavar='VERB')
     for verb in VERBS:
         try:
@@ -49,6 +51,8 @@ def main(argv: list[str] | None = None) -> int:
     try:
         return int(args.func(args) or 0)
     except (ValueError, OSError) as exc:
+        if args.debug:
+            raise
         print(f'pose4d {args.verb}: error: {exc}', file=sys.stderr)
         return 2
     except KeyboardInterrupt:

@@ -106,6 +106,7 @@ class BagMessage:
     msgtype: str
     timestamp_ns: int
     data: bytes
+    bag: Path | None = None  # the bag it was read from, for errors
 
 
 class BagWriter:
@@ -255,16 +256,32 @@ def read_messages(path: str | Path, topics: Iterable[str] | None = None,
                 raise ValueError(f'{path}: no topic(s) {", ".join(sorted(missing))}; has '
                                  f'{", ".join(sorted({c.topic for c in connections}))}')
             connections = [c for c in connections if c.topic in wanted]
-        for connection, timestamp, data in reader.messages(connections=connections,
-                                                           start=start_ns):
-            yield BagMessage(connection.topic, connection.msgtype, timestamp, bytes(data))
+        n = 0
+        messages = reader.messages(connections=connections, start=start_ns)
+        while True:
+            try:
+                connection, timestamp, data = next(messages)
+            except StopIteration:
+                break
+            except Exception as exc:  # rosbags, mcap, zstandard, sqlite3: a damaged file
+                raise ValueError(f'{path}: damaged bag after {n} messages: '
+                                 f'{type(exc).__name__}: {exc}') from exc
+            n += 1
+            yield BagMessage(connection.topic, connection.msgtype, timestamp, bytes(data),
+                             Path(path))
     finally:
         reader.close()
 
 
 def deserialize(message: BagMessage) -> Any:
-    """Decode a message's CDR bytes into a rosbags message object."""
-    return typestore().deserialize_cdr(message.data, message.msgtype)
+    """Decode a message's CDR bytes into a rosbags message object; ValueError naming the bag,
+    topic and time when they are not a message of its type (damaged, or an unknown type)."""
+    try:
+        return typestore().deserialize_cdr(message.data, message.msgtype)
+    except Exception as exc:  # rosbags raises whatever its decoder meets in damaged bytes
+        raise ValueError(f'{message.bag or "bag"}: {message.topic} at {message.timestamp_ns} ns '
+                         f'is not a valid {message.msgtype}: {type(exc).__name__}: {exc}'
+                         ) from exc
 
 
 # ------------------------------------------------------------------ crash recovery

@@ -41,13 +41,19 @@ DIAGNOSTICS_TOPIC = '/diagnostics'
 CLOCK_MISMATCH_S = 10.0
 
 
+class InputFailure(Exception):
+    """The node cannot go on reading its input (a damaged bag, say): `run` logs it as FATAL
+    and exits with status 1."""
+
+
 def run(factory: Callable[[], Node], args: list[str] | None = None,
         body: Callable[[Node], None] = rclpy.spin, *, signal_handlers: bool = True) -> int:
     """Jazzy's main(): init, spin (or `body`), clean shutdown on Ctrl-C/SIGTERM.
 
     `signal_handlers=False`: rclpy does not shut the context down on SIGINT/SIGTERM; `body`
     handles them (the recorder, which must still take what is on its way).
-    Returns the exit status: 0, or 2 when a parameter was refused (logged as FATAL).
+    Returns the exit status: 0, 2 when a parameter was refused, 1 when the node's input
+    could not be read (`InputFailure`; both logged as FATAL, no traceback).
     """
     # One owner of parallelism: the graph's processes share the cores, and OpenBLAS threads
     # spin-waiting for a core make the detector's GEMM several times slower (core.dpm.threads).
@@ -64,6 +70,9 @@ def run(factory: Callable[[], Node], args: list[str] | None = None,
     except ParameterError as exc:
         rclpy.logging.get_logger('pose4d').fatal(str(exc))
         code = 2
+    except InputFailure as exc:
+        rclpy.logging.get_logger('pose4d').fatal(str(exc))
+        code = 1
     finally:
         if node is not None:
             for queue in node.__dict__.get('frame_queues', []):

@@ -28,7 +28,7 @@ from rosgraph_msgs.msg import Clock
 
 from pose4d_ros.datasets import bag
 from pose4d_ros.nodes import qos
-from pose4d_ros.nodes.common import run
+from pose4d_ros.nodes.common import InputFailure, run
 from pose4d_ros.nodes.convert import message_type, ns_to_stamp
 from pose4d_ros.nodes.params import NodeParams, Param, ParameterError
 
@@ -184,7 +184,11 @@ class ReplayNode(Node):
         t0 = time.monotonic()
         rounds = 0
         while rclpy.ok():
-            self.play_once()
+            try:
+                self.play_once()
+            except ValueError as exc:  # a damaged bag: what came before the damage was sent
+                raise InputFailure(f'{exc} (sent {sum(self.sent.values())} messages before '
+                                   'it); stopping') from exc
             rounds += 1
             if not self.cfg['replay.loop']:
                 break

@@ -26,6 +26,8 @@ from __future__ import annotations
 
 import io
 import json
+import zipfile
+import zlib
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -191,8 +193,9 @@ def load_model(path: str | Path) -> PartModel:
     try:
         with np.load(path, allow_pickle=False) as data:
             contents = {k: data[k] for k in data.files}
-    except (OSError, ValueError, EOFError) as exc:
-        raise ValueError(f'{path}: not a part model (.npz): {exc}') from exc
+    except (OSError, ValueError, EOFError, KeyError, zipfile.BadZipFile, zlib.error) as exc:
+        raise ValueError(f'{path}: not a part model: damaged or not a NumPy .npz archive '
+                         f'({type(exc).__name__}: {exc})') from exc
     missing = [k for k in ('header', *_ARRAYS) if k not in contents]
     if missing:
         raise ValueError(f'{path}: not a part model, missing {missing}')

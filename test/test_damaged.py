@@ -1,0 +1,166 @@
+"""Damaged files wherever we read them: one clear error naming the file, a non-zero exit, no
+traceback (unless `pose4d --debug`), nothing half-written under the output's name.
+
+Bags (mcap with zstd chunks, sqlite3) are truncated at several offsets and have bytes flipped
+at seeded positions; a reader either reads what is intact or raises ValueError naming the bag,
+never another exception. The CLI and the replay node are run as a user runs them.
+"""
+
+from __future__ import annotations
+
+import random
+import shutil
+import subprocess
+from pathlib import Path
+
+import numpy as np
+import pytest
+from harness import executable
+
+from pose4d_ros.cli.demo import default_bag
+from pose4d_ros.core.dpm.model import load_model
+from pose4d_ros.datasets import bag
+from pose4d_ros.models import model_path
+
+SAMPLE = default_bag()
+
+
+def copy_bag(dst: Path, storage: str) -> Path:
+    """The sample bag's first 60 messages in `storage` format."""
+    with bag.BagWriter(dst, storage=storage) as writer:
+        for k, m in enumerate(bag.read_messages(SAMPLE)):
+            if k == 60:
+                break
+            if m.topic not in writer.counts:
+                writer.add_topic(m.topic, m.msgtype)
+            writer.write(m.topic, m.timestamp_ns, m.data)
+    return dst
+
+
+def storage_file(path: Path) -> Path:
+    return next(p for p in path.iterdir() if p.suffix in ('.mcap', '.db3'))
+
+
+def truncate(path: Path, fraction: float) -> None:
+    f = storage_file(path)
+    f.write_bytes(f.read_bytes()[:int(f.stat().st_size * fraction)])
+
+
+def flip(path: Path, seed: int, n: int = 20) -> None:
+    f = storage_file(path)
+    data = bytearray(f.read_bytes())
+    rng = random.Random(seed)
+    for _ in range(n):
+        data[rng.randrange(len(data))] ^= 1 << rng.randrange(8)
+    f.write_bytes(bytes(data))
+
+
+def read_everything(path: Path) -> int:
+    n = 0
+    for m in bag.read_messages(path):
+        bag.deserialize(m)
+        n += 1
+    return n
+
+
+@pytest.mark.parametrize('storage', ['mcap', 'sqlite3'])
+def test_damaged_bags_read_what_is_intact_or_name_the_bag(tmp_path, storage):
+    intact = copy_bag(tmp_path / 'intact', storage)
+    assert read_everything(intact) == 60
+    errors = 0
+    damages = [('truncate', f) for f in (0.0, 0.1, 0.5, 0.9, 0.99)]
+    damages += [('flip', seed) for seed in range(12)]
+    for kind, arg in damages:
+        damaged = tmp_path / f'{kind}_{arg}'
+        shutil.copytree(intact, damaged)
+        truncate(damaged, arg) if kind == 'truncate' else flip(damaged, arg)
+        try:
+            read_everything(damaged)
+        except ValueError as exc:  # the one error type, naming the bag
+            assert str(damaged) in str(exc), exc
+            errors += 1
+    assert errors >= 5  # truncations at least are caught
+
+
+def test_a_bag_without_metadata_or_with_an_unknown_type(tmp_path):
+    no_meta = shutil.copytree(SAMPLE, tmp_path / 'no_meta')
+    (no_meta / 'metadata.yaml').unlink()
+    with pytest.raises(ValueError, match=f'{no_meta}: not a rosbag2 directory'):
+        bag.topics(no_meta)
+    unknown = bag.BagMessage('/x', 'nobody_msgs/msg/Thing', 1, b'\0\1\0\0', tmp_path / 'b')
+    with pytest.raises(ValueError, match=r'b: /x at 1 ns is not a valid nobody_msgs/msg/Thing'):
+        bag.deserialize(unknown)
+
+
+def test_damaged_model_files(tmp_path):
+    good = model_path('rgbd_10')
+    cases = {'garbage.npz': b'not a model at all',
+             'truncated.npz': Path(good).read_bytes()[:3000],
+             'empty.npz': b''}
+    for name, data in cases.items():
+        (tmp_path / name).write_bytes(data)
+        with pytest.raises(ValueError, match=f'{tmp_path / name}: not a part model'):
+            load_model(tmp_path / name)
+    np.savez(tmp_path / 'older.npz', filters=np.zeros(3))
+    with pytest.raises(ValueError, match='older.npz: not a part model, missing'):
+        load_model(tmp_path / 'older.npz')
+
+
+def _pose4d(*args: str) -> subprocess.CompletedProcess:
+    return subprocess.run([str(executable('pose4d')), *args], capture_output=True, text=True,
+                          timeout=300)
+
+
+def test_cli_on_a_damaged_bag_says_one_line_and_writes_nothing(tmp_path):
+    damaged = copy_bag(tmp_path / 'damaged', 'mcap')
+    truncate(damaged, 0.5)
+    out = tmp_path / 'res' / 'table.json'
+    for argv in (['eval', str(damaged), '--json', str(out)],
+                 ['bench', str(damaged), '--json', str(out)]):
+        run = _pose4d(*argv)
+        assert run.returncode == 2, run.stderr
+        errors = [line for line in run.stderr.splitlines() if 'error' in line]
+        assert len(errors) == 1 and str(damaged) in errors[0], run.stderr
+        assert 'Traceback' not in run.stderr
+        assert not out.exists() and not list(tmp_path.glob('res/.*'))
+    run = _pose4d('--debug', 'eval', str(damaged), '--json', str(out))
+    assert run.returncode != 0 and 'Traceback' in run.stderr  # --debug shows it
+
+
+def test_cli_with_a_damaged_model(tmp_path):
+    model = tmp_path / 'm.npz'
+    model.write_bytes(Path(model_path('rgbd_10')).read_bytes()[:5000])
+    run = _pose4d('eval', str(SAMPLE), '--model', str(model), '--json', str(tmp_path / 'x.json'))
+    assert run.returncode == 2 and 'Traceback' not in run.stderr
+    assert f'{model}: not a part model' in run.stderr
+    assert not (tmp_path / 'x.json').exists()
+
+
+def test_replay_node_stops_on_damage_with_one_fatal_line(tmp_path):
+    damaged = copy_bag(tmp_path / 'damaged', 'mcap')
+    flipped = [seed for seed in range(40) if _flip_breaks(damaged, tmp_path, seed)]
+    assert flipped, 'no seed damaged the bag'
+    broken = tmp_path / f'flip_{flipped[0]}'
+    run = subprocess.run([str(executable('replay')), '--ros-args', '-p',
+                          f'replay.bag:={broken}', '-p', 'replay.rate:=0.0'],
+                         capture_output=True, text=True, timeout=60)
+    assert run.returncode == 1, run.stdout + run.stderr
+    text = run.stdout + run.stderr
+    assert 'Traceback' not in text
+    assert f'{broken}: damaged bag' in text or f'{broken}:' in text, text
+
+
+def _flip_breaks(intact: Path, tmp_path: Path, seed: int) -> bool:
+    damaged = tmp_path / f'flip_{seed}'
+    shutil.copytree(intact, damaged)
+    flip(damaged, seed, n=200)
+    try:
+        bag.topics(damaged)  # the bag opens (else the node refuses its parameter instead)
+        read_everything(damaged)
+    except ValueError:
+        try:
+            bag.topics(damaged)
+            return True
+        except ValueError:
+            return False
+    return False
