@@ -67,7 +67,10 @@ def test_replay_at_2x_runs_the_graph_on_the_bag_clock(ros, tmp_path, sim_time):
                        'the recorder on the tracker\'s output')
         replay = start('replay', {'replay.bag': str(source), 'replay.rate': 2.0,
                                   'replay.publish_clock': sim_time, 'replay.delay_s': 0.5,
-                                  'replay.wait_for_subscribers': ['pose4d/parts=1']},
+                                  # with sim time, the tracker's and the recorder's clocks
+                                  # too: a recorder that missed every /clock stamps with 0
+                                  'replay.wait_for_subscribers': ['pose4d/parts=1'] + (
+                                      ['clock=2'] if sim_time else [])},
                        log_dir=tmp_path)
         assert replay.wait(60) == 0, replay.output()
         ros.spin_until(lambda: _last_status(diagnostics, 'pose4d: tracker'), 10.0,

@@ -13,6 +13,7 @@ elsewhere. See `core.dpm.train` for the method.
 from __future__ import annotations
 
 import argparse
+import json
 import shlex
 import sys
 import time
@@ -24,7 +25,7 @@ import numpy as np
 
 from pose4d_ros.cli._dpm import git_commit, load_frames, log, machine
 from pose4d_ros.cli._progress import progress
-from pose4d_ros.core.dpm.model import save_model
+from pose4d_ros.core.dpm.model import load_model, save_model
 from pose4d_ros.core.dpm.samples import (
     Negative,
     TrainConfig,
@@ -33,8 +34,9 @@ from pose4d_ros.core.dpm.samples import (
     person_scale,
 )
 from pose4d_ros.core.dpm.threads import set_blas_threads
-from pose4d_ros.core.dpm.train import train
+from pose4d_ros.core.dpm.train import calibrate, train
 from pose4d_ros.datasets.frame import Frame
+from pose4d_ros.models import model_path
 
 
 def add_parser(subparsers: argparse._SubParsersAction) -> None:
@@ -76,6 +78,9 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument('--cache-limit', type=int, default=20000, help='constraint cache size')
     p.add_argument('--max-negative-images', type=int, default=1500)
     p.add_argument('--no-flip', action='store_true', help='no mirrored positives')
+    p.add_argument('--calibrate', type=Path, metavar='MODEL.npz',
+                   help="no training: fit MODEL's part confidences and depth offsets again on "
+                        'SOURCE (as the last step of training does) and write it to --out')
     p.add_argument('--blas-threads', type=int, default=1,
                    help='OpenBLAS threads (1: the measured best on 2 shared cores)')
     p.set_defaults(func=run)
@@ -190,6 +195,8 @@ def run(args: argparse.Namespace) -> int:
         raise ValueError(f'{args.out}: the model file must end in .npz')
     samples = load_frames(args.sources, frame_range=args.frame_range, stride=args.stride,
                           max_frames=args.max_frames)
+    if args.calibrate is not None:
+        return recalibrate(args, samples, t0)
     if cfg.channels == 'rgbd' and not any(s.depth_m is not None for s in samples):
         raise ValueError(f'{", ".join(args.sources)}: no depth images; use --channels rgb')
     if cfg.masked_input:
@@ -217,4 +224,34 @@ def run(args: argparse.Namespace) -> int:
     print(f'wrote {args.out} ({size / 1e6:.2f} MB): {model.n_parts} parts x {model.n_types} '
           f'types, {model.channels}, {report.n_positives} positives, '
           f'{len(negatives)} background images, {elapsed / 60:.1f} min')
+    return 0
+
+
+def recalibrate(args: argparse.Namespace, samples: list[Frame], t0: float) -> int:
+    """`--calibrate MODEL`: the calibration step of `train` alone, on `samples` (the same
+    deterministic subset of `TrainConfig.calibration_samples` frames, masked as the model was
+    trained), recorded in the model's metadata."""
+    model = load_model(model_path(str(args.calibrate)))
+    cfg = json.loads(model.metadata.get('train_config', '{}'))
+    if cfg.get('masked_input'):
+        samples = with_foreground_masks(samples)
+    usable = [s for s in samples if part_joints(s, model.part_names)[1].sum() >= 2]
+    n = int(cfg.get('calibration_samples', TrainConfig.calibration_samples))
+    if len(usable) > n:
+        rng = np.random.default_rng(args.seed)
+        usable = [usable[i] for i in np.sort(rng.choice(len(usable), n, replace=False))]
+    model = calibrate(model, usable, use_depth=model.channels == 'rgbd', progress=progress)
+    meta = dict(model.metadata)
+    meta['calibrated'] = json.dumps({
+        'command': 'pose4d train ' + ' '.join(shlex.quote(a) for a in sys.argv[2:]),
+        'data': ' '.join(str(Path(s).resolve()) for s in args.sources), 'frames': len(usable),
+        'git_commit': git_commit(), 'at': time.strftime('%Y-%m-%dT%H:%M:%S%z'),
+        'wall_seconds': round(time.time() - t0, 1)})
+    model = replace(model, metadata=meta)
+    save_model(model, args.out)
+    offsets = ('none' if model.depth_offset_m is None else ', '.join(
+        f'{n} {1e3 * o:+.0f}' for n, o in zip(model.part_names, model.depth_offset_m,
+                                                 strict=True)))
+    print(f'wrote {args.out}: {args.calibrate} calibrated on {len(usable)} frames; depth offsets '
+          f'(mm behind the surface): {offsets}')
     return 0

@@ -76,7 +76,8 @@ PARAMS = (
           '(for use_sim_time).', restart='the bag is opened and its publishers made at start-up'),
     Param('replay.wait_for_subscribers', ['*=0'], 'Before playing, wait until the played '
           'topics have this many subscribers: pattern=count entries (camera/*=1, '
-          'camera/color/camera_info=4); a topic matched by several needs the largest count.',
+          'camera/color/camera_info=4; clock=2 for /clock with replay.publish_clock); a topic '
+          'matched by several needs the largest count.',
           check=_check_counts, restart='it applies once, before playing'),
     Param('replay.wait_timeout_s', 10.0, 'Longest wait for subscribers, seconds.',
           range=(0.0, 3600.0), restart='it applies once, before playing'),
@@ -135,13 +136,15 @@ class ReplayNode(Node):
 
     def wait_for_subscribers(self) -> bool:
         counts = subscriber_counts(self.cfg['replay.wait_for_subscribers'])
+        pubs = dict(self.publishers_)
+        if self.clock_pub is not None:  # sim-time nodes that must not miss the clock
+            pubs['/clock'] = self.clock_pub
         need = {name: max([c for pat, c in counts if fnmatch.fnmatchcase(name.lstrip('/'), pat)],
                           default=0)
-                for name in self.selected}
+                for name in pubs}
 
         def lacking() -> dict[str, int]:
-            return {n: c for n, c in need.items()
-                    if self.publishers_[n].get_subscription_count() < c}
+            return {n: c for n, c in need.items() if pubs[n].get_subscription_count() < c}
 
         deadline = time.monotonic() + self.cfg['replay.wait_timeout_s']
         while lacking() and time.monotonic() < deadline:
