@@ -9,6 +9,7 @@ import cv2
 import numpy as np
 import pytest
 from helpers import write_utkinect
+from numpy.testing import assert_allclose
 
 from pose4d_ros.cli import _plot
 from pose4d_ros.cli.main import main as pose4d_main
@@ -94,6 +95,15 @@ def test_train_then_eval_and_bench(tiny_set: Path, tmp_path: Path, capsys) -> No
     # the joint centres lie behind the rendered body's surface
     assert m.depth_offset_m.shape == (10,) and np.all(np.abs(m.depth_offset_m) < 0.3)
     assert np.median(m.depth_offset_m) > 0.02, m.depth_offset_m
+    # the calibration alone, again, on the same frames: the same filters, the same offsets
+    # (one calibration subset of the 8 frames), recorded in the metadata
+    again = tmp_path / 'again.npz'
+    assert pose4d_main(['train', str(tiny_set), '--calibrate', str(model), '--out',
+                        str(again)]) == 0
+    a = load_model(again)
+    assert (a.filters == m.filters).all() and a.metadata['seed'] == '3'
+    assert_allclose(a.depth_offset_m, m.depth_offset_m, atol=1e-6)
+    assert json.loads(a.metadata['calibrated'])['frames'] == 8
     out = tmp_path / 'table.json'
     assert pose4d_main(['eval', str(tiny_set), '--json', str(out), '--model', str(model)]) == 0
     table = json.loads(out.read_text())

@@ -243,7 +243,8 @@ def recalibrate(args: argparse.Namespace, samples: list[Frame], t0: float) -> in
     model = calibrate(model, usable, use_depth=model.channels == 'rgbd', progress=progress)
     meta = dict(model.metadata)
     meta['calibrated'] = json.dumps({
-        'command': 'pose4d train ' + ' '.join(shlex.quote(a) for a in sys.argv[2:]),
+        'command': 'pose4d train ' + ' '.join(shlex.quote(a) for a in sys.argv[2:])
+                   if sys.argv[1:2] == ['train'] else '',
         'data': ' '.join(str(Path(s).resolve()) for s in args.sources), 'frames': len(usable),
         'git_commit': git_commit(), 'at': time.strftime('%Y-%m-%dT%H:%M:%S%z'),
         'wall_seconds': round(time.time() - t0, 1)})
