@@ -15,8 +15,8 @@ pytestmark = pytest.mark.slow
 
 
 def test_demo_runs_the_graph_and_scores_it(tmp_path):
-    if 'rgbd_10' not in shipped_models():
-        pytest.fail('the default model rgbd_10 is not shipped in pose4d_ros/models')
+    if 'rgbd_14' not in shipped_models():
+        pytest.fail('the default model rgbd_14 is not shipped in pose4d_ros/models')
     run = subprocess.run([str(executable('pose4d')), 'demo', '--out', str(tmp_path)],
                          capture_output=True, text=True, timeout=600)
     assert run.returncode == 0, run.stdout[-3000:] + run.stderr[-3000:]

@@ -1,6 +1,6 @@
 """`pose4d bench`: time per stage on real frames, and the node graph's throughput and latency.
 
-    pose4d bench SOURCE --json FILE [--model rgbd_10] [--frames N] [--warmup W] [--graph]
+    pose4d bench SOURCE --json FILE [--model rgbd_14] [--frames N] [--warmup W] [--graph]
                  [--peer mediapipe]
 
 Each frame goes through the stages as the live pipeline runs them, in order
@@ -59,7 +59,7 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument('source', metavar='SOURCE', help='CAD-60 directory (or LSPET root)')
     p.add_argument('--json', required=True, type=Path, help='write the timings here (JSON)')
     p.add_argument('--model', default=None,
-                   help='model (.npz or shipped name); default rgbd_10 (lspet_rgb_14 on LSPET)')
+                   help='model (.npz or shipped name); default rgbd_14 (lspet_rgb_14 on LSPET)')
     p.add_argument('--range', dest='frame_range', metavar='A-B', help='LSPET image numbers')
     p.add_argument('--frames', type=int, default=200, help='frames timed (spread over the set)')
     p.add_argument('--warmup', type=int, default=10, help='frames run before timing')
@@ -168,7 +168,7 @@ def graph_bench(bag_path: Path, args: argparse.Namespace) -> dict:
         raise ValueError(f'{bag_path}: --graph needs a bag (got a {kind} source)')
     out = {}
     for name, single in (('nodes', False), ('pipeline', True)):
-        r = run_graph(bag_path, args.out, rate=args.rate, model=args.model or 'rgbd_10',
+        r = run_graph(bag_path, args.out, rate=args.rate, model=args.model or 'rgbd_14',
                       pipeline=single, best_effort=args.best_effort)
         lat = r.latency_ms()
         t_out = np.sort(np.fromiter(r.left.values(), float))

@@ -74,7 +74,7 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
                    'bundled sample, with ground truth on cad60/skeleton)')
     p.add_argument('--out', type=Path, default=Path('out'), help='output directory')
     p.add_argument('--rate', type=float, default=1.0, help='replay speed (1 = real time)')
-    p.add_argument('--model', default='rgbd_10', help='detector model (shipped name or .npz)')
+    p.add_argument('--model', default='rgbd_14', help='detector model (shipped name or .npz)')
     p.add_argument('--timeout', type=float, default=60.0,
                    help='seconds to wait for the graph to connect and to drain')
     p.set_defaults(func=run)
@@ -178,7 +178,7 @@ class GraphRun:
         return (len(t) - 1) / (t[-1] - t[0]) if len(t) > 1 and t[-1] > t[0] else float('nan')
 
 
-def run_graph(bag_path: Path, out: Path, *, rate: float = 1.0, model: str = 'rgbd_10',
+def run_graph(bag_path: Path, out: Path, *, rate: float = 1.0, model: str = 'rgbd_14',
               timeout: float = 60.0, pipeline: bool = False, best_effort: bool = False
               ) -> GraphRun:
     """Replay `bag_path` through the graph, each node its own process as `ros2 run` starts

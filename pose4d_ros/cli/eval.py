@@ -21,8 +21,9 @@ cad60-to-bag`) or an LSPET root (with --range). Every row runs the live pipeline
   video mode, a new video where the tracker starts a new track (each photo or subset frame on
   its own).
 
-Default models: the shipped `rgbd_10` and `rgb_10` for a CAD-60 set, `lspet_rgb_14` for LSPET;
-`--model` (repeatable) replaces them, each model giving the rows of its channels. Every row
+Default models: the shipped `rgbd_14` (what the nodes run) and `rgb_10` for a CAD-60 set,
+`lspet_rgb_14` for LSPET; `--model` (repeatable) replaces them (`--model rgbd_10` gives the
+paper's 10-part rows), each model giving the rows of its channels. Every row
 records its CPU time per frame (`cpu_ms`: p50, p95; see `_pipeline_eval`).
 """
 
@@ -86,7 +87,7 @@ def _clean(table: dict[str, dict[str, float]]) -> dict[str, dict[str, float | No
 
 
 def default_models(kind: str) -> list[str]:
-    return ['lspet_rgb_14'] if kind == 'lspet' else ['rgbd_10', 'rgb_10']
+    return ['lspet_rgb_14'] if kind == 'lspet' else ['rgbd_14', 'rgb_10']
 
 
 def add_parser(subparsers: argparse._SubParsersAction) -> None:
@@ -98,7 +99,7 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument('--json', required=True, type=Path, help='write the table here (JSON)')
     p.add_argument('--model', action='append', default=None,
                    help='model (.npz or shipped name); repeat for several rows; default: '
-                        'rgbd_10 + rgb_10 (CAD-60), lspet_rgb_14 (LSPET)')
+                        'rgbd_14 + rgb_10 (CAD-60), lspet_rgb_14 (LSPET)')
     p.add_argument('--range', dest='frame_range', metavar='A-B',
                    help='LSPET image numbers (inclusive), e.g. 2501-3000')
     p.add_argument('--stride', type=int, default=1, help='every n-th frame of a CAD-60 video')

@@ -670,7 +670,8 @@ class LimbLengths:
 
 @dataclass(frozen=True)
 class IkResult:
-    """Elbows and knees of one frame, in `LIMBS` order (left arm, right arm, left leg, right leg).
+    """Elbows and knees of one frame, in `LIMBS` order (left arm, right arm, left leg, right leg;
+    the limbs asked for, all four by default: the shapes below are then (n, ...)).
 
     Attributes
     ----------
@@ -693,7 +694,8 @@ def infer_middle_joints(depth_m: NDArray[np.floating] | None, points: NDArray[np
                         lengths: LimbLengths | Mapping[str, tuple[float, float]], *,
                         names: Sequence[str] = PARTS_10.names,
                         mask: NDArray[np.bool_] | None = None,
-                        config: IkConfig = IkConfig()) -> IkResult:
+                        config: IkConfig = IkConfig(),
+                        limbs: Sequence[str] | None = None) -> IkResult:
     """Infer both elbows and both knees of one frame (what the `ik` node calls).
 
     Parameters
@@ -706,6 +708,7 @@ def infer_middle_joints(depth_m: NDArray[np.floating] | None, points: NDArray[np
     names : joint names of `points` (default: the 10 parts).
     mask : (H, W) bool person mask, optional.
     config : parameters.
+    limbs : the limbs to solve (`LIMBS` keys, in `LIMBS` order in the result); default all.
     """
     pts = np.asarray(points, dtype=np.float64)
     if pts.ndim != 2 or pts.shape != (len(names), 3):
@@ -727,8 +730,9 @@ def infer_middle_joints(depth_m: NDArray[np.floating] | None, points: NDArray[np
 
     frame = body_frame(get('left_shoulder'), get('right_shoulder'), get('left_hip'),
                        get('right_hip'))
+    solved = {limb: joints for limb, joints in LIMBS.items() if limbs is None or limb in limbs}
     sols = []
-    for limb, (a, _, b) in LIMBS.items():
+    for limb, (a, _, b) in solved.items():
         upper, lower = (lengths.lengths(limb) if isinstance(lengths, LimbLengths)
                         else lengths[limb])
         sols.append(solve_limb(depth_m, get(a), get(b), upper, lower, intrinsics,
@@ -736,8 +740,8 @@ def infer_middle_joints(depth_m: NDArray[np.floating] | None, points: NDArray[np
                                kind='arm' if limb.endswith('arm') else 'leg', mask=mask,
                                config=config))
     return IkResult(
-        names=tuple(m for _, m, _ in LIMBS.values()),
-        positions=np.stack([s.position for s in sols]),
-        pixels=np.stack([s.pixel for s in sols]),
+        names=tuple(m for _, m, _ in solved.values()),
+        positions=np.array([s.position for s in sols], np.float64).reshape(-1, 3),
+        pixels=np.array([s.pixel for s in sols], np.float64).reshape(-1, 2),
         confidence=np.array([s.confidence for s in sols], np.float32),
         flags=np.array([s.flag for s in sols], np.uint8))

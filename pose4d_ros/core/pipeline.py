@@ -423,13 +423,16 @@ class IkStage:
         points = np.where(valid[:, None], xyz, np.nan)
         if self.learn:
             self.learner.observe_skeleton(SKELETON_14, points)
+        # elbows and knees measured by a 14-part detector are kept: only the others are solved
+        measured = (src != cj.MISSING) & valid
+        unmeasured = [limb for limb, (_, middle, _) in LIMBS.items()
+                      if not measured[SKELETON_14.index(middle)]]
         result = infer_middle_joints(
             depth_m if self.use_depth else None, points, intrinsics, self.lengths(),
-            names=SKELETON_14, mask=mask if self.use_depth else None, config=self.config)
+            names=SKELETON_14, mask=mask if self.use_depth else None, config=self.config,
+            limbs=unmeasured)
         for k, name in enumerate(result.names):
             i = SKELETON_14.index(name)
-            if src[i] != cj.MISSING and valid[i]:
-                continue  # measured by a 14-part detector: keep it
             if result.flags[k] in (IkFlag.MISSING, IkFlag.BEHIND_CAMERA) or \
                     not np.isfinite(result.positions[k]).all():
                 uv[i], xyz[i], conf[i], src[i] = np.nan, np.nan, 0.0, cj.MISSING

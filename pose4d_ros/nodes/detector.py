@@ -67,8 +67,8 @@ def _scale_factors(value: list[float]) -> str | None:
 
 
 PARAMS = (
-    Param('detector.model', 'rgbd_10', 'Part model: the name of a shipped model (rgbd_10, '
-          'rgb_10, ...) or the path of a .npz.', check=_model_exists,
+    Param('detector.model', 'rgbd_14', 'Part model: the name of a shipped model (rgbd_14, '
+          'rgbd_10, rgb_10, ...) or the path of a .npz.', check=_model_exists,
           restart='the model is loaded, and its kernels compiled, at start-up'),
     Param('detector.n_levels', _S.n_levels, 'Pyramid levels searched around the scale the '
           "person's depth predicts.", range=(1, 9), live=True),
