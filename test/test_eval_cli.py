@@ -11,7 +11,7 @@ import pytest
 from helpers import write_utkinect
 from numpy.testing import assert_allclose
 
-from pose4d_ros.cli import _plot
+from pose4d_ros.cli import _draw, _plot
 from pose4d_ros.cli.main import main as pose4d_main
 from pose4d_ros.core.dpm import PartModel, load_model, save_model
 from pose4d_ros.core.skeleton import PARTS_10, PARTS_14
@@ -104,10 +104,16 @@ def test_train_then_eval_and_bench(tiny_set: Path, tmp_path: Path, capsys) -> No
     assert (a.filters == m.filters).all() and a.metadata['seed'] == '3'
     assert_allclose(a.depth_offset_m, m.depth_offset_m, atol=1e-6)
     assert json.loads(a.metadata['calibrated'])['frames'] == 8
-    out = tmp_path / 'table.json'
-    assert pose4d_main(['eval', str(tiny_set), '--json', str(out), '--model', str(model)]) == 0
+    out, drawn = tmp_path / 'table.json', tmp_path / 'drawn'
+    assert pose4d_main(['eval', str(tiny_set), '--json', str(out), '--model', str(model),
+                        '--draw', str(drawn)]) == 0
     table = json.loads(out.read_text())
     assert list(table['rows']) == ['rgbd', 'rgbd_kf', 'rgbd_kf_ik']
+    for row in table['rows']:  # every frame drawn, and the worst and best 8 of 8 as a grid
+        assert len(list((drawn / row).glob('*_pck*.jpg'))) == 8
+        grid = cv2.imread(str(drawn / f'{row}_worst_best.jpg'))
+        assert grid.shape == (2 * _draw.TILE, 8 * _draw.TILE, 3)
+    assert not list(drawn.rglob('.*'))
     # trained and tested on the same 8 frames: the parts must mostly be found
     assert table['rows']['rgbd']['pck@0.2']['average'] > 50
     bench = tmp_path / 'bench.json'
@@ -211,3 +217,26 @@ def test_without_the_peer_venv_eval_says_make_peer_in_one_line(tiny_set: Path, t
                             '--peer', 'mediapipe']) == 2
         err = capsys.readouterr().err
         assert 'make peer' in err and err.count('\n') == 1, err
+
+
+def test_frame_pck_scores_each_frame_by_the_table_rule(tiny_set: Path) -> None:
+    """A frame predicted exactly scores 100, one shifted by a box size 0, one with some joints
+    moved the share of the rest; frames are independent of each other."""
+    from pose4d_ros.cli._pipeline_eval import Row
+    from pose4d_ros.core.joints import JointSet
+    from pose4d_ros.datasets.sources import open_source
+
+    frames = list(open_source(str(tiny_set)))[:3]
+    names = PARTS_14.names
+    row = Row()
+    for k, f in enumerate(frames):
+        uv, _, _ = f.truth.labelled(names)
+        uv = uv.copy()
+        if k == 1:
+            uv += np.ptp(uv, axis=0).max()
+        if k == 2:
+            uv[:7] += np.ptp(uv, axis=0).max()
+        row.add(JointSet(names, uv, confidence=np.ones(len(names))), 0.0)
+    pck = _draw.frame_pck('rgbd', row, frames)
+    assert pck[0] == 100 and pck[1] == 0
+    assert pck[2] == pytest.approx(100 * 7 / 14)

@@ -100,7 +100,7 @@ def score_rows(rows: dict[str, Row], frames: Sequence[Frame]
     is not scored."""
     tables = {}
     for name, row in rows.items():
-        names, arrays = _arrays(name, row, frames)
+        names, arrays = row_arrays(name, row, frames)
         tables[name] = score_groups(names=names, **arrays)
         if row.cpu_ms:
             tables[name]['cpu_ms'] = ms_stats(row.cpu_ms)
@@ -112,12 +112,12 @@ def curve_rows(rows: dict[str, Row], frames: Sequence[Frame], alphas: Sequence[f
     """`core.metrics.curves` of each row at `alphas`, on the joints `score_rows` scores."""
     out = {}
     for name, row in rows.items():
-        names, arrays = _arrays(name, row, frames)
+        names, arrays = row_arrays(name, row, frames)
         out[name] = curves(names=names, alphas=np.asarray(alphas), **arrays)
     return out
 
 
-def _arrays(name: str, row: Row, frames: Sequence[Frame]) -> tuple[tuple[str, ...], dict]:
+def row_arrays(name: str, row: Row, frames: Sequence[Frame]) -> tuple[tuple[str, ...], dict]:
     names = SKELETON_14 if name.endswith('_ik') else tuple(
         n for n in SKELETON_14 if row.preds and n in row.preds[0].names)
     sizes = [(f.color.shape[1], f.color.shape[0]) for f in frames]

@@ -1,7 +1,7 @@
 """`pose4d eval`: run the perception core over a labelled set and print the paper's table.
 
     pose4d eval SOURCE --json FILE [--model M ...] [--range A-B] [--peer mediapipe]
-                [--plot FILE.png]
+                [--plot FILE.png] [--draw DIR]
 
 SOURCE is a CAD-60 directory (real or synthetic), a rosbag2 with ground truth (`pose4d
 cad60-to-bag`) or an LSPET root (with --range). Every row runs the live pipeline's own stages
@@ -24,7 +24,9 @@ cad60-to-bag`) or an LSPET root (with --range). Every row runs the live pipeline
 Default models: the shipped `rgbd_14` (what the nodes run) and `rgb_10` for a CAD-60 set,
 `lspet_rgb_14` for LSPET; `--model` (repeatable) replaces them (`--model rgbd_10` gives the
 paper's 10-part rows), each model giving the rows of its channels. Every row
-records its CPU time per frame (`cpu_ms`: p50, p95; see `_pipeline_eval`).
+records its CPU time per frame (`cpu_ms`: p50, p95; see `_pipeline_eval`). `--draw DIR`
+writes every frame with each row's skeleton and the ground truth, and each row's worst and best
+frames as one grid (`_draw`).
 """
 
 from __future__ import annotations
@@ -35,7 +37,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from pose4d_ros.cli import _plot
+from pose4d_ros.cli import _draw, _plot
 from pose4d_ros.cli._dpm import factor_list, load_frames, log
 from pose4d_ros.cli._pipeline_eval import Row, curve_rows, peer_rows, pipeline_rows, score_rows
 from pose4d_ros.cli._progress import progress
@@ -115,6 +117,10 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument('--plot', type=Path, metavar='FILE.png',
                    help='also draw PCK against the threshold (0 to 0.5) per joint group, one '
                         'curve per row, and the 3-D error distribution')
+    p.add_argument('--draw', type=Path, metavar='DIR',
+                   help="also write every frame with each row's skeleton and the ground truth "
+                        "(DIR/<row>/), and each row's worst and best frames as a grid "
+                        '(DIR/<row>_worst_best.jpg)')
     p.set_defaults(func=run)
 
 
@@ -170,4 +176,7 @@ def table_rows(args: argparse.Namespace, kind: str, models: list[PartModel],
     for name, row in rows.items():
         if row.no_pose:
             log(f'{name}: no pose in {row.no_pose} of {len(frames)} frames')
+    if args.draw is not None:
+        for path in _draw.draw_rows(rows, frames, args.draw):
+            log(f'wrote {path}')
     return score_rows(rows, frames), len(frames), curve_rows(rows, frames, _plot.ALPHAS)

@@ -15,8 +15,8 @@ SOURCE_RGB = {cj.DETECTED: (40, 220, 60), cj.TRACKED: (50, 130, 255),
 
 
 def draw_skeleton(rgb: NDArray[np.uint8], joints: JointSet, bones: list[tuple[int, int]], *,
-                  truth_uv: NDArray[np.floating] | None = None, scale: int = 2
-                  ) -> NDArray[np.uint8]:
+                  truth_uv: NDArray[np.floating] | None = None, truth_bones: bool = False,
+                  scale: int = 2) -> NDArray[np.uint8]:
     """A copy of `rgb`, enlarged `scale` times, with the skeleton drawn on it.
 
     Parameters
@@ -25,6 +25,7 @@ def draw_skeleton(rgb: NDArray[np.uint8], joints: JointSet, bones: list[tuple[in
     joints : the skeleton; MISSING joints are not drawn.
     bones : (a, b) index pairs into `joints`.
     truth_uv : (K, 2) ground-truth pixels drawn as small white crosses, optional.
+    truth_bones : `truth_uv` is in the order of `joints`: also draw its bones, thin and white.
     """
     img = cv2.resize(np.ascontiguousarray(rgb), None, fx=scale, fy=scale,
                      interpolation=cv2.INTER_NEAREST)
@@ -34,6 +35,12 @@ def draw_skeleton(rgb: NDArray[np.uint8], joints: JointSet, bones: list[tuple[in
         if ok[a] and ok[b]:
             worst = max(int(joints.source[a]), int(joints.source[b]))
             cv2.line(img, tuple(pts[a]), tuple(pts[b]), SOURCE_RGB[worst], 2, cv2.LINE_AA)
+    if truth_uv is not None and truth_bones:
+        tp = np.asarray(truth_uv, dtype=np.float64) * scale + (scale - 1) / 2
+        for a, b in bones:
+            if np.isfinite(tp[[a, b]]).all():
+                cv2.line(img, tuple(np.round(tp[a]).astype(int)),
+                         tuple(np.round(tp[b]).astype(int)), (255, 255, 255), 1, cv2.LINE_AA)
     if truth_uv is not None:
         for u, v in np.asarray(truth_uv, dtype=np.float64):
             if np.isfinite(u) and np.isfinite(v):
