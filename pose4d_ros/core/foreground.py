@@ -63,7 +63,7 @@ import numpy as np
 from numba import njit
 from numpy.typing import NDArray
 
-from pose4d_ros.core.camera import Intrinsics, depth_to_metres
+from pose4d_ros.core.camera import MAX_DEPTH_M, Intrinsics, depth_to_metres
 
 # Reasons given when no person is found.
 REASON_OK = ''
@@ -1082,27 +1082,39 @@ def apply_mask(color: NDArray[np.uint8], depth_m: NDArray[np.floating],
         raise ValueError(f'mask must be bool, got dtype {mask.dtype}')
     if mask.ndim != 2 or color.shape[:2] != mask.shape:
         raise ValueError(f'colour shape {color.shape} does not match the mask {mask.shape}')
-    depth = depth_to_metres(np.asarray(depth_m))
+    depth = np.asarray(depth_m)
+    if depth.dtype not in (np.uint16, np.float32, np.float64):
+        raise ValueError(f'depth must be uint16 millimetres or float metres, '
+                         f'got dtype {depth.dtype}')
     if depth.shape != mask.shape:
         raise ValueError(f'depth shape {depth.shape} does not match the mask {mask.shape}')
-    color_masked = np.empty(color.shape, color.dtype)
-    _blank_outside(np.ascontiguousarray(color).reshape(*mask.shape, -1),
-                   color_masked.reshape(*mask.shape, -1), depth, mask)
-    return color_masked, depth
+    # outside the mask's box nothing is read: zeros and NaN are written at memory speed
+    color_masked = np.zeros(color.shape, color.dtype)
+    depth_masked = np.full(mask.shape, np.nan, np.float32)
+    rows = np.flatnonzero(mask.any(axis=1))
+    if rows.size:
+        cols = np.flatnonzero(mask.any(axis=0))
+        box = np.s_[rows[0]:rows[-1] + 1, cols[0]:cols[-1] + 1]
+        inner = color_masked[box]
+        _blank_outside(color[box].reshape(*inner.shape[:2], -1),
+                       inner.reshape(*inner.shape[:2], -1), depth[box], depth_masked[box],
+                       mask[box], 0.001 if depth.dtype == np.uint16 else 1.0, MAX_DEPTH_M)
+    return color_masked, depth_masked
 
 
 @njit(cache=True)
-def _blank_outside(color: NDArray[np.uint8], out: NDArray[np.uint8],
-                   depth: NDArray[np.float32], mask: NDArray[np.bool_]) -> None:
-    """`apply_mask` in one pass: `out` = `color` inside the mask, 0 outside; `depth` NaN
-    outside (in place)."""
+def _blank_outside(color: NDArray[np.uint8], out: NDArray[np.uint8], depth: NDArray,
+                   out_depth: NDArray[np.float32], mask: NDArray[np.bool_], scale: float,
+                   max_m: float) -> None:
+    """`apply_mask` inside the mask's box, in one pass: `out` = `color` inside the mask (it is
+    0 elsewhere already); `out_depth` = the depth in metres (`depth` times `scale`) inside the
+    mask where it is a reading (`camera.depth_to_metres`'s rule), NaN elsewhere already."""
     h, w, c = color.shape
     for r in range(h):
         for x in range(w):
             if mask[r, x]:
                 for k in range(c):
                     out[r, x, k] = color[r, x, k]
-            else:
-                for k in range(c):
-                    out[r, x, k] = 0
-                depth[r, x] = np.nan
+                z = np.float32(depth[r, x]) * np.float32(scale)  # as depth_to_metres
+                if z > 0 and z <= max_m:
+                    out_depth[r, x] = z

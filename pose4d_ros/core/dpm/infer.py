@@ -37,6 +37,9 @@ from pose4d_ros.core.dpm.model import PartModel
 from pose4d_ros.core.foreground import apply_mask
 from pose4d_ros.core.hog import Level, depth_image, feature_pyramid
 
+# rows of the depth image read for the person's depth (the foreground's working height)
+WORKING_ROWS = 240
+
 
 @dataclass(frozen=True)
 class SearchConfig:
@@ -410,11 +413,14 @@ class Detector:
             d = np.asarray(depth_m)
             if d.shape != (h, w):
                 raise ValueError(f'depth shape {d.shape} does not match the image {(h, w)}')
+            # the person's median depth from every n-th pixel of every n-th row, n such that
+            # about WORKING_ROWS rows are read: as much work at any camera resolution
+            n = max(h // WORKING_ROWS, 1)
             if mask is not None:
-                vals = d[mask]
+                vals = d[::n, ::n][mask[::n, ::n]]
             elif bx is not None:
                 x0, y0, x1, y1 = (int(round(v)) for v in bx)
-                vals = d[max(y0, 0):max(y1, 0), max(x0, 0):max(x1, 0)].ravel()
+                vals = d[max(y0, 0):max(y1, 0):n, max(x0, 0):max(x1, 0):n].ravel()
             else:
                 vals = np.zeros(0, np.float32)  # no person region: depth cannot give the scale
             vals = vals[np.isfinite(vals) & (vals > 0)]
