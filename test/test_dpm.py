@@ -372,3 +372,31 @@ def test_kmeans_is_deterministic_and_finds_separated_clusters() -> None:
     assert_array_equal(l1, l2)
     assert sorted(np.bincount(l1).tolist()) == [30, 30, 30]
     assert_allclose(np.sort(np.round(c1).sum(1)), [0, 5, 5])
+
+
+def test_labelled_pose_score_is_the_tree_dp_at_fixed_cells() -> None:
+    """tools/lspet_diagnose's score of a given pose: at the DP's best pose it equals the best
+    score, anywhere else it is no higher (the DP is the max over all poses)."""
+    import importlib.util
+
+    from pose4d_ros.core.dpm.infer import backtrack, best_roots, model_arrays, score_level
+    from pose4d_ros.core.hog import feature_pyramid
+
+    path = Path(__file__).resolve().parents[1] / 'tools' / 'lspet_diagnose.py'
+    spec = importlib.util.spec_from_file_location('lspet_diagnose', path)
+    tool = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(tool)
+    m = tenpart_model('rgb')
+    rng = np.random.default_rng(3)
+    img = rng.integers(0, 255, (90, 70, 3), dtype=np.uint8)
+    level = feature_pyramid(img, None, [1.0], sbin=4, pad=(3, 3))[0]
+    arrays = model_arrays(m)
+    res = score_level(level, m, arrays)
+    parts, _ = backtrack(best_roots(res, 1), *arrays[1:2], res.resp, res.ix, res.iy, res.ik,
+                         *arrays[2:])
+    resp = res.resp.astype(np.float64)
+    assert tool.labelled_score(resp, parts[0][:, 1:], m) == pytest.approx(res.root.max(), abs=1e-4)
+    ny, nx = resp.shape[2:]
+    for _ in range(20):
+        cells = np.stack([rng.integers(0, ny, 10), rng.integers(0, nx, 10)], 1)
+        assert tool.labelled_score(resp, cells, m) <= res.root.max() + 1e-4

@@ -1,0 +1,139 @@
+"""Why the photo model fails: the labelled pose's own score against the pose the search finds.
+
+    .venv/bin/python tools/lspet_diagnose.py ../shared/data/lspet --range 2501-2600 \
+        [--model lspet_rgb_14] [--json out/lspet_diagnose.json]
+
+For every photograph whose 14 joints are all labelled:
+- the labelled person's scale (`core.dpm.samples.joint_scale`, as training measures it) and the
+  model's level at that scale;
+- the score of the labelled pose on that level: each part's filter at the labelled cell, its
+  spring from its parent's labelled cell and the best types (an exact max over the types on the
+  tree);
+- the best pose on that same level (what the search would return if it knew the scale), and the
+  best pose over the whole search (`Detector.detect`, what `pose4d eval` scores);
+- each pose's PCK@0.1 against the labels (the table's rule).
+
+If the found pose outscores the labelled one, the model ranks a wrong pose above the truth (a
+training problem); if the labelled pose scores higher but is not found, the search misses it.
+Prints the shares and medians; `--json` writes every photo's numbers.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+
+import numpy as np
+
+from pose4d_ros.core.dpm.infer import Detector, SearchPlan, model_arrays, score_level
+from pose4d_ros.core.dpm.model import PartModel, load_model
+from pose4d_ros.core.dpm.samples import joint_scale
+from pose4d_ros.core.files import write_json
+from pose4d_ros.datasets.lspet import read_frames
+from pose4d_ros.models import model_path
+
+
+def labelled_score(resp: np.ndarray, cells: np.ndarray, model: PartModel) -> float:
+    """The best score over part types of the pose with part c at window `cells[c]` = (row,
+    col) on a level whose filter responses are `resp` (P, K, ny, nx)."""
+    parents = np.asarray(model.parents)
+    sp, an, bias = (model.springs.astype(np.float64), model.anchors, model.bias.astype(np.float64))
+    n_parts, n_types = resp.shape[:2]
+    below = np.zeros((n_parts, n_types))  # best score of each part's subtree, per its type
+    for c in range(n_parts - 1, -1, -1):
+        r, q = cells[c]
+        below[c] += resp[c, :, r, q]
+        if c == 0:
+            break
+        p = parents[c]
+        dx = q - cells[p, 1] - an[c, :, 0]
+        dy = r - cells[p, 0] - an[c, :, 1]
+        spring = (sp[c, :, 0] * dx + sp[c, :, 1] * dx * dx
+                  + sp[c, :, 2] * dy + sp[c, :, 3] * dy * dy)
+        # message to the parent: for each parent type, the best child type
+        below[p] += np.max(below[c][None, :] - spring[None, :] + bias[c], axis=1)
+    return float(np.max(below[0] + bias[0, 0]))
+
+
+def pck(uv: np.ndarray, truth: np.ndarray, alpha: float = 0.1) -> float:
+    size = float(np.max(np.ptp(truth, axis=0)))
+    return 100.0 * float(np.mean(np.hypot(*(uv - truth).T) <= alpha * size))
+
+
+def diagnose(root: str, first: int, last: int, model: PartModel) -> list[dict]:
+    det = Detector(model)
+    arrays = model_arrays(model)
+    fh, fw = model.filter_shape
+    out = []
+    for frame in read_frames(root, first, last):
+        truth, _, vis = frame.truth.labelled(model.part_names)
+        if not vis.all():
+            continue
+        s = joint_scale(truth, list(model.part_names))
+        if not (np.isfinite(s) and s > 2):
+            continue
+        h, w = frame.color.shape[:2]
+        f = model.canonical_scale_px / s
+        level = det.pyramid(frame.color, None, SearchPlan(0, 0, w, h, (f,), False))[0]
+        res = score_level(level, model, arrays)
+        if res is None:
+            continue
+        rows, cols = level.pixel_to_cell(truth[:, 0], truth[:, 1], (fh, fw))
+        ny, nx = res.resp.shape[2:]
+        if rows.min() < 0 or cols.min() < 0 or rows.max() >= ny or cols.max() >= nx:
+            continue
+        gt = labelled_score(res.resp.astype(np.float64), np.stack([rows, cols], 1), model)
+        same = det.poses_from_levels([level])[0]
+        found = det.detect(frame.color, None)[0]
+        out.append({'key': Path(frame.key).name, 'person_scale_px': round(s, 1),
+                    'labelled_score': round(gt, 3),
+                    'same_scale_score': round(same.score, 3),
+                    'same_scale_pck': round(pck(same.uv, truth), 1),
+                    'found_score': round(found.score, 3),
+                    'found_pck': round(pck(found.uv, truth), 1),
+                    'found_scale_ratio': round(found.scale / f, 3)})
+    return out
+
+
+def summary(rows: list[dict]) -> str:
+    def col(k: str) -> np.ndarray:
+        return np.array([r[k] for r in rows], float)
+    gt, same, found = col('labelled_score'), col('same_scale_score'), col('found_score')
+    ratio = col('found_scale_ratio')
+    near = np.abs(np.log(ratio)) <= np.log(1.15)
+    lines = [f'{len(rows)} photographs with all 14 joints labelled',
+             f'median score: labelled pose {np.median(gt):.2f}, best at its scale '
+             f'{np.median(same):.2f}, found {np.median(found):.2f}',
+             f'found pose outscores the labelled one: {100 * np.mean(found > gt):.1f} %',
+             f'best pose at the labelled scale outscores the labelled one: '
+             f'{100 * np.mean(same > gt + 1e-6):.1f} %',
+             f'labelled pose scores above 0 (the SVM boundary): {100 * np.mean(gt > 0):.1f} %',
+             f'found at the labelled scale (+-15 %): {100 * np.mean(near):.1f} %'
+             f', smaller (level scale > 1.15x): {100 * np.mean(ratio > 1.15):.1f} %'
+             f', larger: {100 * np.mean(ratio < 1 / 1.15):.1f} %',
+             f'PCK@0.1: found {np.mean(col("found_pck")):.1f}, best at the labelled scale '
+             f'{np.mean(col("same_scale_pck")):.1f}']
+    return '\n'.join(lines)
+
+
+def main(argv: list[str] | None = None) -> int:
+    p = argparse.ArgumentParser(description=__doc__.split('\n\n')[0])
+    p.add_argument('root', help='LSPET root')
+    p.add_argument('--range', dest='frame_range', default='2501-2600', metavar='A-B')
+    p.add_argument('--model', default='lspet_rgb_14')
+    p.add_argument('--json', type=Path)
+    args = p.parse_args(argv)
+    a, b = (int(v) for v in args.frame_range.split('-'))
+    rows = diagnose(args.root, a, b, load_model(model_path(args.model)))
+    if not rows:
+        print('no photograph with all 14 joints labelled in range', file=sys.stderr)
+        return 1
+    print(summary(rows))
+    if args.json is not None:
+        write_json(args.json, {'model': args.model, 'range': args.frame_range, 'photos': rows})
+    return 0
+
+
+if __name__ == '__main__':
+    raise SystemExit(main())
