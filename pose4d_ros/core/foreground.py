@@ -54,6 +54,7 @@ used only to report. The tuning script is kept with the project notes
 
 from __future__ import annotations
 
+import functools
 import math
 import threading
 from dataclasses import dataclass, field, fields, replace
@@ -318,6 +319,15 @@ def _rays(intrinsics: Intrinsics) -> tuple[NDArray[np.float32], NDArray[np.float
     return rays
 
 
+@functools.lru_cache(maxsize=64)
+def _ransac_draws(seed: int, n_pts: int, iterations: int) -> NDArray[np.int64]:
+    """The RANSAC sample: (iterations, 3) point indices (read-only), a function of its
+    arguments, drawn once (seeding a generator costs more than the fit's arithmetic)."""
+    idx = np.random.default_rng(seed).integers(0, n_pts, size=(iterations, 3))
+    idx.setflags(write=False)
+    return idx
+
+
 def fit_floor(depth_m: NDArray[np.floating], intrinsics: Intrinsics, *,
               config: ForegroundConfig = ForegroundConfig(),
               previous: NDArray[np.floating] | None = None) -> NDArray[np.float64] | None:
@@ -353,8 +363,7 @@ def fit_floor(depth_m: NDArray[np.floating], intrinsics: Intrinsics, *,
     # Kinect v1 depth error grows with z^2 (disparity quantisation)
     tol = config.floor_inlier_m * np.maximum(z, 1.0) ** 2
 
-    rng = np.random.default_rng(config.seed)
-    idx = rng.integers(0, n_pts, size=(config.floor_iterations, 3))
+    idx = _ransac_draws(config.seed, n_pts, config.floor_iterations)
     p0, p1, p2 = pts[idx[:, 0]], pts[idx[:, 1]], pts[idx[:, 2]]
     normal = np.cross(p1 - p0, p2 - p0)
     norm = np.linalg.norm(normal, axis=1)
@@ -388,8 +397,10 @@ def fit_floor(depth_m: NDArray[np.floating], intrinsics: Intrinsics, *,
         q = pts[inl]
         wt = 1.0 / np.maximum(q[:, 2], 1.0) ** 4
         c = (wt @ q) / wt.sum()
-        _, _, vt = np.linalg.svd((q - c) * np.sqrt(wt)[:, None], full_matrices=False)
-        n = vt[2] * (-1.0 if vt[2][1] > 0 else 1.0)
+        qc = q - c
+        # the normal: the weighted scatter's eigenvector of the smallest eigenvalue
+        _, vecs = np.linalg.eigh((qc * wt[:, None]).T @ qc)
+        n = vecs[:, 0] * (-1.0 if vecs[1, 0] > 0 else 1.0)
         if -n[1] < cos_tilt:
             break
         plane = np.append(n, -float(n @ c))
@@ -937,29 +948,36 @@ def _describe(part: NDArray[np.bool_], hist: NDArray[np.int64], lo: int, hi: int
     r0, r1, c0, c1 = int(rows[0]), int(rows[-1]) + 1, int(cols[0]), int(cols[-1]) + 1
     bh, bw = r1 - r0, c1 - c0
     box = (origin[0] + c0, origin[1] + r0, origin[0] + c1, origin[1] + r1)
-    top = bottom = math.nan
-    if above is not None:
-        k = config.edge_rows
-        t = above[r0:r0 + k][part[r0:r0 + k]]
-        b = above[max(r1 - k, 0):r1][part[max(r1 - k, 0):r1]]
-        t, b = t[np.isfinite(t)], b[np.isfinite(b)]
-        top = float(np.median(t)) if t.size else math.nan
-        bottom = float(np.median(b)) if b.size else math.nan
-    return Part(crop=part, origin=(origin[0], origin[1]), box=box, lo=lo, hi=hi, n=n, z=z,
-                height_m=bh * z / intrinsics.fy, width_m=bw * z / intrinsics.fx,
-                area_m2=n * z * z / (intrinsics.fx * intrinsics.fy), fill=n / (bh * bw),
-                variation=var, side=box[0] == 0 or box[2] == width, top_m=top,
-                bottom_m=bottom, extent_m=_extent_levels(hist) * config.metres_per_level)
+    pt = Part(crop=part, origin=(origin[0], origin[1]), box=box, lo=lo, hi=hi, n=n, z=z,
+              height_m=bh * z / intrinsics.fy, width_m=bw * z / intrinsics.fx,
+              area_m2=n * z * z / (intrinsics.fx * intrinsics.fy), fill=n / (bh * bw),
+              variation=var, side=box[0] == 0 or box[2] == width, top_m=math.nan,
+              bottom_m=math.nan, extent_m=_extent_levels(hist) * config.metres_per_level)
+    if above is None or not size_rules(pt, config):
+        # the heights above the floor decide only among parts of a person's size
+        return pt
+    k = config.edge_rows
+    t = above[r0:r0 + k][part[r0:r0 + k]]
+    b = above[max(r1 - k, 0):r1][part[max(r1 - k, 0):r1]]
+    t, b = t[np.isfinite(t)], b[np.isfinite(b)]
+    return replace(pt, top_m=float(np.median(t)) if t.size else math.nan,
+                   bottom_m=float(np.median(b)) if b.size else math.nan)
+
+
+def size_rules(part: Part, config: ForegroundConfig) -> bool:
+    """Whether a part has a person's height, width, surface, fill and depth extent."""
+    c = config
+    return (c.person_min_height_m <= part.height_m <= c.person_max_height_m
+            and c.person_min_width_m <= part.width_m <= c.person_max_width_m
+            and c.person_min_area_m2 <= part.area_m2 <= c.person_max_area_m2
+            and part.fill <= c.person_max_fill and part.extent_m <= c.person_max_extent_m)
 
 
 def person_rules(part: Part, config: ForegroundConfig) -> bool:
     """Whether a part passes the person-size rules of `config` (tops and bottoms only when
     the floor is known)."""
     c = config
-    if not (c.person_min_height_m <= part.height_m <= c.person_max_height_m
-            and c.person_min_width_m <= part.width_m <= c.person_max_width_m
-            and c.person_min_area_m2 <= part.area_m2 <= c.person_max_area_m2
-            and part.fill <= c.person_max_fill and part.extent_m <= c.person_max_extent_m):
+    if not size_rules(part, c):
         return False
     if math.isfinite(part.top_m) and not c.person_min_top_m <= part.top_m <= c.person_max_top_m:
         return False
@@ -1013,10 +1031,11 @@ def _depth_parts(hist: NDArray[np.int64], gap_levels: float) -> list[tuple[int, 
         return []
     if gap_levels <= 0:
         return [(int(levels[0]), int(levels[-1]))]
-    cuts = np.flatnonzero(np.diff(levels) > gap_levels)
-    starts = np.r_[levels[0], levels[cuts + 1]]
-    ends = np.r_[levels[cuts], levels[-1]]
-    return [(int(a), int(b)) for a, b in zip(starts, ends, strict=True)]
+    cuts = np.flatnonzero(np.diff(levels) > gap_levels).tolist()
+    lv = levels.tolist()
+    starts = [lv[0]] + [lv[i + 1] for i in cuts]
+    ends = [lv[i] for i in cuts] + [lv[-1]]
+    return list(zip(starts, ends, strict=True))
 
 
 def _region(g: NDArray[np.uint8], level: int, seed: tuple[int, int], connectivity: int
