@@ -209,22 +209,30 @@ def depth_image(depth_m: NDArray[np.floating], encoding: str = 'float', *,
     raise ValueError(f"depth encoding must be 'float' or 'u8', got {encoding!r}")
 
 
-def pad_features(feat: NDArray[np.float32], pad_y: int, pad_x: int) -> NDArray[np.float32]:
+def pad_features(feat: NDArray[np.float32], pad_y: int, pad_x: int,
+                 end: tuple[int, int] | None = None) -> NDArray[np.float32]:
     """Pad a feature map with cells that are all zero except the truncation feature (1).
 
     Parameters
     ----------
     feat : (h, w, 32 * n) float32, n channel groups of 32 (e.g. colour then depth).
-    pad_y, pad_x : cells added on each side.
+    pad_y, pad_x : cells added above and to the left (and below and to the right, unless
+        `end` says otherwise).
+    end : (pad_y_end, pad_x_end) cells added below and to the right.
 
     Returns
     -------
-    (h + 2 pad_y, w + 2 pad_x, 32 * n) float32.
+    (h + pad_y + pad_y_end, w + pad_x + pad_x_end, 32 * n) float32.
     """
     h, w, c = feat.shape
     if c % N_FEATURES:
         raise ValueError(f'feature depth {c} is not a multiple of {N_FEATURES}')
-    out = np.zeros((h + 2 * pad_y, w + 2 * pad_x, c), np.float32)
+    ey, ex = (pad_y, pad_x) if end is None else end
+    if min(pad_y, pad_x, ey, ex) < 0:
+        raise ValueError(f'padding must be >= 0 cells, got {(pad_y, pad_x, ey, ex)}')
+    if (pad_y, pad_x, ey, ex) == (0, 0, 0, 0):
+        return feat
+    out = np.zeros((h + pad_y + ey, w + pad_x + ex, c), np.float32)
     out[:, :, TRUNCATION::N_FEATURES] = 1.0
     out[pad_y:pad_y + h, pad_x:pad_x + w] = feat
     return out
@@ -238,7 +246,7 @@ class Level:
     ----------
     feat : (h, w, C) float32 padded features (C = 32 per channel group).
     scale : level pixels per source pixel (the source image was resized by this factor).
-    pad : (pad_y, pad_x) cells of padding on each side.
+    pad : (pad_y, pad_x) cells of padding above and to the left.
     origin : (x0, y0) source pixel of the crop's top-left corner the level was computed on.
     sbin : cell size, level pixels.
     """
@@ -248,6 +256,14 @@ class Level:
     pad: tuple[int, int]
     origin: tuple[int, int]
     sbin: int
+    pad_end: tuple[int, int] | None = None  # (below, right) cells; None = as `pad`
+
+    @property
+    def image_cells(self) -> tuple[int, int]:
+        """(rows, cols) of cells of the image itself (without the padding)."""
+        h, w = self.feat.shape[:2]
+        ey, ex = self.pad if self.pad_end is None else self.pad_end
+        return h - self.pad[0] - ey, w - self.pad[1] - ex
 
     def cell_to_pixel(self, row: NDArray, col: NDArray, size: tuple[int, int]
                       ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
@@ -315,7 +331,8 @@ def channel_features(color: NDArray | None, depth: NDArray[np.float32] | None, s
 
 def feature_pyramid(color: NDArray | None, depth: NDArray[np.float32] | None,
                     scales: list[float] | tuple[float, ...] | NDArray, *, sbin: int,
-                    pad: tuple[int, int], origin: tuple[int, int] = (0, 0)) -> list[Level]:
+                    pad: tuple[int, int], origin: tuple[int, int] = (0, 0),
+                    pad_end: tuple[int, int] | None = None) -> list[Level]:
     """Padded feature maps of an image (crop) at several scales.
 
     Parameters
@@ -324,7 +341,8 @@ def feature_pyramid(color: NDArray | None, depth: NDArray[np.float32] | None,
     depth : (H, W) float32 from `depth_image`, or None (colour only).
     scales : resize factors (level pixels per source pixel).
     sbin : cell size, pixels.
-    pad : (pad_y, pad_x) cells of truncation padding on each side.
+    pad : (pad_y, pad_x) cells of truncation padding above and to the left.
+    pad_end : (pad_y, pad_x) below and to the right; None = `pad`.
     origin : (x0, y0) of the crop in the full image, so levels map back to full-image pixels.
 
     Returns
@@ -334,5 +352,6 @@ def feature_pyramid(color: NDArray | None, depth: NDArray[np.float32] | None,
     levels = []
     for s in scales:
         feat = channel_features(color, depth, float(s), sbin)
-        levels.append(Level(pad_features(feat, *pad), float(s), pad, origin, sbin))
+        levels.append(Level(pad_features(feat, *pad, end=pad_end), float(s), pad, origin, sbin,
+                            pad_end))
     return levels

@@ -308,7 +308,8 @@ def score_level(level: Level, model: PartModel, arrays: tuple | None = None
     wmat, parents, springs, anchors, bias = arrays if arrays is not None else model_arrays(model)
     fh, fw = model.filter_shape
     h, w, _ = level.feat.shape
-    if h - 2 * level.pad[0] < fh or w - 2 * level.pad[1] < fw:
+    ih, iw = level.image_cells
+    if ih < fh or iw < fw:
         return None
     ny, nx = h - fh + 1, w - fw + 1
     cols = im2col(level.feat, fh, fw)
@@ -476,9 +477,15 @@ class Detector:
                               far_m=m.depth_range_m[1])
         elif keep is not None:
             col, _ = apply_mask(col, np.zeros(keep.shape, np.float32), keep)
+        # Truncation padding (a part may lie partly outside the image) only where the crop
+        # meets the image's border: elsewhere the crop's margin is the space around the person,
+        # and padding there would only add filter positions nobody's parts lie on.
         fh, fw = m.filter_shape
-        pad = (fh // 2 + 1, fw // 2 + 1)
-        return feature_pyramid(col, dep, plan.scales, sbin=m.sbin, pad=pad,
+        py, px = fh // 2 + 1, fw // 2 + 1
+        h, w = np.shape(color)[:2]
+        return feature_pyramid(col, dep, plan.scales, sbin=m.sbin,
+                               pad=(py * (plan.y0 == 0), px * (plan.x0 == 0)),
+                               pad_end=(py * (plan.y1 == h), px * (plan.x1 == w)),
                                origin=(plan.x0, plan.y0))
 
     # ---------------------------------------------------------------- detection
