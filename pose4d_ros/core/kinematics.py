@@ -578,6 +578,18 @@ def solve_limb(depth_m: NDArray[np.floating] | None, root: NDArray[np.floating],
 # Bone lengths
 
 
+def _median(values: deque[float]) -> float:
+    """np.median of a deque of floats, by one partial sort (np.median's own overhead is most
+    of its time on a few hundred values, and the IK asks for eight medians per frame)."""
+    n = len(values)
+    a = np.fromiter(values, float, n)
+    k = n // 2
+    if n % 2:
+        return float(np.partition(a, k)[k])
+    lo, hi = np.partition(a, (k - 1, k))[k - 1:k + 1]
+    return float((lo + hi) / 2.0)
+
+
 class LimbLengths:
     """Bone lengths per limb, learned from a track's observations (falls back on parameters).
 
@@ -602,8 +614,9 @@ class LimbLengths:
                              f'reach_percentile ({reach_percentile}) in (0, 100]')
         self.min_samples = min_samples
         self.reach_percentile = reach_percentile
-        self._bones: dict[str, deque[tuple[float, float]]] = {
-            k: deque(maxlen=window) for k in LIMBS}
+        # upper and lower bone lengths, each a deque of floats (read back with np.fromiter)
+        self._upper: dict[str, deque[float]] = {k: deque(maxlen=window) for k in LIMBS}
+        self._lower: dict[str, deque[float]] = {k: deque(maxlen=window) for k in LIMBS}
         self._reach: dict[str, deque[float]] = {k: deque(maxlen=window) for k in LIMBS}
 
     def observe(self, limb: str, root: NDArray[np.floating], middle: NDArray[np.floating] | None,
@@ -615,8 +628,8 @@ class LimbLengths:
         if middle is not None and np.isfinite(middle).all() and np.isfinite(r0).all() \
                 and np.isfinite(e0).all():
             m0 = np.asarray(middle, float)
-            self._bones[limb].append((float(np.linalg.norm(m0 - r0)),
-                                      float(np.linalg.norm(e0 - m0))))
+            self._upper[limb].append(float(np.linalg.norm(m0 - r0)))
+            self._lower[limb].append(float(np.linalg.norm(e0 - m0)))
         if np.isfinite(r0).all() and np.isfinite(e0).all():
             self._reach[limb].append(float(np.linalg.norm(e0 - r0)))
 
@@ -633,7 +646,8 @@ class LimbLengths:
             both = ok & np.isfinite(m0).all(axis=1)
             up = np.linalg.norm(m0[both] - r0[both], axis=1)
             lo = np.linalg.norm(e0[both] - m0[both], axis=1)
-            self._bones[limb].extend(zip(up.tolist(), lo.tolist(), strict=True))
+            self._upper[limb].extend(up.tolist())
+            self._lower[limb].extend(lo.tolist())
         self._reach[limb].extend(np.linalg.norm(e0[ok] - r0[ok], axis=1).tolist())
 
     def observe_skeleton(self, names: Sequence[str], points: NDArray[np.floating]) -> None:
@@ -649,10 +663,9 @@ class LimbLengths:
         """(upper, lower) metres for `limb`."""
         if limb not in LIMBS:
             raise ValueError(f'unknown limb {limb!r}; expected one of {tuple(LIMBS)}')
-        bones = self._bones[limb]
-        if len(bones) >= self.min_samples:
-            arr = np.asarray(bones)
-            return float(np.median(arr[:, 0])), float(np.median(arr[:, 1]))
+        upper, lower = self._upper[limb], self._lower[limb]
+        if len(upper) >= self.min_samples:
+            return _median(upper), _median(lower)
         a, b = self.defaults[limb]
         reach = self._reach[limb]
         if len(reach) >= self.min_samples:
