@@ -76,6 +76,8 @@ def _hog_kernel(im: NDArray[np.float32], sbin: int, uu: NDArray[np.float32],
                     best_v = v
                     dx = gx
                     dy = gy
+            if best_v == 0.0:
+                continue  # votes nothing (blank background around a masked person)
             # snap to one of 18 orientations
             best_dot = 0.0
             best_o = 0
