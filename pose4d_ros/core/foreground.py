@@ -65,6 +65,7 @@ from numba import njit
 from numpy.typing import NDArray
 
 from pose4d_ros.core.camera import MAX_DEPTH_M, Intrinsics, depth_to_metres
+from pose4d_ros.core.stats import median
 
 # Reasons given when no person is found.
 REASON_OK = ''
@@ -718,7 +719,7 @@ def segment(depth_m: NDArray[np.floating], intrinsics: Intrinsics, *,
     _complete(mask, ~valid, best.box, config)
     zr = depth[mask]
     zr = zr[np.isfinite(zr)]
-    return ForegroundResult(mask=mask, box=best.box, depth_m=float(np.median(zr)), found=True,
+    return ForegroundResult(mask=mask, box=best.box, depth_m=median(zr), found=True,
                             reason=REASON_OK, stability=best.variation, level=best.lo,
                             floor=floor)
 
@@ -948,36 +949,37 @@ def _describe(part: NDArray[np.bool_], hist: NDArray[np.int64], lo: int, hi: int
     r0, r1, c0, c1 = int(rows[0]), int(rows[-1]) + 1, int(cols[0]), int(cols[-1]) + 1
     bh, bw = r1 - r0, c1 - c0
     box = (origin[0] + c0, origin[1] + r0, origin[0] + c1, origin[1] + r1)
-    pt = Part(crop=part, origin=(origin[0], origin[1]), box=box, lo=lo, hi=hi, n=n, z=z,
-              height_m=bh * z / intrinsics.fy, width_m=bw * z / intrinsics.fx,
-              area_m2=n * z * z / (intrinsics.fx * intrinsics.fy), fill=n / (bh * bw),
-              variation=var, side=box[0] == 0 or box[2] == width, top_m=math.nan,
-              bottom_m=math.nan, extent_m=_extent_levels(hist) * config.metres_per_level)
-    if above is None or not size_rules(pt, config):
-        # the heights above the floor decide only among parts of a person's size
-        return pt
-    k = config.edge_rows
-    t = above[r0:r0 + k][part[r0:r0 + k]]
-    b = above[max(r1 - k, 0):r1][part[max(r1 - k, 0):r1]]
-    t, b = t[np.isfinite(t)], b[np.isfinite(b)]
-    return replace(pt, top_m=float(np.median(t)) if t.size else math.nan,
-                   bottom_m=float(np.median(b)) if b.size else math.nan)
+    height_m, width_m = bh * z / intrinsics.fy, bw * z / intrinsics.fx
+    area, fill = n * z * z / (intrinsics.fx * intrinsics.fy), n / (bh * bw)
+    extent = _extent_levels(hist) * config.metres_per_level
+    top = bottom = math.nan
+    # the heights above the floor decide only among parts of a person's size
+    if above is not None and size_rules(height_m, width_m, area, fill, extent, config):
+        k = config.edge_rows
+        t = above[r0:r0 + k][part[r0:r0 + k]]
+        b = above[max(r1 - k, 0):r1][part[max(r1 - k, 0):r1]]
+        top, bottom = median(t[np.isfinite(t)]), median(b[np.isfinite(b)])
+    return Part(crop=part, origin=(origin[0], origin[1]), box=box, lo=lo, hi=hi, n=n, z=z,
+                height_m=height_m, width_m=width_m, area_m2=area, fill=fill, variation=var,
+                side=box[0] == 0 or box[2] == width, top_m=top, bottom_m=bottom,
+                extent_m=extent)
 
 
-def size_rules(part: Part, config: ForegroundConfig) -> bool:
+def size_rules(height_m: float, width_m: float, area_m2: float, fill: float, extent_m: float,
+               config: ForegroundConfig) -> bool:
     """Whether a part has a person's height, width, surface, fill and depth extent."""
     c = config
-    return (c.person_min_height_m <= part.height_m <= c.person_max_height_m
-            and c.person_min_width_m <= part.width_m <= c.person_max_width_m
-            and c.person_min_area_m2 <= part.area_m2 <= c.person_max_area_m2
-            and part.fill <= c.person_max_fill and part.extent_m <= c.person_max_extent_m)
+    return (c.person_min_height_m <= height_m <= c.person_max_height_m
+            and c.person_min_width_m <= width_m <= c.person_max_width_m
+            and c.person_min_area_m2 <= area_m2 <= c.person_max_area_m2
+            and fill <= c.person_max_fill and extent_m <= c.person_max_extent_m)
 
 
 def person_rules(part: Part, config: ForegroundConfig) -> bool:
     """Whether a part passes the person-size rules of `config` (tops and bottoms only when
     the floor is known)."""
     c = config
-    if not size_rules(part, c):
+    if not size_rules(part.height_m, part.width_m, part.area_m2, part.fill, part.extent_m, c):
         return False
     if math.isfinite(part.top_m) and not c.person_min_top_m <= part.top_m <= c.person_max_top_m:
         return False

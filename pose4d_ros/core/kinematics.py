@@ -45,6 +45,7 @@ from numpy.typing import NDArray
 
 from pose4d_ros.core.camera import Intrinsics, project, robust_depth_at
 from pose4d_ros.core.skeleton import LIMBS, PARTS_10
+from pose4d_ros.core.stats import median
 
 # Default bone lengths (upper, lower), metres: medians of the Kinect v1 skeletons of UTKinect
 # subjects s01-s06 (shoulder-elbow, elbow-wrist, hip-knee, knee-ankle), rounded to 5 mm.
@@ -578,18 +579,6 @@ def solve_limb(depth_m: NDArray[np.floating] | None, root: NDArray[np.floating],
 # Bone lengths
 
 
-def _median(values: deque[float]) -> float:
-    """np.median of a deque of floats, by one partial sort (np.median's own overhead is most
-    of its time on a few hundred values, and the IK asks for eight medians per frame)."""
-    n = len(values)
-    a = np.fromiter(values, float, n)
-    k = n // 2
-    if n % 2:
-        return float(np.partition(a, k)[k])
-    lo, hi = np.partition(a, (k - 1, k))[k - 1:k + 1]
-    return float((lo + hi) / 2.0)
-
-
 class LimbLengths:
     """Bone lengths per limb, learned from a track's observations (falls back on parameters).
 
@@ -665,7 +654,9 @@ class LimbLengths:
             raise ValueError(f'unknown limb {limb!r}; expected one of {tuple(LIMBS)}')
         upper, lower = self._upper[limb], self._lower[limb]
         if len(upper) >= self.min_samples:
-            return _median(upper), _median(lower)
+            # np.fromiter: converting the deque is most of the work of a median of 300
+            return (median(np.fromiter(upper, float, len(upper))),
+                    median(np.fromiter(lower, float, len(lower))))
         a, b = self.defaults[limb]
         reach = self._reach[limb]
         if len(reach) >= self.min_samples:

@@ -36,6 +36,7 @@ from pose4d_ros.core.dpm.dt import dt2d
 from pose4d_ros.core.dpm.model import PartModel
 from pose4d_ros.core.foreground import apply_mask
 from pose4d_ros.core.hog import Level, depth_image, feature_pyramid
+from pose4d_ros.core.stats import median
 
 # rows of the depth image read for the person's depth (the foreground's working height)
 WORKING_ROWS = 240
@@ -426,7 +427,7 @@ class Detector:
                 vals = np.zeros(0, np.float32)  # no person region: depth cannot give the scale
             vals = vals[np.isfinite(vals) & (vals > 0)]
             if vals.size:
-                z = float(np.median(vals))
+                z = median(vals)
         if np.isfinite(z):
             k = intrinsics or cad60_intrinsics(w, h)
             # Bounded work whatever the input: a person the depth puts outside the scales the
