@@ -56,6 +56,7 @@ constant-velocity Kalman filter used for comparison, with the same interface.
 
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass, field, replace
 from enum import IntEnum
@@ -321,6 +322,19 @@ def process_noise_matrix(dt: float, config: SlqeConfig, n_parts: int) -> NDArray
     return out
 
 
+@functools.lru_cache(maxsize=32)
+def _prediction_matrices(dt: float, config: SlqeConfig, tree: PartTree,
+                         active: tuple[bool, ...]
+                         ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """A(dt) and Q(dt) (read-only), built once per step, model and set of active parts: a
+    camera's frames come at one rate, and the parts seen change rarely."""
+    a = transition_matrix(dt, config, tree, np.array(active, bool))
+    q = process_noise_matrix(dt, config, len(tree))
+    a.setflags(write=False)
+    q.setflags(write=False)
+    return a, q
+
+
 def predict(state: TrackState, dt: float, config: SlqeConfig, tree: PartTree) -> TrackState:
     """The prediction of eqs. (7)-(9) over `dt` seconds (0 = no motion).
 
@@ -340,8 +354,7 @@ def predict(state: TrackState, dt: float, config: SlqeConfig, tree: PartTree) ->
         raise ValueError(f'state has {state.n_parts} parts, tree {len(tree)}')
     if dt == 0.0 or not state.active.any():
         return state
-    a = transition_matrix(dt, config, tree, state.active)
-    q = process_noise_matrix(dt, config, state.n_parts)
+    a, q = _prediction_matrices(dt, config, tree, tuple(state.active.tolist()))
     x = a @ state.x
     cov = a @ state.cov @ a.T + q
     inactive = np.repeat(~state.active, config.block)
