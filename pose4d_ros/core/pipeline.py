@@ -204,8 +204,11 @@ class DetectorStage:
 
     def step(self, color: NDArray[np.uint8], depth_m: NDArray[np.floating] | None,
              intrinsics: Intrinsics | None, *, mask: NDArray[np.bool_] | None = None,
-             stamp_s: float | None = None) -> JointSet:
+             stamp_s: float | None = None, blanked: bool = False) -> JointSet:
         """The detected parts of one frame (all MISSING when there is no person to search).
+
+        `blanked`: colour and depth are already blanked outside `mask` (as `ForegroundStage`
+        returns them), so the detector need not blank them again.
 
         `stamp_s` (the frame's time, seconds) tells the person's scale when a new track starts
         (`core.dpm.scale.PersonScale`: the person unseen for a while); without it, only
@@ -218,7 +221,7 @@ class DetectorStage:
         scaled = depth_m is not None and self.model.channels == 'rgbd'
         factors = self.person_scale.factors(stamp_s) if scaled else (1.0,)
         found = {f: self.detector.detect(color, depth_m, mask=mask, intrinsics=intrinsics,
-                                         scale=f) for f in factors}
+                                         scale=f, blanked=blanked) for f in factors}
         if not any(found.values()):
             self.last_flags = ('no_person',)
             return JointSet.missing(self.names)
@@ -507,7 +510,8 @@ class FramePipeline:
         clock.append((time.process_time(), time.perf_counter()))
         # the detector sees what the detector node receives: the masked frame and the mask
         parts = self.detector.step(color_m, depth_mm, intrinsics,
-                                   mask=fg.mask if fg is not None else None, stamp_s=stamp_s)
+                                   mask=fg.mask if fg is not None else None, stamp_s=stamp_s,
+                                   blanked=fg is not None)
         clock.append((time.process_time(), time.perf_counter()))
         tracked = self.tracker.step(parts, stamp_s, intrinsics)
         clock.append((time.process_time(), time.perf_counter()))

@@ -460,15 +460,17 @@ class Detector:
         return SearchPlan(x0, y0, x1, y1, scales, guided)
 
     def pyramid(self, color: NDArray, depth_m: NDArray | None, plan: SearchPlan, *,
-                mask: NDArray[np.bool_] | None = None) -> list[Level]:
-        """Padded HOG levels of the plan's crop (colour, + depth for an rgbd model)."""
+                mask: NDArray[np.bool_] | None = None, blanked: bool = False) -> list[Level]:
+        """Padded HOG levels of the plan's crop (colour, + depth for an rgbd model); a model
+        trained on masked frames blanks the crop outside `mask`, unless it is `blanked`
+        already."""
         m = self.model
         sl = np.s_[plan.y0:plan.y1, plan.x0:plan.x1]
         col = np.asarray(color)[sl]
         if col.ndim == 2:
             col = col[:, :, None]
         dep = None
-        keep = mask[sl] if m.masked_input and mask is not None else None
+        keep = mask[sl] if m.masked_input and mask is not None and not blanked else None
         if m.channels == 'rgbd':
             dcrop = (np.full(col.shape[:2], np.nan, np.float32) if depth_m is None
                      else np.asarray(depth_m, np.float32)[sl])
@@ -492,8 +494,8 @@ class Detector:
     # ---------------------------------------------------------------- detection
     def detect(self, color: NDArray, depth_m: NDArray | None = None, *,
                mask: NDArray[np.bool_] | None = None, box: tuple | None = None,
-               intrinsics: Intrinsics | None = None, top_k: int = 1, scale: float = 1.0
-               ) -> list[Pose]:
+               intrinsics: Intrinsics | None = None, top_k: int = 1, scale: float = 1.0,
+               blanked: bool = False) -> list[Pose]:
         """The best `top_k` poses in a frame.
 
         Parameters
@@ -507,6 +509,8 @@ class Detector:
         intrinsics : the colour camera; default CAD-60's at the image size.
         top_k : poses returned at most (non-maximum suppressed by pose-box overlap).
         scale : factor on the person scale that depth predicts (see `plan`).
+        blanked : colour and depth are already blanked outside `mask` (NaN depth, zero
+            colour), as the foreground stage publishes them: not blanked again.
 
         Returns
         -------
@@ -527,7 +531,7 @@ class Detector:
             d = None if depth_m is None else np.asarray(depth_m, np.float32)
             if d is None or not (np.isfinite(d) & (d > 0)).any():
                 flags = ('no_depth',)
-        levels = self.pyramid(color, depth_m, plan, mask=mask)
+        levels = self.pyramid(color, depth_m, plan, mask=mask, blanked=blanked)
         return self.poses_from_levels(levels, top_k=top_k, flags=flags)
 
     def poses_from_levels(self, levels: list[Level], *, top_k: int = 1,
