@@ -258,8 +258,8 @@ def test_detect_finds_a_pose_and_maps_it_into_the_box() -> None:
     assert p.uv.shape == (10, 2) and p.names == PARTS_10.names
     assert np.all((p.confidence >= 0) & (p.confidence <= 1))
     assert_allclose(p.part_scores.sum(), p.score, rtol=1e-5)
-    # the search box is the mask's box plus a margin of 0.6 person scales
-    margin = 0.6 * 285.171 * 0.5 / 2.5 + 10
+    # the search box is the mask's box plus a margin of 0.4 person scales
+    margin = SearchConfig().margin * 285.171 * 0.5 / 2.5 + 10
     assert (p.uv[:, 0] > 130 - margin).all() and (p.uv[:, 0] < 190 + margin).all()
 
 

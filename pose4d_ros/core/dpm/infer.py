@@ -61,7 +61,7 @@ class SearchConfig:
     n_levels: int = 1
     level_step: float = 2.0 ** 0.2
     levels_per_octave: int = 5
-    margin: float = 0.6
+    margin: float = 0.4
     low_score: float = 0.0
     nms_overlap: float = 0.5
     subcell: bool = True
