@@ -12,7 +12,8 @@ Publications (all with the colour image's header)
     pose4d/foreground/mask (mono8, 255 = person)
     pose4d/foreground/color (rgb8, 0 outside the person)
     pose4d/foreground/depth (the input's encoding; 0 / NaN outside the person)
-    pose4d/foreground/points (sensor_msgs/PointCloud2 of the person, if foreground.publish_cloud)
+    pose4d/foreground/points (sensor_msgs/PointCloud2 of the person, if foreground.publish_cloud
+    and while it has a subscriber)
     /diagnostics
 Parameters (config/foreground.yaml)
     foreground.max_region_area_px, foreground.mser_delta, foreground.mser_max_variation,
@@ -156,7 +157,7 @@ class ForegroundNode(Node):
                             foreground_messages(result.mask, color_m, depth_m,
                                                 depth_msg.encoding, header), strict=True):
             pub.publish(msg)
-        if self.pub_cloud is not None:
+        if self.pub_cloud is not None and self.pub_cloud.get_subscription_count():
             rows, cols = np.nonzero(result.mask[::self.cloud_step, ::self.cloud_step])
             rows, cols = rows * self.cloud_step, cols * self.cloud_step
             xyz = backproject(np.stack([cols, rows], axis=1), depth_m[rows, cols], intrinsics)

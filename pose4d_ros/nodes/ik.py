@@ -15,6 +15,7 @@ Publications
     /tf (tf2_msgs/TFMessage: each located joint as the frame <tf.prefix>/<track_id>/<joint>
     in the image's frame, stamped like the skeleton; when tf.publish)
     /diagnostics
+    (markers and /tf are built and sent only while they have a subscriber)
 Parameters (config/ik.yaml)
     ik.use_depth, ik.learn_lengths, ik.upper_arm_length_m, ik.forearm_length_m,
     ik.thigh_length_m, ik.shin_length_m, ik.depth_slop_s, ik.marker_lifetime_s, tf.publish,
@@ -113,9 +114,12 @@ class SkeletonOutputs:
 
     def publish(self, skeleton: JointSet, header: Header) -> None:
         self.skeleton.publish(joints_to_msg(skeleton, header))
-        self.markers.publish(skeleton_markers(skeleton, self.bones, header,
-                                              lifetime_s=self.marker_lifetime_s))
-        if self.publish_tf:
+        # markers and transforms are built only while someone listens: making and serialising
+        # them costs more CPU than the IK itself
+        if self.markers.get_subscription_count():
+            self.markers.publish(skeleton_markers(skeleton, self.bones, header,
+                                                  lifetime_s=self.marker_lifetime_s))
+        if self.publish_tf and self.tf.get_subscription_count():
             frames = joints_to_tf(skeleton, header, self.tf_prefix)
             if frames.transforms:
                 self.tf.publish(frames)
