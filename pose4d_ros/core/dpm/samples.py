@@ -43,6 +43,10 @@ class TrainConfig:
     background_negatives : mine poses in background images (Yang & Ramanan's negatives).
     negatives_per_image : most background poses taken per image and round.
     structural_per_positive : most wrong poses taken per labelled frame and round.
+    latent_radius : 0: each labelled pose is fixed at its labelled cells; r > 0: before every
+        mining round each part of a labelled pose moves to the cell within r cells (Chebyshev)
+        of its label, its type kept, that the current model scores best (Yang & Ramanan's latent
+        positives: it absorbs label noise and the cell grid's phase).
     loss_alpha : a part is wrong when farther than loss_alpha * the labelled joints' box size.
     cache_limit : most cached negative constraints.
     qp_epochs, qp_tol : coordinate-descent epochs at most, and the relative duality gap at
@@ -72,6 +76,7 @@ class TrainConfig:
     background_negatives: bool = True
     negatives_per_image: int = 6
     structural_per_positive: int = 4
+    latent_radius: int = 0
     loss_alpha: float = 0.1
     cache_limit: int = 20000
     qp_epochs: int = 300
@@ -92,6 +97,8 @@ class TrainConfig:
             raise ValueError(f'bad sbin {self.sbin} or filter_cells {self.filter_cells}')
         if not self.svm_c > 0:
             raise ValueError(f'svm_c must be > 0, got {self.svm_c}')
+        if not 0 <= self.latent_radius <= 8:
+            raise ValueError(f'latent_radius must be in 0..8 cells, got {self.latent_radius}')
         if self.mining_rounds < 0:
             raise ValueError(f'mining_rounds must be >= 0, got {self.mining_rounds}')
 

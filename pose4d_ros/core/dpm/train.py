@@ -57,7 +57,7 @@ from numpy.typing import NDArray
 
 from pose4d_ros.core.camera import robust_depth
 from pose4d_ros.core.dpm.infer import Detector
-from pose4d_ros.core.dpm.mining import mine_background, mine_structural
+from pose4d_ros.core.dpm.mining import mine_background, mine_structural, relabel_positives
 from pose4d_ros.core.dpm.model import PartModel
 from pose4d_ros.core.dpm.samples import (
     Log,
@@ -79,6 +79,7 @@ from pose4d_ros.core.dpm.solver import (
     margins,
     model_from_w,
     pose_blocks,
+    rebuild_w,
     w_from_model,
     whitened,
 )
@@ -416,6 +417,12 @@ def train(samples: Sequence, negatives: Sequence[Negative], cfg: TrainConfig, *,
                                   | (marg < arr[7] + 0.05))
             if len(keep) < ex.n:
                 ex.keep(keep)
+        moved = 0
+        if cfg.latent_radius > 0:
+            moved = relabel_positives(model, pos, types, samples, ex, lay, cfg, white, progress,
+                                      rnd)
+            arr = ex.arrays()
+            w = rebuild_w(w0, *arr[:7], arr[8], ex.alpha[:ex.n], lb_idx, beta)
         added_bg = 0
         if negs:
             added_bg = mine_background(model, negs, ex, lay, cfg, white,
@@ -445,9 +452,9 @@ def train(samples: Sequence, negatives: Sequence[Negative], cfg: TrainConfig, *,
         ok = marg >= arr[7] - 1e-9
         kind = np.where(np.arange(ex.n) < n_pos, 0, np.where(arr[8] >= 0, 2, 1))
         t2 = time.perf_counter()
-        info = dict(round=rnd, background_added=added_bg, poses_added=added_st,
-                    cache=ex.n - n_pos, qp_epochs=epochs, qp_gap=round(gap, 4),
-                    objective=round(obj, 4),
+        info = dict(round=rnd, positives_moved=moved, background_added=added_bg,
+                    poses_added=added_st, cache=ex.n - n_pos, qp_epochs=epochs,
+                    qp_gap=round(gap, 4), objective=round(obj, 4),
                     positives_ok=round(float(ok[kind == 0].mean()), 3),
                     background_ok=round(float(ok[kind == 1].mean()), 3) if (kind == 1).any()
                     else None,
