@@ -127,6 +127,7 @@ def _violating_poses(model: PartModel, pos: list[Positive], samples: Sequence,
         yy, xx = np.mgrid[0:ny, 0:nx]
         far = np.hypot(yy[None] - p.cells[:, 0, None, None],
                        xx[None] - p.cells[:, 1, None, None]) > p.tau     # (P, ny, nx)
+        far &= p.known()[:, None, None]   # an unlabelled part is never wrong
         aug = res.resp + (unit * far).astype(np.float32)[:, None]
         root, ix, iy, ik, _ = tree_dp(aug, parents, springs, anchors, bias)
         aug_res = LevelResult(level, aug, root, ix, iy, ik)
@@ -154,7 +155,8 @@ def relabel_positives(model: PartModel, pos: list[Positive], types: NDArray[np.i
                       white: Whitening, progress: Progress | None, round_: int) -> int:
     """Latent positives (Yang & Ramanan's `poslatent`): each labelled pose i (example i of
     `ex`) becomes the best pose of the current model whose part c keeps its type
-    `types[i, c]` and lies within `cfg.latent_radius` cells (Chebyshev) of its labelled cell.
+    `types[i, c]` and lies within `cfg.latent_radius` cells (Chebyshev) of its labelled cell;
+    an unlabelled part may take any cell and type, a labelled one of type -1 any type.
     Rewrites the examples' blocks in place; returns how many poses moved."""
     arrays = model_arrays(model)
     _, parents, springs, anchors, bias = arrays
@@ -172,8 +174,14 @@ def relabel_positives(model: PartModel, pos: list[Positive], types: NDArray[np.i
             continue
         ny, nx = res.resp.shape[2:]
         resp = np.full_like(res.resp, NEG)
+        known = p.known()
         for c in range(lay.n_parts):
             t = int(types[i, c])
+            if not known[c]:   # an unlabelled part: anywhere, any type
+                resp[c] = res.resp[c]
+                continue
+            if t < 0:          # labelled, but its offset type is unknown: any type
+                t = slice(None)
             r0, c0 = int(p.cells[c, 0]), int(p.cells[c, 1])
             ys = slice(max(r0 - r, 0), min(r0 + r + 1, ny))
             xs = slice(max(c0 - r, 0), min(c0 + r + 1, nx))

@@ -327,7 +327,7 @@ def train(samples: Sequence, negatives: Sequence[Negative], cfg: TrainConfig, *,
         it = progress(it, 'positives', len(samples))
     for idx, s in it:
         uv, vis = part_joints(s, names)
-        if not vis.all():
+        if not vis.all() and not (cfg.partial_labels and vis.sum() >= cfg.min_labelled):
             continue
         sc = person_scale(s, names, cfg, uv)
         if not (np.isfinite(sc) and sc > 2):
@@ -353,10 +353,16 @@ def train(samples: Sequence, negatives: Sequence[Negative], cfg: TrainConfig, *,
     types = np.zeros((len(pos), len(tree)), np.int64)
     offs = np.stack([p.offsets for p in pos])          # (N, P, 2)
     cells = np.stack([p.cells for p in pos])           # (N, P, 2) row, col
+    # a part whose offset is unknown (it or its parent unlabelled) gets type -1: latent
     for c in range(1, len(tree)):
-        _, types[:, c] = kmeans(offs[:, c], k, rng)
+        ok = np.isfinite(offs[:, c]).all(1)
+        types[~ok, c] = -1
+        _, types[ok, c] = kmeans(offs[ok, c], k, rng)
     kids = tree.children(0)
-    _, types[:, 0] = kmeans(offs[:, kids].reshape(len(pos), -1), k, rng)
+    root_offs = offs[:, kids].reshape(len(pos), -1)
+    ok = np.isfinite(root_offs).all(1)
+    types[~ok, 0] = -1
+    _, types[ok, 0] = kmeans(root_offs[ok], k, rng)
     par = np.asarray(tree.parents)
     anchors = np.zeros((len(tree), k, 2), np.int32)
     spring_var = np.ones((len(tree), k, 2))
@@ -394,7 +400,8 @@ def train(samples: Sequence, negatives: Sequence[Negative], cfg: TrainConfig, *,
     cap = len(pos) + cfg.cache_limit
     ex = Examples(cap, lay.n_parts, dim)
     for i, p in enumerate(pos):
-        parts = np.concatenate([types[i][:, None], p.cells], axis=1)
+        # a latent type starts as type 0 (the first relabelling replaces it)
+        parts = np.concatenate([np.maximum(types[i], 0)[:, None], p.cells], axis=1)
         blocks = pose_blocks(np.zeros((0, 0, 0), np.float32), parts, par, anchors, lay, fs,
                               cfg.bias_feature, patches=p.patches)
         ex.add(whitened(blocks, white), 1.0, 1.0, -1, ('pos', i))
