@@ -13,7 +13,7 @@ level the positives and the wrong poses are cut from):
    and inference shows here);
 2. the labelled pose's own score (filters at the labelled cells, best types) against the best
    pose's, the share of cells whose best root outscores it, and the best pose's share of parts
-   within the loss radius of their labels;
+   within the loss radius of their labels and its PCK@0.1 (cell centres, no sub-cell step);
 3. the same labelled pose scored on the level of the whole photograph at the same scale (what
    `Detector` searches): the HOG cell grid then has another phase.
 """
@@ -92,6 +92,8 @@ def check(model, samples, cfg: TrainConfig) -> dict:
         gt = labelled_score(res.resp.astype(np.float64), p.cells, model)
         best = res.root.max(axis=0)
         near = np.hypot(*(parts[0, :, 1:] - p.cells).T) <= p.tau
+        bu, bv = level.cell_to_pixel(parts[0, :, 1], parts[0, :, 2], (fs, fs))
+        pck = np.hypot(bu - uv[:, 0], bv - uv[:, 1]) <= 0.1 * float(np.max(np.ptp(uv, axis=0)))
         h, w_ = s.color.shape[:2]
         full = det.pyramid(s.color, None, SearchPlan(0, 0, w_, h, (p.level_scale,), False))[0]
         rf = score_level(full, model, arrays)
@@ -101,13 +103,14 @@ def check(model, samples, cfg: TrainConfig) -> dict:
                    if r.min() >= 0 and c.min() >= 0 and r.max() < ny and c.max() < nx
                    else np.nan)
         rows.append((gt, float(best.max()), float((best > gt + 1e-6).mean()),
-                     float(near.mean()), gt_full))
+                     float(near.mean()), gt_full, float(pck.mean())))
     a = np.asarray(rows)
     return {'photos': len(a), 'max_abs_backtrack_minus_w_phi': worst,
             'labelled_score_median': float(np.median(a[:, 0])),
             'best_score_median': float(np.median(a[:, 1])),
             'cells_above_labelled_median': float(np.median(a[:, 2])),
             'best_parts_within_loss_radius_pct': 100 * float(a[:, 3].mean()),
+            'best_pck01_on_crop_pct': 100 * float(a[:, 5].mean()),
             'labelled_score_on_whole_photo_median': float(np.nanmedian(a[:, 4]))}
 
 
