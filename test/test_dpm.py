@@ -13,7 +13,8 @@ from numpy.testing import assert_allclose, assert_array_equal
 from pose4d_ros.core.dpm import Detector, PartModel, SearchConfig, load_model, save_model
 from pose4d_ros.core.dpm.dt import dt1d, dt2d
 from pose4d_ros.core.dpm.infer import backtrack, best_roots, im2col, score_level, tree_dp
-from pose4d_ros.core.dpm.solver import Examples, dcd, margins
+from pose4d_ros.core.dpm.samples import TrainConfig
+from pose4d_ros.core.dpm.solver import Examples, dcd, margins, rebuild_w
 from pose4d_ros.core.dpm.train import kmeans
 from pose4d_ros.core.hog import feature_pyramid
 from pose4d_ros.core.skeleton import PARTS_10
@@ -354,6 +355,8 @@ def test_dual_coordinate_descent_reaches_the_svm_optimum() -> None:
     rebuilt = w0 + (alpha * arr[6]) @ dense
     rebuilt[lb_idx] += beta
     assert_allclose(w, rebuilt, atol=1e-8)
+    # the same from the duals alone (latent positives rewrite blocks, then rebuild w)
+    assert_allclose(rebuild_w(w0, *arr[:7], arr[8], alpha, lb_idx, beta), rebuilt, atol=1e-8)
     assert w[lb_idx[0]] >= lb_val[0] - 1e-9
     # optimality: the duality gap of 1/2|w - w0|^2 + C sum hinge closes
     marg = margins(w, *arr[:7], arr[8])
@@ -400,3 +403,11 @@ def test_labelled_pose_score_is_the_tree_dp_at_fixed_cells() -> None:
     for _ in range(20):
         cells = np.stack([rng.integers(0, ny, 10), rng.integers(0, nx, 10)], 1)
         assert tool.labelled_score(resp, cells, m) <= res.root.max() + 1e-4
+
+
+def test_partial_labels_need_latent_positives() -> None:
+    with pytest.raises(ValueError, match='latent_radius'):
+        TrainConfig(partial_labels=True)
+    with pytest.raises(ValueError, match='latent_radius'):
+        TrainConfig(latent_radius=-1)
+    assert TrainConfig(partial_labels=True, latent_radius=1).min_labelled == 10

@@ -75,6 +75,14 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument('--negatives-per-image', type=int, default=6)
     p.add_argument('--poses-per-frame', type=int, default=4,
                    help='wrong poses mined per labelled frame and round')
+    p.add_argument('--latent-radius', type=int, default=0,
+                   help='cells a labelled part may move to the best-scoring cell before each '
+                        'mining round (latent positives; 0: fixed at the labels)')
+    p.add_argument('--partial-labels', action='store_true',
+                   help='also train on frames with some parts unlabelled (those parts latent; '
+                        'needs --latent-radius)')
+    p.add_argument('--min-labelled', type=int, default=10,
+                   help='fewest labelled parts of a frame used with --partial-labels')
     p.add_argument('--cache-limit', type=int, default=20000, help='constraint cache size')
     p.add_argument('--max-negative-images', type=int, default=1500)
     p.add_argument('--no-flip', action='store_true', help='no mirrored positives')
@@ -190,6 +198,8 @@ def run(args: argparse.Namespace) -> int:
                       mining_rounds=args.rounds, background_negatives=not args.no_background,
                       negatives_per_image=args.negatives_per_image,
                       structural_per_positive=args.poses_per_frame,
+                      latent_radius=args.latent_radius, partial_labels=args.partial_labels,
+                      min_labelled=args.min_labelled,
                       cache_limit=args.cache_limit, seed=args.seed)
     if args.out.suffix != '.npz':
         raise ValueError(f'{args.out}: the model file must end in .npz')

@@ -9,6 +9,7 @@ from collections.abc import Iterable, Iterator, Sequence
 import numpy as np
 from numpy.typing import NDArray
 
+from pose4d_ros.core.dpm.dt import NEG
 from pose4d_ros.core.dpm.infer import (
     Detector,
     LevelResult,
@@ -126,6 +127,7 @@ def _violating_poses(model: PartModel, pos: list[Positive], samples: Sequence,
         yy, xx = np.mgrid[0:ny, 0:nx]
         far = np.hypot(yy[None] - p.cells[:, 0, None, None],
                        xx[None] - p.cells[:, 1, None, None]) > p.tau     # (P, ny, nx)
+        far &= p.known()[:, None, None]   # an unlabelled part is never wrong
         aug = res.resp + (unit * far).astype(np.float32)[:, None]
         root, ix, iy, ik, _ = tree_dp(aug, parents, springs, anchors, bias)
         aug_res = LevelResult(level, aug, root, ix, iy, ik)
@@ -146,3 +148,51 @@ def _violating_poses(model: PartModel, pos: list[Positive], samples: Sequence,
                    lambda level=level, pose=poses[k]: whitened(pose_blocks(
                        level.feat, pose, parents, anchors, lay, cfg.filter_cells,
                        cfg.bias_feature), white, -1.0), 1.0, loss, i)
+
+
+def relabel_positives(model: PartModel, pos: list[Positive], types: NDArray[np.int64],
+                      samples: Sequence, ex: Examples, lay: Layout, cfg: TrainConfig,
+                      white: Whitening, progress: Progress | None, round_: int) -> int:
+    """Latent positives (Yang & Ramanan's `poslatent`): each labelled pose i (example i of
+    `ex`) becomes the best pose of the current model whose part c keeps its type
+    `types[i, c]` and lies within `cfg.latent_radius` cells (Chebyshev) of its labelled cell;
+    an unlabelled part may take any cell and type, a labelled one of type -1 any type.
+    Rewrites the examples' blocks in place; returns how many poses moved."""
+    arrays = model_arrays(model)
+    _, parents, springs, anchors, bias = arrays
+    tree = cfg.tree
+    r = cfg.latent_radius
+    moved = 0
+    it: Iterable = enumerate(pos)
+    if progress is not None:
+        it = progress(it, f'round {round_}: latent positives', len(pos))
+    for i, p in it:
+        color, depth, mask, _ = frame_of(samples[p.sample], tree.names, cfg, p.flipped)
+        level = level_of(color, depth, mask, p.box, p.level_scale, cfg)
+        res = score_level(level, model, arrays)
+        if res is None:
+            continue
+        ny, nx = res.resp.shape[2:]
+        resp = np.full_like(res.resp, NEG)
+        known = p.known()
+        for c in range(lay.n_parts):
+            t = int(types[i, c])
+            if not known[c]:   # an unlabelled part: anywhere, any type
+                resp[c] = res.resp[c]
+                continue
+            if t < 0:          # labelled, but its offset type is unknown: any type
+                t = slice(None)
+            r0, c0 = int(p.cells[c, 0]), int(p.cells[c, 1])
+            ys = slice(max(r0 - r, 0), min(r0 + r + 1, ny))
+            xs = slice(max(c0 - r, 0), min(c0 + r + 1, nx))
+            resp[c, t, ys, xs] = res.resp[c, t, ys, xs]
+        root, ix, iy, ik, _ = tree_dp(resp, parents, springs, anchors, bias)
+        roots = best_roots(LevelResult(level, resp, root, ix, iy, ik), 1)
+        if len(roots) == 0 or root[roots[0, 0], roots[0, 1], roots[0, 2]] < NEG / 2:
+            continue
+        parts, _ = backtrack(roots, parents, resp, ix, iy, ik, springs, anchors, bias)
+        ex.xf[i], ex.of[i], ex.xd[i], ex.od[i], ex.xb[i], ex.ob[i] = whitened(pose_blocks(
+            level.feat, parts[0], parents, anchors, lay, cfg.filter_cells, cfg.bias_feature),
+            white)
+        moved += int((parts[0, :, 1:] != p.cells).any())
+    return moved

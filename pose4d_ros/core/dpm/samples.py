@@ -43,6 +43,14 @@ class TrainConfig:
     background_negatives : mine poses in background images (Yang & Ramanan's negatives).
     negatives_per_image : most background poses taken per image and round.
     structural_per_positive : most wrong poses taken per labelled frame and round.
+    latent_radius : 0: each labelled pose is fixed at its labelled cells; r > 0: before every
+        mining round each part of a labelled pose moves to the cell within r cells (Chebyshev)
+        of its label, its type kept, that the current model scores best (Yang & Ramanan's latent
+        positives: it absorbs label noise and the cell grid's phase).
+    partial_labels : also train on frames with some parts unlabelled (a torso side labelled,
+        at least `min_labelled` parts): their unlabelled parts are latent, placed anywhere and
+        of any type by the current model (needs latent_radius > 0); they carry no loss.
+    min_labelled : fewest labelled parts of a frame used with partial_labels.
     loss_alpha : a part is wrong when farther than loss_alpha * the labelled joints' box size.
     cache_limit : most cached negative constraints.
     qp_epochs, qp_tol : coordinate-descent epochs at most, and the relative duality gap at
@@ -72,6 +80,9 @@ class TrainConfig:
     background_negatives: bool = True
     negatives_per_image: int = 6
     structural_per_positive: int = 4
+    latent_radius: int = 0
+    partial_labels: bool = False
+    min_labelled: int = 10
     loss_alpha: float = 0.1
     cache_limit: int = 20000
     qp_epochs: int = 300
@@ -92,6 +103,11 @@ class TrainConfig:
             raise ValueError(f'bad sbin {self.sbin} or filter_cells {self.filter_cells}')
         if not self.svm_c > 0:
             raise ValueError(f'svm_c must be > 0, got {self.svm_c}')
+        if not 0 <= self.latent_radius <= 8:
+            raise ValueError(f'latent_radius must be in 0..8 cells, got {self.latent_radius}')
+        if self.partial_labels and self.latent_radius <= 0:
+            raise ValueError('partial_labels needs latent_radius > 0 (unlabelled parts are '
+                             f'latent), got latent_radius {self.latent_radius}')
         if self.mining_rounds < 0:
             raise ValueError(f'mining_rounds must be >= 0, got {self.mining_rounds}')
 
@@ -176,6 +192,11 @@ class Positive:
     tau: float                     # PCK radius of the loss, cells
     sample: int                    # index into the samples
     flipped: bool
+    labelled: NDArray[np.bool_] | None = None   # (P,) parts with a label (None: all)
+
+    def known(self) -> NDArray[np.bool_]:
+        return (np.ones(len(self.cells), bool) if self.labelled is None
+                else np.asarray(self.labelled, bool))
 
 
 def _crop_box(uv: NDArray, margin: float, w: int, h: int) -> tuple[int, int, int, int]:
@@ -231,26 +252,35 @@ def frame_of(sample, names: Sequence[str], cfg: TrainConfig, flipped: bool) -> t
 
 def prepare_positive(sample, index: int, flipped: bool, s: float, tree: PartTree,
                       cfg: TrainConfig) -> Positive | None:
+    """A labelled frame at the canonical scale; None when a labelled part's window leaves the
+    level. Parts without a label (`cfg.partial_labels`) get the cell of the first labelled
+    part, a zero window and NaN offsets: training makes them latent."""
     color, depth, mask, uv = frame_of(sample, tree.names, cfg, flipped)
+    known = np.isfinite(uv).all(axis=1)
+    if not known.any():
+        return None
     h, w = color.shape[:2]
     f = cfg.canonical_scale_px / s
-    box = _crop_box(uv, 1.0 * s, w, h)
+    box = _crop_box(uv[known], 1.0 * s, w, h)
     level = level_of(color, depth, mask, box, f, cfg)
     fs = (cfg.filter_cells, cfg.filter_cells)
-    rows, cols = level.pixel_to_cell(uv[:, 0], uv[:, 1], fs)
+    first = uv[int(np.argmax(known))]
+    filled = np.where(known[:, None], uv, first[None])
+    rows, cols = level.pixel_to_cell(filled[:, 0], filled[:, 1], fs)
     hh, ww, _ = level.feat.shape
     if (rows < 0).any() or (cols < 0).any() or (rows > hh - fs[0]).any() or (
             cols > ww - fs[1]).any():
         return None
     patches = np.stack([level.feat[r:r + fs[0], c:c + fs[1]].reshape(-1)
                         for r, c in zip(rows, cols, strict=True)])
+    patches[~known] = 0.0
     par = np.asarray(tree.parents)
     offs = np.zeros((len(tree), 2))
     offs[1:] = (uv[1:] - uv[par[1:]]) * f
-    size = float(np.max(np.ptp(uv, axis=0)))
+    size = float(np.max(np.ptp(uv[known], axis=0)))
     tau = cfg.loss_alpha * size * f / cfg.sbin
     return Positive(patches.astype(np.float32), np.stack([rows, cols], 1), offs, s, f, box,
-                     tau, index, flipped)
+                     tau, index, flipped, known)
 
 
 @dataclass(frozen=True)

@@ -232,6 +232,22 @@ def dcd(w, xf, of, xd, od, xb, ob, y, m, ref, alpha, cost, lb_idx, lb_val, beta,
 
 
 @nb.njit(cache=True)
+def rebuild_w(w0, xf, of, xd, od, xb, ob, y, ref, alpha, lb_idx, beta):
+    """w = w0 + sum_i a_i y_i x_i + sum_k b_k e_k: the dual's weights again after examples'
+    blocks changed (latent positives), so that `dcd` can warm-start from the same duals."""
+    w = w0.copy()
+    for i in range(y.shape[0]):
+        a = alpha[i] * y[i]
+        if a != 0.0:
+            _own_axpy(w, a, xf, of, xd, od, xb, ob, i)
+            if ref[i] >= 0:
+                _own_axpy(w, a, xf, of, xd, od, xb, ob, ref[i])
+    for j in range(lb_idx.shape[0]):
+        w[lb_idx[j]] += beta[j]
+    return w
+
+
+@nb.njit(cache=True)
 def margins(w, xf, of, xd, od, xb, ob, y, ref):
     """y_i w . x_i for every example."""
     n = y.shape[0]

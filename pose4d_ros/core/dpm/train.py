@@ -57,7 +57,7 @@ from numpy.typing import NDArray
 
 from pose4d_ros.core.camera import robust_depth
 from pose4d_ros.core.dpm.infer import Detector
-from pose4d_ros.core.dpm.mining import mine_background, mine_structural
+from pose4d_ros.core.dpm.mining import mine_background, mine_structural, relabel_positives
 from pose4d_ros.core.dpm.model import PartModel
 from pose4d_ros.core.dpm.samples import (
     Log,
@@ -79,6 +79,7 @@ from pose4d_ros.core.dpm.solver import (
     margins,
     model_from_w,
     pose_blocks,
+    rebuild_w,
     w_from_model,
     whitened,
 )
@@ -326,7 +327,7 @@ def train(samples: Sequence, negatives: Sequence[Negative], cfg: TrainConfig, *,
         it = progress(it, 'positives', len(samples))
     for idx, s in it:
         uv, vis = part_joints(s, names)
-        if not vis.all():
+        if not vis.all() and not (cfg.partial_labels and vis.sum() >= cfg.min_labelled):
             continue
         sc = person_scale(s, names, cfg, uv)
         if not (np.isfinite(sc) and sc > 2):
@@ -352,10 +353,16 @@ def train(samples: Sequence, negatives: Sequence[Negative], cfg: TrainConfig, *,
     types = np.zeros((len(pos), len(tree)), np.int64)
     offs = np.stack([p.offsets for p in pos])          # (N, P, 2)
     cells = np.stack([p.cells for p in pos])           # (N, P, 2) row, col
+    # a part whose offset is unknown (it or its parent unlabelled) gets type -1: latent
     for c in range(1, len(tree)):
-        _, types[:, c] = kmeans(offs[:, c], k, rng)
+        ok = np.isfinite(offs[:, c]).all(1)
+        types[~ok, c] = -1
+        _, types[ok, c] = kmeans(offs[ok, c], k, rng)
     kids = tree.children(0)
-    _, types[:, 0] = kmeans(offs[:, kids].reshape(len(pos), -1), k, rng)
+    root_offs = offs[:, kids].reshape(len(pos), -1)
+    ok = np.isfinite(root_offs).all(1)
+    types[~ok, 0] = -1
+    _, types[ok, 0] = kmeans(root_offs[ok], k, rng)
     par = np.asarray(tree.parents)
     anchors = np.zeros((len(tree), k, 2), np.int32)
     spring_var = np.ones((len(tree), k, 2))
@@ -393,7 +400,8 @@ def train(samples: Sequence, negatives: Sequence[Negative], cfg: TrainConfig, *,
     cap = len(pos) + cfg.cache_limit
     ex = Examples(cap, lay.n_parts, dim)
     for i, p in enumerate(pos):
-        parts = np.concatenate([types[i][:, None], p.cells], axis=1)
+        # a latent type starts as type 0 (the first relabelling replaces it)
+        parts = np.concatenate([np.maximum(types[i], 0)[:, None], p.cells], axis=1)
         blocks = pose_blocks(np.zeros((0, 0, 0), np.float32), parts, par, anchors, lay, fs,
                               cfg.bias_feature, patches=p.patches)
         ex.add(whitened(blocks, white), 1.0, 1.0, -1, ('pos', i))
@@ -416,6 +424,12 @@ def train(samples: Sequence, negatives: Sequence[Negative], cfg: TrainConfig, *,
                                   | (marg < arr[7] + 0.05))
             if len(keep) < ex.n:
                 ex.keep(keep)
+        moved = 0
+        if cfg.latent_radius > 0:
+            moved = relabel_positives(model, pos, types, samples, ex, lay, cfg, white, progress,
+                                      rnd)
+            arr = ex.arrays()
+            w = rebuild_w(w0, *arr[:7], arr[8], ex.alpha[:ex.n], lb_idx, beta)
         added_bg = 0
         if negs:
             added_bg = mine_background(model, negs, ex, lay, cfg, white,
@@ -445,9 +459,9 @@ def train(samples: Sequence, negatives: Sequence[Negative], cfg: TrainConfig, *,
         ok = marg >= arr[7] - 1e-9
         kind = np.where(np.arange(ex.n) < n_pos, 0, np.where(arr[8] >= 0, 2, 1))
         t2 = time.perf_counter()
-        info = dict(round=rnd, background_added=added_bg, poses_added=added_st,
-                    cache=ex.n - n_pos, qp_epochs=epochs, qp_gap=round(gap, 4),
-                    objective=round(obj, 4),
+        info = dict(round=rnd, positives_moved=moved, background_added=added_bg,
+                    poses_added=added_st, cache=ex.n - n_pos, qp_epochs=epochs,
+                    qp_gap=round(gap, 4), objective=round(obj, 4),
                     positives_ok=round(float(ok[kind == 0].mean()), 3),
                     background_ok=round(float(ok[kind == 1].mean()), 3) if (kind == 1).any()
                     else None,
