@@ -8,7 +8,7 @@ from helpers import BODY, INTR
 from numpy.testing import assert_allclose
 
 from pose4d_ros.core import joints as cj
-from pose4d_ros.core.camera import backproject, project
+from pose4d_ros.core.camera import backproject, cad60_intrinsics, project
 from pose4d_ros.core.joints import JointSet
 from pose4d_ros.core.pipeline import IkStage, TrackerStage, limb_bones, reorder
 from pose4d_ros.core.skeleton import PARTS_10, PARTS_14, SKELETON_14
@@ -167,3 +167,21 @@ def test_foreground_holds_the_person_through_a_frame_or_two_without_one(monkeypa
     assert (held[0].mask & person).sum() > 0.9 * person.sum()
     assert held[0].mask.sum() < 1.5 * first.mask.sum()  # grown a little, not the background
     assert held[0].depth_m == pytest.approx(first.depth_m, abs=0.05)
+
+
+def test_a_nearly_unconfident_detection_gives_the_ik_a_joint_it_accepts() -> None:
+    """A part detected with confidence 1e-6 starts a track with a bounded variance, so the
+    tracked joints pass the next stage's checks (a variance of millions of pixels, lifted to
+    3-D, exceeded 400 m^2 and the IK refused the whole frame)."""
+    k = cad60_intrinsics()
+    names = PARTS_10.names
+    uv = np.column_stack([np.linspace(120, 200, len(names)), np.linspace(40, 200, len(names))])
+    xyz = backproject(uv, np.full(len(names), 2.8), k)
+    conf = np.ones(len(names), np.float32)
+    conf[0] = 1e-6
+    parts = JointSet(names, uv, xyz, confidence=conf,
+                     source=np.full(len(names), cj.DETECTED, np.uint8))
+    tracked = TrackerStage().step(parts, 0.0, k)
+    assert np.all(np.abs(tracked.covariance) <= 20.0 ** 2)
+    skeleton = IkStage(use_depth=False).step(tracked, None, k)
+    assert skeleton.source[SKELETON_14.index(names[0])] != cj.MISSING

@@ -322,6 +322,10 @@ def process_noise_matrix(dt: float, config: SlqeConfig, n_parts: int) -> NDArray
     return out
 
 
+# Smallest confidence that scales a detection's R (R / confidence): at most 1000 R.
+MIN_WEIGHT = 1e-3
+
+
 @functools.lru_cache(maxsize=32)
 def _prediction_matrices(dt: float, config: SlqeConfig, tree: PartTree,
                          active: tuple[bool, ...]
@@ -421,7 +425,10 @@ def update(state: TrackState, uv: NDArray[np.floating], confidence: NDArray[np.f
     b = config.block
     valid = np.isfinite(z).all(axis=1) & np.isfinite(conf) & (conf > 0) & \
         (conf >= config.min_confidence)
-    safe_conf = np.where(valid, conf, 1.0)
+    # R / confidence, the confidence floored: a detection of confidence 1e-6 would otherwise
+    # start a part with a variance of millions of pixels (metres squared beyond any camera's
+    # range once lifted to 3-D, which the next stage rightly refuses)
+    safe_conf = np.where(valid, np.maximum(conf, MIN_WEIGHT), 1.0)
     r_var = config.measurement_noise_px ** 2 / safe_conf
     x, cov = state.x.copy(), state.cov.copy()
     active = state.active.copy()
