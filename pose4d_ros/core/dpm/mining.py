@@ -30,6 +30,7 @@ from pose4d_ros.core.dpm.samples import (
     level_of,
 )
 from pose4d_ros.core.dpm.solver import Examples, Layout, Whitening, dot, pose_blocks, whitened
+from pose4d_ros.core.hog import Level
 
 
 def _add_new(ex: Examples, candidates: Iterable[tuple], room: int) -> int:
@@ -104,25 +105,33 @@ def mine_structural(model: PartModel, pos: list[Positive], samples: Sequence,
                                          round_), room)
 
 
+def _positive_levels(model: PartModel, pos: list[Positive], samples: Sequence,
+                     cfg: TrainConfig, progress: Progress | None, label: str
+                     ) -> Iterator[tuple[int, Positive, Level, LevelResult]]:
+    """(index, positive, its level, the model's DP on it) for every labelled pose whose
+    level is at least a filter large."""
+    arrays = model_arrays(model)
+    it: Iterable = enumerate(pos)
+    if progress is not None:
+        it = progress(it, label, len(pos))
+    for i, p in it:
+        color, depth, mask, _ = frame_of(samples[p.sample], cfg.tree.names, cfg, p.flipped)
+        level = level_of(color, depth, mask, p.box, p.level_scale, cfg)
+        res = score_level(level, model, arrays)
+        if res is not None:
+            yield i, p, level, res
+
+
 def _violating_poses(model: PartModel, pos: list[Positive], samples: Sequence,
                      w: NDArray[np.float64], ex: Examples, lay: Layout, cfg: TrainConfig,
                      white: Whitening, progress: Progress | None, round_: int
                      ) -> Iterator[tuple]:
-    arrays = model_arrays(model)
-    _, parents, springs, anchors, bias = arrays
-    tree = cfg.tree
+    _, parents, springs, anchors, bias = model_arrays(model)
     p_n = lay.n_parts
     unit = 2.0 / p_n
     arr = ex.arrays()
-    it: Iterable = enumerate(pos)
-    if progress is not None:
-        it = progress(it, f'round {round_}: poses', len(pos))
-    for i, p in it:
-        color, depth, mask, _ = frame_of(samples[p.sample], tree.names, cfg, p.flipped)
-        level = level_of(color, depth, mask, p.box, p.level_scale, cfg)
-        res = score_level(level, model, arrays)
-        if res is None:
-            continue
+    for i, p, level, res in _positive_levels(model, pos, samples, cfg, progress,
+                                             f'round {round_}: poses'):
         ny, nx = res.resp.shape[2:]
         yy, xx = np.mgrid[0:ny, 0:nx]
         far = np.hypot(yy[None] - p.cells[:, 0, None, None],
@@ -158,20 +167,11 @@ def relabel_positives(model: PartModel, pos: list[Positive], types: NDArray[np.i
     `types[i, c]` and lies within `cfg.latent_radius` cells (Chebyshev) of its labelled cell;
     an unlabelled part may take any cell and type, a labelled one of type -1 any type.
     Rewrites the examples' blocks in place; returns how many poses moved."""
-    arrays = model_arrays(model)
-    _, parents, springs, anchors, bias = arrays
-    tree = cfg.tree
+    _, parents, springs, anchors, bias = model_arrays(model)
     r = cfg.latent_radius
     moved = 0
-    it: Iterable = enumerate(pos)
-    if progress is not None:
-        it = progress(it, f'round {round_}: latent positives', len(pos))
-    for i, p in it:
-        color, depth, mask, _ = frame_of(samples[p.sample], tree.names, cfg, p.flipped)
-        level = level_of(color, depth, mask, p.box, p.level_scale, cfg)
-        res = score_level(level, model, arrays)
-        if res is None:
-            continue
+    for i, p, level, res in _positive_levels(model, pos, samples, cfg, progress,
+                                             f'round {round_}: latent positives'):
         ny, nx = res.resp.shape[2:]
         resp = np.full_like(res.resp, NEG)
         known = p.known()
