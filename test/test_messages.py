@@ -151,3 +151,38 @@ def test_color_and_camera_info_round_trip():
     assert_array_equal(color_from_msg(array_to_image(rgb[..., ::-1], 'bgr8', Header())), rgb)
     intr = cad60_intrinsics()
     assert intrinsics_from_msg(intrinsics_to_msg(intr, Header())) == intr
+
+
+@pytest.mark.parametrize('frame_id', ['', 'c', 'camera_color_optical_frame'])
+@pytest.mark.parametrize('n', [0, 1, 10, 14])
+def test_joints_to_cdr_is_the_serialised_message(frame_id, n):
+    """The bytes the nodes publish decode to exactly the message joints_to_msg builds (and have
+    its length: the same layout, alignment included)."""
+    from builtin_interfaces.msg import Time
+    from pose4d_msgs.msg import JointArray
+    from rclpy.serialization import deserialize_message, serialize_message
+    from std_msgs.msg import Header
+
+    from pose4d_ros.core.joints import JointSet
+    from pose4d_ros.core.skeleton import SKELETON_14
+    from pose4d_ros.nodes.convert import joints_to_cdr, joints_to_msg
+
+    rng = np.random.default_rng(n)
+    uv = rng.normal(size=(n, 2)) * 100
+    uv[:1] = np.nan
+    js = JointSet(SKELETON_14[:n], uv, rng.normal(size=(n, 3)),
+                  confidence=rng.random(n).astype(np.float32),
+                  source=rng.integers(0, 4, n).astype(np.uint8),
+                  covariance=rng.normal(size=(n, 3, 3)), score=0.25, track_id=n + 3)
+    header = Header(frame_id=frame_id, stamp=Time(sec=1234567, nanosec=890))
+    msg = joints_to_msg(js, header)
+    data = joints_to_cdr(js, header)
+    assert len(data) == len(serialize_message(msg))
+    back = deserialize_message(data, JointArray)
+    assert back.header == header and back.track_id == msg.track_id and back.score == msg.score
+    for a, b in zip(back.joints, msg.joints, strict=True):
+        assert (a.name, a.source) == (b.name, b.source)
+        assert np.float32(a.confidence) == np.float32(b.confidence)
+        assert_array_equal([a.u, a.v, a.position.x, a.position.y, a.position.z],
+                           [b.u, b.v, b.position.x, b.position.y, b.position.z])
+        assert_array_equal(a.position_covariance, b.position_covariance)

@@ -41,7 +41,7 @@ from pose4d_ros.nodes.convert import (
     color_from_msg,
     depth_from_msg,
     image_to_array,
-    joints_to_msg,
+    joints_to_cdr,
     stamp_to_ns,
 )
 from pose4d_ros.nodes.params import NodeParams, Param, ParameterError
@@ -151,7 +151,7 @@ class DetectorNode(Node):
             return
         if self.stage.last_flags:
             self.get_logger().debug(f'frame at {stamp} ns: {", ".join(self.stage.last_flags)}')
-        self.pub.publish(joints_to_msg(parts, color_msg.header))
+        self.pub.publish(joints_to_cdr(parts, color_msg.header))
         self.monitor.frame(stamp, time.perf_counter() - t0)
 
 

@@ -43,7 +43,7 @@ from pose4d_ros.nodes.common import LatestIntrinsics, PairedInputs, StageMonitor
 from pose4d_ros.nodes.convert import (
     depth_from_msg,
     joints_from_msg,
-    joints_to_msg,
+    joints_to_cdr,
     joints_to_tf,
     skeleton_markers,
     stamp_to_ns,
@@ -113,7 +113,7 @@ class SkeletonOutputs:
         self.tf_prefix = p['tf.prefix']
 
     def publish(self, skeleton: JointSet, header: Header) -> None:
-        self.skeleton.publish(joints_to_msg(skeleton, header))
+        self.skeleton.publish(joints_to_cdr(skeleton, header))
         # markers and transforms are built only while someone listens: making and serialising
         # them costs more CPU than the IK itself
         if self.markers.get_subscription_count():

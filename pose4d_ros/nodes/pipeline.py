@@ -12,7 +12,7 @@ Subscriptions
 Publications (all with the colour image's header)
     pose4d/skeleton (pose4d_msgs/JointArray, 14 joints), pose4d/skeleton/markers, /tf (the
     joints, as the ik node publishes them),
-    pose4d/parts, pose4d/parts/tracked (JointArray, 10 parts),
+    pose4d/parts, pose4d/parts/tracked (JointArray, the model's parts; while subscribed),
     pose4d/foreground/{mask,color,depth} (if pipeline.publish_foreground), /diagnostics
 Parameters (config/pipeline.yaml)
     those of the foreground, detector, tracker and ik nodes, and pipeline.publish_foreground
@@ -35,7 +35,7 @@ from pose4d_ros.nodes.convert import (
     color_from_msg,
     depth_from_msg,
     intrinsics_from_msg,
-    joints_to_msg,
+    joints_to_cdr,
     stamp_to_ns,
 )
 from pose4d_ros.nodes.params import NodeParams, Param
@@ -105,8 +105,9 @@ class PipelineNode(Node):
             return
         header = color_msg.header
         self.outputs.publish(out.skeleton, header)
-        self.pubs['parts'].publish(joints_to_msg(out.parts, header))
-        self.pubs['tracked'].publish(joints_to_msg(out.tracked, header))
+        for name, joints in (('parts', out.parts), ('tracked', out.tracked)):
+            if self.pubs[name].get_subscription_count():  # intermediate results: on demand
+                self.pubs[name].publish(joints_to_cdr(joints, header))
         if self.publish_foreground:
             msgs = foreground.foreground_messages(out.foreground.mask, out.color_masked,
                                                   out.depth_masked, depth_msg.encoding, header)

@@ -25,7 +25,7 @@ from pose4d_ros.nodes import qos
 from pose4d_ros.nodes.common import LatestIntrinsics, StageMonitor, run
 from pose4d_ros.nodes.convert import (
     joints_from_msg,
-    joints_to_msg,
+    joints_to_cdr,
     stamp_to_ns,
 )
 from pose4d_ros.nodes.params import NodeParams, Param
@@ -98,7 +98,7 @@ class TrackerNode(Node):
         except ValueError as exc:
             self.monitor.bad_input(f'pose4d/parts frame at {stamp} ns refused: {exc}')
             return
-        self.pub.publish(joints_to_msg(tracked, msg.header))
+        self.pub.publish(joints_to_cdr(tracked, msg.header))
         self.monitor.frame(stamp, time.perf_counter() - t0)
 
 
