@@ -411,3 +411,55 @@ def test_partial_labels_need_latent_positives() -> None:
     with pytest.raises(ValueError, match='latent_radius'):
         TrainConfig(latent_radius=-1)
     assert TrainConfig(partial_labels=True, latent_radius=1).min_labelled == 10
+
+
+def _labelled_frame(rng: np.random.Generator, names: tuple[str, ...], key: str = 'f',
+                    **kw: object):
+    """A noise photograph 160 x 200 with the named joints labelled inside its middle."""
+    from pose4d_ros.core.joints import JointSet
+    from pose4d_ros.datasets.frame import Frame
+
+    uv = np.stack([rng.uniform(60, 100, len(names)), rng.uniform(60, 140, len(names))], 1)
+    truth = JointSet(tuple(names), uv, confidence=np.ones(len(names), np.float32))
+    color = rng.integers(0, 255, (200, 160, 3), dtype=np.uint8)
+    return Frame(0, color, kw.pop('depth_m', None), None, truth, key=key, **kw)
+
+
+def test_jittered_positive_moves_the_crop_origin_not_the_labels() -> None:
+    from pose4d_ros.core.dpm.samples import prepare_positive
+
+    cfg = TrainConfig(parts='10', channels='rgb', jitter=1)
+    rng = np.random.default_rng(5)
+    f = _labelled_frame(rng, cfg.tree.names)
+    p0 = prepare_positive(f, 0, False, 20.0, cfg.tree, cfg)
+    p1 = prepare_positive(f, 0, False, 20.0, cfg.tree, cfg, (2, 1))
+    assert p0 is not None and p1 is not None
+    assert p1.box == (p0.box[0] + 2, p0.box[1] + 1, p0.box[2], p0.box[3])
+    assert_allclose(p1.offsets, p0.offsets)
+    # the same parts on another phase of the cell grid: other windows, cells at most one apart
+    assert np.abs(p1.cells - p0.cells).max() <= 1
+    assert not np.allclose(p1.patches, p0.patches)
+    with pytest.raises(ValueError, match='shift'):
+        prepare_positive(f, 0, False, 20.0, cfg.tree, cfg, (-1, 0))
+    with pytest.raises(ValueError, match='jitter'):
+        TrainConfig(jitter=9)
+
+
+def test_background_rooms_come_first_and_lose_depth_for_rgb() -> None:
+    from pose4d_ros.cli.train import build_negatives
+
+    cfg = TrainConfig(parts='10', channels='rgb')
+    rng = np.random.default_rng(6)
+    photos = [_labelled_frame(rng, cfg.tree.names, f'p{i}') for i in range(3)]
+    rooms = []
+    for i, x0 in enumerate((10, 110)):   # the person on the left, then on the right
+        mask = np.zeros((200, 160), bool)
+        mask[50:150, x0:x0 + 30] = True
+        rooms.append(_labelled_frame(rng, cfg.tree.names, f'r{i}', video='v',
+                                     depth_m=np.full((200, 160), 2.0, np.float32), mask=mask))
+    negs = build_negatives(photos, cfg, 4, 0, rooms)
+    assert len(negs) == 4 and negs[0].key == 'v (room)'
+    assert negs[0].color.shape == (200, 160, 3) and negs[0].depth_m is None
+    assert all('room' not in n.key for n in negs[1:])
+    with pytest.raises(ValueError, match='room'):
+        build_negatives(photos, cfg, 4, 0, photos)

@@ -83,6 +83,13 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
                         'needs --latent-radius)')
     p.add_argument('--min-labelled', type=int, default=10,
                    help='fewest labelled parts of a frame used with --partial-labels')
+    p.add_argument('--jitter', type=int, default=0,
+                   help='extra copies of every positive cut with the crop origin shifted by '
+                        'less than one HOG cell (another phase of the cell grid)')
+    p.add_argument('--background', action='append', default=[], metavar='SOURCE',
+                   help='person-free background images: the rooms of a synthetic CAD-60 set '
+                        '(pose4d synth), assembled from the frames where the person is '
+                        'elsewhere; counted first against --max-negative-images (repeatable)')
     p.add_argument('--cache-limit', type=int, default=20000, help='constraint cache size')
     p.add_argument('--max-negative-images', type=int, default=1500)
     p.add_argument('--no-flip', action='store_true', help='no mirrored positives')
@@ -165,10 +172,17 @@ def with_foreground_masks(samples: list[Frame]) -> list[Frame]:
     return out
 
 
-def build_negatives(samples: list[Frame], cfg: TrainConfig, max_images: int, seed: int
-                    ) -> list[Negative]:
-    """Background images for mining: room plates (masked sets) + strips beside the person."""
+def build_negatives(samples: list[Frame], cfg: TrainConfig, max_images: int, seed: int,
+                    extra: list[Frame] | None = None) -> list[Negative]:
+    """Background images for mining: room plates (masked sets, and the `extra` frames, which
+    serve as backgrounds only) + strips beside the person."""
     negs = room_backgrounds(samples)
+    if extra:
+        rooms = room_backgrounds(extra)
+        if not rooms:
+            raise ValueError(f'--background: no room could be assembled from {len(extra)} '
+                             'frames (a synthetic set with person masks and depth is needed)')
+        negs += rooms
     strips: list[Negative] = []
     for s in samples:
         uv, _ = part_joints(s, cfg.tree.names)
@@ -199,7 +213,7 @@ def run(args: argparse.Namespace) -> int:
                       negatives_per_image=args.negatives_per_image,
                       structural_per_positive=args.poses_per_frame,
                       latent_radius=args.latent_radius, partial_labels=args.partial_labels,
-                      min_labelled=args.min_labelled,
+                      min_labelled=args.min_labelled, jitter=args.jitter,
                       cache_limit=args.cache_limit, seed=args.seed)
     if args.out.suffix != '.npz':
         raise ValueError(f'{args.out}: the model file must end in .npz')
@@ -211,7 +225,9 @@ def run(args: argparse.Namespace) -> int:
         raise ValueError(f'{", ".join(args.sources)}: no depth images; use --channels rgb')
     if cfg.masked_input:
         samples = with_foreground_masks(samples)
-    negatives = (build_negatives(samples, cfg, args.max_negative_images, args.seed)
+    extra = (load_frames(args.background, stride=args.stride, labelled=False)
+             if args.background else None)
+    negatives = (build_negatives(samples, cfg, args.max_negative_images, args.seed, extra)
                  if cfg.background_negatives else [])
     log(f'{len(samples)} frames, {len(negatives)} background images')
     m = machine()

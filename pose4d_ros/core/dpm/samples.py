@@ -51,6 +51,10 @@ class TrainConfig:
         at least `min_labelled` parts): their unlabelled parts are latent, placed anywhere and
         of any type by the current model (needs latent_radius > 0); they carry no loss.
     min_labelled : fewest labelled parts of a frame used with partial_labels.
+    jitter : extra copies of every positive, each cut from a crop whose origin is shifted by a
+        random whole number of image pixels below one HOG cell (at least 1) in x and y: the
+        cell grid's phase differs between a crop and the searched whole image, and HOG
+        changes by about 20 % for a one-pixel shift.
     loss_alpha : a part is wrong when farther than loss_alpha * the labelled joints' box size.
     cache_limit : most cached negative constraints.
     qp_epochs, qp_tol : coordinate-descent epochs at most, and the relative duality gap at
@@ -83,6 +87,7 @@ class TrainConfig:
     latent_radius: int = 0
     partial_labels: bool = False
     min_labelled: int = 10
+    jitter: int = 0
     loss_alpha: float = 0.1
     cache_limit: int = 20000
     qp_epochs: int = 300
@@ -108,6 +113,8 @@ class TrainConfig:
         if self.partial_labels and self.latent_radius <= 0:
             raise ValueError('partial_labels needs latent_radius > 0 (unlabelled parts are '
                              f'latent), got latent_radius {self.latent_radius}')
+        if not 0 <= self.jitter <= 8:
+            raise ValueError(f'jitter must be in 0..8 copies, got {self.jitter}')
         if self.mining_rounds < 0:
             raise ValueError(f'mining_rounds must be >= 0, got {self.mining_rounds}')
 
@@ -251,10 +258,12 @@ def frame_of(sample, names: Sequence[str], cfg: TrainConfig, flipped: bool) -> t
 
 
 def prepare_positive(sample, index: int, flipped: bool, s: float, tree: PartTree,
-                      cfg: TrainConfig) -> Positive | None:
+                      cfg: TrainConfig, shift: tuple[int, int] = (0, 0)) -> Positive | None:
     """A labelled frame at the canonical scale; None when a labelled part's window leaves the
     level. Parts without a label (`cfg.partial_labels`) get the cell of the first labelled
-    part, a zero window and NaN offsets: training makes them latent."""
+    part, a zero window and NaN offsets: training makes them latent. `shift` (dx, dy) >= 0
+    moves the crop's origin by that many image pixels (`cfg.jitter`: another phase of the HOG
+    cell grid)."""
     color, depth, mask, uv = frame_of(sample, tree.names, cfg, flipped)
     known = np.isfinite(uv).all(axis=1)
     if not known.any():
@@ -262,6 +271,10 @@ def prepare_positive(sample, index: int, flipped: bool, s: float, tree: PartTree
     h, w = color.shape[:2]
     f = cfg.canonical_scale_px / s
     box = _crop_box(uv[known], 1.0 * s, w, h)
+    dx, dy = int(shift[0]), int(shift[1])
+    if dx < 0 or dy < 0:
+        raise ValueError(f'shift must be >= 0 pixels, got {shift}')
+    box = (min(box[0] + dx, box[2] - 1), min(box[1] + dy, box[3] - 1), box[2], box[3])
     level = level_of(color, depth, mask, box, f, cfg)
     fs = (cfg.filter_cells, cfg.filter_cells)
     first = uv[int(np.argmax(known))]

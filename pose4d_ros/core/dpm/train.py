@@ -322,6 +322,7 @@ def train(samples: Sequence, negatives: Sequence[Negative], cfg: TrainConfig, *,
     # 1. positives at the canonical scale (+ mirror images)
     pos: list[Positive] = []
     scales = []
+    jitter_rng = np.random.default_rng(cfg.seed + 7919)   # apart: jitter 0 keeps `rng` as was
     it: Iterable = enumerate(samples)
     if progress is not None:
         it = progress(it, 'positives', len(samples))
@@ -335,8 +336,17 @@ def train(samples: Sequence, negatives: Sequence[Negative], cfg: TrainConfig, *,
         scales.append(sc)
         for flipped in (False, True) if cfg.flip else (False,):
             p = prepare_positive(s, idx, flipped, sc, tree, cfg)
-            if p is not None:
-                pos.append(p)
+            if p is None:
+                continue
+            pos.append(p)
+            # jittered copies: the crop's origin moved by 1 .. cell - 1 image pixels
+            cell_px = cfg.sbin * sc / cfg.canonical_scale_px
+            top = max(int(np.ceil(cell_px)) - 1, 1)
+            for _ in range(cfg.jitter):
+                dx, dy = jitter_rng.integers(1, top + 1, 2)
+                pj = prepare_positive(s, idx, flipped, sc, tree, cfg, (int(dx), int(dy)))
+                if pj is not None:
+                    pos.append(pj)
     need = max(2 * cfg.n_types, 10)
     if len(pos) < need:
         raise ValueError(f'only {len(pos)} usable positives (frames with every one of the '
