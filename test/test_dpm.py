@@ -10,13 +10,15 @@ import numpy as np
 import pytest
 from numpy.testing import assert_allclose, assert_array_equal
 
+from pose4d_ros.core.camera import cad60_intrinsics
 from pose4d_ros.core.dpm import Detector, PartModel, SearchConfig, load_model, save_model
 from pose4d_ros.core.dpm.dt import dt1d, dt2d
 from pose4d_ros.core.dpm.infer import backtrack, best_roots, im2col, score_level, tree_dp
 from pose4d_ros.core.dpm.samples import TrainConfig
 from pose4d_ros.core.dpm.solver import Examples, dcd, margins, rebuild_w
-from pose4d_ros.core.dpm.train import kmeans
+from pose4d_ros.core.dpm.train import choose_depth_lookup, kmeans
 from pose4d_ros.core.hog import feature_pyramid
+from pose4d_ros.core.pipeline import lift_parts
 from pose4d_ros.core.skeleton import PARTS_10
 
 # --------------------------------------------------------------------------- distance transforms
@@ -184,8 +186,46 @@ def tenpart_model(channels: str = 'rgbd') -> PartModel:
                      {'data': 'unit test', 'seed': '1'})
 
 
+
+def test_choose_depth_lookup_takes_the_look_up_that_lands_joints_near_the_truth() -> None:
+    rng = np.random.default_rng(2)
+    n = 200
+    truth_z = rng.uniform(2.0, 3.5, n)
+    rays = np.column_stack([rng.uniform(-0.5, 0.5, (n, 2)), np.ones(n)])
+    truth = rays * truth_z[:, None]
+    right = rng.random(n) < 0.8
+    # look-up 0: the surface 6 cm in front, but a third of the time an arm 25 cm in front;
+    # look-up 1: the surface 4 cm in front with 1 cm of noise; look-up 2: no reading
+    arm = rng.random(n) < 0.33
+    depths = np.column_stack([truth_z - 0.06 - 0.25 * arm,
+                              truth_z - 0.04 + rng.normal(0, 0.01, n), np.full(n, np.nan)])
+    best, offset = choose_depth_lookup(right, rays, truth, depths)
+    assert best == 1 and offset == pytest.approx(0.04, abs=0.005)
+    assert choose_depth_lookup(np.zeros(n, bool), rays, truth, depths) == (0, 0.0)
+
+
+def test_lift_parts_reads_each_part_as_the_model_learned() -> None:
+    intr = cad60_intrinsics()
+    depth = np.full((240, 320), 3.0, np.float32)
+    depth[:, 155:166] = 2.7  # an arm 30 cm in front of the torso, across the image's centre
+    m = tenpart_model()
+    uv = np.tile([[160.0, 120.0]], (m.n_parts, 1))
+    assert_allclose(lift_parts(m, depth, uv, intr), 2.7)  # no look-up, no offset: the surface
+    offsets = np.full(m.n_parts, 0.05, np.float32)
+    lookup = np.tile(np.float32([0.03, 0.5]), (m.n_parts, 1))
+    lookup[2] = (0.1, 0.9)  # one part reads the torso behind the arm
+    m = replace(m, depth_offset_m=offsets, depth_lookup=lookup)
+    z = lift_parts(m, depth, uv, intr)
+    assert z[2] == pytest.approx(3.05) and np.delete(z, 2) == pytest.approx(2.75)
+    # by name: a joint the model lacks gets the default look-up and no offset
+    names = (m.part_names[2], 'left_elbow', m.part_names[0])
+    assert_allclose(lift_parts(m, depth, uv[:3], intr, names=names), [3.05, 2.7, 2.75])
+    with pytest.raises(ValueError, match='depth_lookup'):
+        replace(m, depth_lookup=lookup[:, :1])
+
 def test_model_save_load_round_trip(tmp_path: Path) -> None:
-    m = replace(tenpart_model(), depth_offset_m=np.linspace(0.0, 0.09, 10, dtype=np.float32))
+    m = replace(tenpart_model(), depth_offset_m=np.linspace(0.0, 0.09, 10, dtype=np.float32),
+                depth_lookup=np.tile(np.float32([0.055, 0.9]), (10, 1)))
     path = tmp_path / 'm.npz'
     save_model(m, path)
     back = load_model(path)

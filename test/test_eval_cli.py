@@ -9,7 +9,7 @@ import cv2
 import numpy as np
 import pytest
 from helpers import write_utkinect
-from numpy.testing import assert_allclose
+from numpy.testing import assert_allclose, assert_array_equal
 
 from pose4d_ros.cli import _draw, _plot
 from pose4d_ros.cli.main import main as pose4d_main
@@ -95,6 +95,13 @@ def test_train_then_eval_and_bench(tiny_set: Path, tmp_path: Path, capsys) -> No
     # the joint centres lie behind the rendered body's surface
     assert m.depth_offset_m.shape == (10,) and np.all(np.abs(m.depth_offset_m) < 0.3)
     assert np.median(m.depth_offset_m) > 0.02, m.depth_offset_m
+    # a look-up per part, the same for a left part and its right twin
+    assert m.depth_lookup.shape == (10, 2)
+    for i, name in enumerate(m.part_names):
+        if name.startswith('left_'):
+            twin = m.part_names.index('right_' + name.removeprefix('left_'))
+            assert_array_equal(m.depth_lookup[i], m.depth_lookup[twin])
+            assert m.depth_offset_m[i] == m.depth_offset_m[twin]
     # the calibration alone, again, on the same frames: the same filters, the same offsets
     # (one calibration subset of the 8 frames), recorded in the metadata
     again = tmp_path / 'again.npz'
@@ -103,6 +110,7 @@ def test_train_then_eval_and_bench(tiny_set: Path, tmp_path: Path, capsys) -> No
     a = load_model(again)
     assert (a.filters == m.filters).all() and a.metadata['seed'] == '3'
     assert_allclose(a.depth_offset_m, m.depth_offset_m, atol=1e-6)
+    assert_array_equal(a.depth_lookup, m.depth_lookup)
     assert json.loads(a.metadata['calibrated'])['frames'] == 8
     out, drawn = tmp_path / 'table.json', tmp_path / 'drawn'
     assert pose4d_main(['eval', str(tiny_set), '--json', str(out), '--model', str(model),

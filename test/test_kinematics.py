@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 from numpy.testing import assert_allclose
 
-from pose4d_ros.core.camera import cad60_intrinsics, robust_depth
+from pose4d_ros.core.camera import cad60_intrinsics, lift_depth, robust_depth
 from pose4d_ros.core.kinematics import (
     DEFAULT_LIMB_LENGTHS_M,
     IkConfig,
@@ -235,6 +235,53 @@ def test_robust_depth_matches_a_per_pixel_median(use_mask: bool) -> None:
     assert_allclose(got, _median_window(depth, uv, 2, mask), rtol=1e-6)
     assert np.isnan(got[-3]) and np.isfinite(got).sum() > 100  # not vacuous
 
+
+
+def test_robust_depth_quantiles_and_per_pixel_windows() -> None:
+    rng = np.random.default_rng(6)
+    depth = rng.uniform(1.0, 3.0, (40, 50)).astype(np.float32)
+    depth[rng.random(depth.shape) < 0.2] = np.nan
+    uv = rng.uniform(3, [46, 36], (50, 2))
+    radius = rng.integers(0, 6, len(uv))
+    q = rng.uniform(0, 1, len(uv))
+    got = robust_depth(depth, uv, radius=radius, quantile=q)
+    want = []
+    for (u, v), r, qi in zip(uv, radius, q, strict=True):
+        c, w = int(np.rint(u)), int(np.rint(v))
+        win = depth[max(w - r, 0):w + r + 1, max(c - r, 0):c + r + 1]
+        win = win[np.isfinite(win)]
+        want.append(np.quantile(win.astype(np.float64), qi) if len(win) else np.nan)
+    assert_allclose(got, want, rtol=1e-6)
+    assert np.isfinite(got).sum() > 40
+    # 0.5 is the median (numpy's, in the image's dtype), 1 the farthest
+    assert_allclose(robust_depth(depth, uv, radius=3, quantile=0.5), robust_depth(depth, uv))
+    assert_allclose(robust_depth(depth, uv, radius=3, quantile=1.0),
+                    [np.nanmax(depth[max(int(np.rint(v)) - 3, 0):int(np.rint(v)) + 4,
+                                     max(int(np.rint(u)) - 3, 0):int(np.rint(u)) + 4])
+                     for u, v in uv], rtol=1e-6)
+    with pytest.raises(ValueError, match='quantile'):
+        robust_depth(depth, uv, quantile=1.5)
+    with pytest.raises(ValueError, match='radius'):
+        robust_depth(depth, uv, radius=-1)
+
+
+def test_lift_depth_finds_the_torso_behind_an_arm_at_any_distance() -> None:
+    """A forearm 25 cm in front of the torso covers the shoulder's pixel: the median of a small
+    window reads the arm; the 0.9 quantile of a window 8 cm wide on the body reads the torso,
+    at 2 m and at 4 m, in a 320x240 and a 640x480 image alike."""
+    for width, dist in ((320, 2.0), (320, 4.0), (640, 2.0), (640, 4.0)):
+        intr = cad60_intrinsics(width, width * 3 // 4)
+        depth = np.full((intr.height, intr.width), dist, np.float32)
+        col, row = intr.width // 2, intr.height // 2
+        arm = max(1, round(0.03 * intr.fx / dist))  # an arm 6 cm wide across the shoulder
+        depth[:, col - arm:col + arm + 1] = dist - 0.25
+        uv = np.array([[col, row]], float)
+        assert robust_depth(depth, uv, radius=3)[0] == pytest.approx(dist - 0.25)
+        assert lift_depth(depth, uv, intr, 0.08, 0.9)[0] == pytest.approx(dist)
+        assert lift_depth(depth, uv, intr, 0.08, 0.5)[0] == pytest.approx(dist)  # most: torso
+        assert lift_depth(depth, uv, intr, 0.03, 0.5)[0] == pytest.approx(dist - 0.25)
+    assert np.isnan(lift_depth(np.full((240, 320), np.nan, np.float32), uv[:1] * 0 + 5,
+                               cad60_intrinsics(), 0.08, 0.9)[0])
 
 def test_limb_lengths_learn_and_fall_back() -> None:
     rng = np.random.default_rng(5)

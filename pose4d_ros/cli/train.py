@@ -25,7 +25,7 @@ import numpy as np
 
 from pose4d_ros.cli._dpm import git_commit, load_frames, log, machine
 from pose4d_ros.cli._progress import progress
-from pose4d_ros.core.dpm.model import load_model, save_model
+from pose4d_ros.core.dpm.model import PartModel, load_model, save_model
 from pose4d_ros.core.dpm.samples import (
     Negative,
     TrainConfig,
@@ -253,6 +253,17 @@ def run(args: argparse.Namespace) -> int:
     return 0
 
 
+def depth_lifting(model: PartModel) -> str:
+    """How the model lifts each part to 3-D, in a line."""
+    if model.depth_offset_m is None:
+        return 'no depth look-up'
+    lookup = model.depth_lookup
+    return 'depth look-up per part (window radius, quantile, mm behind the surface): ' + ', '.join(
+        f'{n} ' + ('3 px, 0.5' if lookup is None else f'{100 * lookup[i, 0]:.1f} cm, '
+                   f'{lookup[i, 1]:.1f}') + f', {1e3 * model.depth_offset_m[i]:+.0f}'
+        for i, n in enumerate(model.part_names))
+
+
 def recalibrate(args: argparse.Namespace, samples: list[Frame], t0: float) -> int:
     """`--calibrate MODEL`: the calibration step of `train` alone, on `samples` (the same
     deterministic subset of `TrainConfig.calibration_samples` frames, masked as the model was
@@ -276,9 +287,6 @@ def recalibrate(args: argparse.Namespace, samples: list[Frame], t0: float) -> in
         'wall_seconds': round(time.time() - t0, 1)})
     model = replace(model, metadata=meta)
     save_model(model, args.out)
-    offsets = ('none' if model.depth_offset_m is None else ', '.join(
-        f'{n} {1e3 * o:+.0f}' for n, o in zip(model.part_names, model.depth_offset_m,
-                                                 strict=True)))
-    print(f'wrote {args.out}: {args.calibrate} calibrated on {len(usable)} frames; depth offsets '
-          f'(mm behind the surface): {offsets}')
+    print(f'wrote {args.out}: {args.calibrate} calibrated on {len(usable)} frames; '
+          f'{depth_lifting(model)}')
     return 0

@@ -175,8 +175,9 @@ def depth_to_millimetres(depth_m: NDArray[np.floating]) -> NDArray[np.uint16]:
 
 
 def robust_depth(depth_m: NDArray[np.floating], uv: NDArray[np.floating], *,
-                 radius: int = 3, mask: NDArray[np.bool_] | None = None) -> NDArray[np.float64]:
-    """Median depth of the valid pixels in a small window around each pixel.
+                 radius: int | NDArray[np.integer] = 3, mask: NDArray[np.bool_] | None = None,
+                 quantile: float | NDArray[np.floating] = 0.5) -> NDArray[np.float64]:
+    """Median (or another quantile) of the valid depths in a small window around each pixel.
 
     Holes (NaN) are ignored, and when a foreground `mask` is given only the person's pixels
     count, so that joints on an edge do not fall into the background.
@@ -185,36 +186,67 @@ def robust_depth(depth_m: NDArray[np.floating], uv: NDArray[np.floating], *,
     ----------
     depth_m : (H, W) float, metres, NaN = no reading.
     uv : (N, 2) float pixel (u, v); NaN rows give NaN.
-    radius : half-size of the square window, pixels.
+    radius : half-size of the square window, pixels; one for all pixels or (N,) one each.
     mask : (H, W) bool, optional; True = person.
+    quantile : which quantile of the window's depths, in [0, 1] (0.5: the median, 1: the
+        farthest); one for all pixels or (N,) one each. Between two values it interpolates.
 
     Returns
     -------
     (N,) float64 metres; NaN where the window holds no valid pixel or uv is outside the image.
     """
-    if radius < 0:
-        raise ValueError(f'radius must be >= 0, got {radius}')
     depth_m = np.asarray(depth_m)
     if depth_m.ndim != 2:
         raise ValueError(f'depth image must be 2-D, got shape {depth_m.shape}')
     if mask is not None and np.shape(mask) != depth_m.shape:
         raise ValueError(f'mask {np.shape(mask)} and depth {depth_m.shape} differ in shape')
+    uv = np.asarray(uv, dtype=np.float64).reshape(-1, 2)
+    radii = np.broadcast_to(np.asarray(radius, dtype=np.int64), (len(uv),))
+    q = np.broadcast_to(np.asarray(quantile, dtype=np.float64), (len(uv),))
+    if (radii < 0).any():
+        raise ValueError(f'radius must be >= 0, got {radii.min()}')
+    if not ((q >= 0) & (q <= 1)).all():
+        raise ValueError(f'quantile must be in [0, 1], got {np.asarray(quantile).tolist()}')
     return _robust_depth(depth_m, np.zeros((0, 0), bool) if mask is None else
-                         np.asarray(mask, dtype=bool),
-                         np.asarray(uv, dtype=np.float64).reshape(-1, 2), int(radius))
+                         np.asarray(mask, dtype=bool), uv, np.ascontiguousarray(radii),
+                         np.ascontiguousarray(q))
+
+
+# Largest window of `lift_depth`, half-size in pixels (a 41 x 41 window)
+MAX_LIFT_RADIUS_PX = 20
+
+
+def lift_depth(depth_m: NDArray[np.floating], uv: NDArray[np.floating], intrinsics: Intrinsics,
+               radius_m: float | NDArray[np.floating], quantile: float | NDArray[np.floating],
+               *, mask: NDArray[np.bool_] | None = None, probe_px: int = 3
+               ) -> NDArray[np.float64]:
+    """The depth at each pixel from a window of the same size on the body at any distance.
+
+    The window's half-size is `radius_m` metres at the surface's depth (the median of a
+    `probe_px` window: at least 1, at most `MAX_LIFT_RADIUS_PX` pixels), and it gives the
+    `quantile` of its valid depths (`robust_depth`). A high quantile of a wide window finds the
+    torso behind an arm crossing in front of a shoulder or a hip, where the median finds the arm.
+
+    Returns (N,) float64 metres, NaN where nothing valid is near.
+    """
+    z0 = robust_depth(depth_m, uv, radius=probe_px, mask=mask)
+    with np.errstate(invalid='ignore', divide='ignore'):
+        r = np.rint(np.asarray(radius_m, dtype=np.float64) * intrinsics.fx / z0)
+    r = np.clip(np.where(np.isfinite(r), r, probe_px), 1, MAX_LIFT_RADIUS_PX)
+    return robust_depth(depth_m, uv, radius=r.astype(np.int64), mask=mask, quantile=quantile)
 
 
 @njit(cache=True)
 def _robust_depth(depth_m: NDArray, mask: NDArray[np.bool_], uv: NDArray[np.float64],
-                  radius: int) -> NDArray[np.float64]:
+                  radii: NDArray[np.int64], q: NDArray[np.float64]) -> NDArray[np.float64]:
     h, w = depth_m.shape
     out = np.full(len(uv), np.nan)
-    buf = np.empty((2 * radius + 1) ** 2, depth_m.dtype)
+    buf = np.empty((2 * radii.max() + 1) ** 2 if len(radii) else 1, depth_m.dtype)
     for i in range(len(uv)):
         if np.isfinite(uv[i, 0]) and np.isfinite(uv[i, 1]):
             col, row = int(np.rint(uv[i, 0])), int(np.rint(uv[i, 1]))
             if 0 <= col < w and 0 <= row < h:
-                out[i] = robust_depth_at(depth_m, mask, col, row, radius, buf)
+                out[i] = window_quantile_at(depth_m, mask, col, row, radii[i], q[i], buf)
     return out
 
 
@@ -226,6 +258,13 @@ def robust_depth_at(depth_m: NDArray, mask: NDArray[np.bool_], col: int, row: in
     `mask` (H, W) bool, or empty for none; `buf` scratch of (2 radius + 1)^2 of the depth's
     dtype. The median of the valid values is taken in the image's dtype, as numpy's.
     """
+    return window_quantile_at(depth_m, mask, col, row, radius, 0.5, buf)
+
+
+@njit(cache=True)
+def window_quantile_at(depth_m: NDArray, mask: NDArray[np.bool_], col: int, row: int,
+                       radius: int, q: float, buf: NDArray) -> float:
+    """The `q` quantile of the valid depths in the window of `robust_depth_at`."""
     h, w = depth_m.shape
     k = 0
     for r in range(max(row - radius, 0), min(row + radius + 1, h)):
@@ -233,12 +272,18 @@ def robust_depth_at(depth_m: NDArray, mask: NDArray[np.bool_], col: int, row: in
             d = depth_m[r, c]
             if not (d > 0 and np.isfinite(d)) or (mask.size > 0 and not mask[r, c]):
                 continue
-            j = k  # insertion sort of the window's valid values
-            while j > 0 and buf[j - 1] > d:
-                buf[j] = buf[j - 1]
-                j -= 1
-            buf[j] = d
+            buf[k] = d
             k += 1
     if k == 0:
         return np.nan
-    return float((buf[(k - 1) // 2] + buf[k // 2]) / 2)
+    values = buf[:k]
+    values.sort()
+    pos = q * (k - 1)
+    lo = int(pos)
+    hi = min(lo + 1, k - 1)
+    frac = pos - lo
+    if frac == 0.0:
+        return float(values[lo])
+    if frac == 0.5:  # the median of an even count, in the image's dtype as numpy's
+        return float((values[lo] + values[hi]) / 2)
+    return float(values[lo]) + frac * (float(values[hi]) - float(values[lo]))

@@ -23,7 +23,7 @@ from __future__ import annotations
 
 import math
 import time
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, replace
 
 import numpy as np
@@ -33,11 +33,12 @@ from pose4d_ros.core import joints as cj
 from pose4d_ros.core.camera import (
     Intrinsics,
     backproject,
+    lift_depth,
     project,
     robust_depth,
 )
 from pose4d_ros.core.dpm.infer import Detector, SearchConfig
-from pose4d_ros.core.dpm.model import PartModel
+from pose4d_ros.core.dpm.model import DEFAULT_DEPTH_LOOKUP, PartModel
 from pose4d_ros.core.dpm.scale import PersonScale, ScaleConfig
 from pose4d_ros.core.foreground import (
     ForegroundConfig,
@@ -149,6 +150,31 @@ class ForegroundStage:
         return (fg, *apply_mask(color, depth_m, fg.mask))
 
 
+def lift_parts(model: PartModel, depth_m: NDArray[np.floating], uv: NDArray[np.floating],
+               intrinsics: Intrinsics, mask: NDArray[np.bool_] | None = None,
+               names: Sequence[str] | None = None) -> NDArray[np.float64]:
+    """The depth of each part's joint centre at pixels `uv`, as `model` learned to read it.
+
+    Each part has its own look-up (`PartModel.depth_lookup`: a window of a size on the body and
+    a quantile of its depths; without one, the median of a `DEPTH_RADIUS_PX` window) and lies
+    its `depth_offset_m` behind the surface the camera sees. `names`: the parts `uv` holds, by
+    name (default: the model's parts, in order); a name the model lacks gets the default look-up
+    and no offset.
+    """
+    names = model.part_names if names is None else tuple(names)
+    index = [model.part_names.index(n) if n in model.part_names else -1 for n in names]
+    known = np.array([i >= 0 for i in index], bool)
+    pick = np.array([max(i, 0) for i in index], int)
+    if model.depth_lookup is None:
+        z = robust_depth(depth_m, uv, radius=DEPTH_RADIUS_PX, mask=mask)
+    else:
+        lookup = np.where(known[:, None], model.depth_lookup[pick], DEFAULT_DEPTH_LOOKUP)
+        z = lift_depth(depth_m, uv, intrinsics, lookup[:, 0], lookup[:, 1], mask=mask)
+    if model.depth_offset_m is not None:
+        z = z + np.where(known, model.depth_offset_m[pick], 0.0)
+    return z
+
+
 class DetectorStage:
     """Part detection in one frame: the best pose of the part model, lifted to 3-D.
 
@@ -159,32 +185,26 @@ class DetectorStage:
     search : where and at which scales to search (`core.dpm.infer.SearchConfig`).
     scale : how the person's own scale is chosen per track (`core.dpm.scale`; with an RGB
         model, or without depth, the depth-free search covers every scale anyway).
-    depth_radius_px : half-size of the window of the robust depth look-up, pixels.
     min_confidence : parts less confident than this are reported MISSING.
     """
 
     def __init__(self, model: PartModel, *, search: SearchConfig | None = None,
-                 scale: ScaleConfig | None = None, depth_radius_px: int = DEPTH_RADIUS_PX,
-                 min_confidence: float = 0.0) -> None:
+                 scale: ScaleConfig | None = None, min_confidence: float = 0.0) -> None:
         self.model = model
         self.detector = Detector(model, search)
         self.person_scale = PersonScale(scale)
         self.last_flags: tuple[str, ...] = ()
-        self.configure(search=search, scale=scale, depth_radius_px=depth_radius_px,
-                       min_confidence=min_confidence)
+        self.configure(search=search, scale=scale, min_confidence=min_confidence)
 
     def configure(self, *, search: SearchConfig | None = None, scale: ScaleConfig | None = None,
-                  depth_radius_px: int = DEPTH_RADIUS_PX, min_confidence: float = 0.0) -> None:
+                  min_confidence: float = 0.0) -> None:
         """New settings (as in the constructor), used from the next frame on (new person scale
         settings start the choice of scale anew)."""
-        if depth_radius_px < 0:
-            raise ValueError(f'depth_radius_px must be >= 0, got {depth_radius_px}')
         if not 0.0 <= min_confidence <= 1.0:
             raise ValueError(f'min_confidence must be in [0, 1], got {min_confidence}')
         self.detector.config = search or SearchConfig()
         if (scale or ScaleConfig()) != self.person_scale.config:
             self.person_scale = PersonScale(scale)
-        self.depth_radius_px = depth_radius_px
         self.min_confidence = min_confidence
 
     @property
@@ -237,11 +257,8 @@ class DetectorStage:
         uv = np.where(src[:, None] == cj.DETECTED, pose.uv, np.nan)
         xyz = np.full((len(self.names), 3), np.nan)
         if depth_m is not None and intrinsics is not None:
-            # the joint centre lies behind the surface the camera sees (learned per part)
-            z = robust_depth(depth_m, uv, radius=self.depth_radius_px, mask=mask)
-            if self.model.depth_offset_m is not None:
-                z = z + self.model.depth_offset_m
-            xyz = backproject(uv, z, intrinsics)
+            xyz = backproject(uv, lift_parts(self.model, depth_m, uv, intrinsics, mask),
+                              intrinsics)
         return JointSet(self.names, uv, xyz, confidence=np.where(src == cj.DETECTED, conf, 0),
                         source=src, score=float(pose.score))
 

@@ -15,8 +15,8 @@ Publications
     pose4d/parts (pose4d_msgs/JointArray: parts DETECTED or MISSING, input header), /diagnostics
 Parameters (config/detector.yaml)
     detector.model, detector.n_levels, detector.margin, detector.person_scales,
-    detector.scale_warm_up_frames, detector.scale_probe_every, detector.depth_radius_px,
-    detector.min_confidence
+    detector.scale_warm_up_frames, detector.scale_probe_every, detector.min_confidence
+    (a part's depth look-up is the model's: `core.pipeline.lift_parts`)
 """
 
 from __future__ import annotations
@@ -83,8 +83,6 @@ PARAMS = (
     Param('detector.scale_probe_every', _C.probe_every, 'After the warm-up, a neighbouring '
           'person scale is also searched every this many frames (0 = never).',
           range=(0, 100000), live=True),
-    Param('detector.depth_radius_px', 3, 'Half-size of the window of the robust depth look-up '
-          "that lifts a part to 3-D, pixels.", range=(0, 20), live=True),
     Param('detector.min_confidence', 0.0, 'Parts less confident than this are MISSING.',
           range=(0.0, 1.0), live=True),
 )
@@ -97,7 +95,6 @@ def detector_settings(p: dict[str, Any]) -> dict[str, Any]:
             'scale': ScaleConfig(factors=tuple(p['detector.person_scales']),
                                  warm_up_frames=p['detector.scale_warm_up_frames'],
                                  probe_every=p['detector.scale_probe_every']),
-            'depth_radius_px': p['detector.depth_radius_px'],
             'min_confidence': p['detector.min_confidence']}
 
 

@@ -42,6 +42,10 @@ CHANNELS = ('rgb', 'rgbd')
 DEPTH_ENCODINGS = ('float', 'u8')
 FORMAT_VERSION = 1
 
+# The depth look-up (window half-size in metres on the body, quantile) of a part that has none
+# learned: about the median of a 3-pixel window at 3 m in a 320x240 image
+DEFAULT_DEPTH_LOOKUP = (0.03, 0.5)
+
 
 @dataclass(frozen=True)
 class PartModel:
@@ -74,6 +78,9 @@ class PartModel:
     metadata : free-form strings (data, command, seed, time, git commit, ...).
     depth_offset_m : (P,) float32 how far behind the visible surface each part's joint centre
         lies, metres (rgbd models: learned with the calibration); None = on the surface.
+    depth_lookup : (P, 2) float32 how each part's depth is read (`camera.lift_depth`): the
+        window's half-size in metres and the quantile of its depths (rgbd models: chosen with
+        the calibration); None = the median of a 3-pixel window for every part.
     """
 
     part_names: tuple[str, ...]
@@ -93,6 +100,7 @@ class PartModel:
     masked_input: bool = False
     metadata: Mapping[str, str] = field(default_factory=dict)
     depth_offset_m: NDArray[np.float32] | None = None
+    depth_lookup: NDArray[np.float32] | None = None
 
     def __post_init__(self) -> None:
         p = len(self.part_names)
@@ -127,6 +135,12 @@ class PartModel:
         if offset is not None and (offset.shape != (p,) or not (np.abs(offset) < 1.0).all()):
             raise ValueError(f'depth_offset_m must be ({p},) metres within +-1, got '
                              f'{np.asarray(offset).tolist()}')
+        lookup = self.depth_lookup
+        if lookup is not None and (lookup.shape != (p, 2) or not (
+                (lookup[:, 0] > 0) & (lookup[:, 0] <= 0.5)
+                & (lookup[:, 1] >= 0) & (lookup[:, 1] <= 1)).all()):
+            raise ValueError(f'depth_lookup must be ({p}, 2): a radius in (0, 0.5] metres and '
+                             f'a quantile in [0, 1] per part, got {np.asarray(lookup).tolist()}')
         if p > 1 and not ((self.springs[1:, :, 1] > 0).all()
                           and (self.springs[1:, :, 3] > 0).all()):
             raise ValueError('spring weights w_dx2 and w_dy2 must be > 0')
@@ -161,7 +175,7 @@ class PartModel:
 
 
 _ARRAYS = ('filters', 'springs', 'anchors', 'bias')
-_OPTIONAL = ('calibration', 'depth_offset_m')  # float32 arrays a model may have
+_OPTIONAL = ('calibration', 'depth_offset_m', 'depth_lookup')  # float32 arrays a model may have
 
 
 def save_model(model: PartModel, path: str | Path) -> None:

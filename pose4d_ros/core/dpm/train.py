@@ -55,10 +55,10 @@ from dataclasses import asdict, dataclass, field, replace
 import numpy as np
 from numpy.typing import NDArray
 
-from pose4d_ros.core.camera import robust_depth
+from pose4d_ros.core.camera import lift_depth
 from pose4d_ros.core.dpm.infer import Detector
 from pose4d_ros.core.dpm.mining import mine_background, mine_structural, relabel_positives
-from pose4d_ros.core.dpm.model import PartModel
+from pose4d_ros.core.dpm.model import DEFAULT_DEPTH_LOOKUP, PartModel
 from pose4d_ros.core.dpm.samples import (
     Log,
     Negative,
@@ -209,6 +209,41 @@ def _fit_logistic(x: NDArray[np.float64], y: NDArray[np.float64], l2: float = 1e
 # part's rate of being right)
 MIN_OUTCOMES = 30
 
+# The depth look-ups the calibration chooses from per part (`PartModel.depth_lookup`): window
+# half-sizes, metres on the body, and quantiles of the window's depths. The first is the
+# look-up of a part nothing was learned for.
+LOOKUP_RADII_M = (DEFAULT_DEPTH_LOOKUP[0], 0.055, 0.08, 0.105)
+LOOKUP_QUANTILES = (DEFAULT_DEPTH_LOOKUP[1], 0.7, 0.8, 0.9)
+LOOKUPS = tuple((r, q) for r in LOOKUP_RADII_M for q in LOOKUP_QUANTILES)
+
+
+def choose_depth_lookup(right: NDArray[np.bool_], rays: NDArray[np.float64],
+                        truth: NDArray[np.float64], depths: NDArray[np.float64],
+                        tolerance_m: float = 0.1) -> tuple[int, float]:
+    """The look-up that lifts one part's detections best, and its depth offset.
+
+    right : (N,) the detection is right in the image; rays : (N, 3) each detection's pixel as
+    (x/z, y/z, 1); truth : (N, 3) the joints' 3-D positions; depths : (N, L) the depth each of
+    the L look-ups gives. A look-up's offset is the median of truth z less its depth over the
+    right detections (how far behind the surface the joint lies); its worth, the share of all
+    detections it puts within `tolerance_m` of the joint in 3-D. Returns (index, offset); the
+    first look-up with offset 0 when no detection was right.
+    """
+    best, best_offset, best_share = 0, 0.0, -1.0
+    for c in range(depths.shape[1]):
+        z = depths[:, c]
+        behind = truth[right, 2] - z[right]
+        behind = behind[np.isfinite(behind)]
+        if len(behind) == 0:
+            continue
+        offset = float(np.median(behind))
+        with np.errstate(invalid='ignore'):
+            err = np.linalg.norm(rays * (z + offset)[:, None] - truth, axis=1)
+            share = float(np.mean(err < tolerance_m))
+        if share > best_share:
+            best, best_offset, best_share = c, offset, share
+    return best, best_offset
+
 
 def calibrate(model: PartModel, samples: Sequence, *, use_depth: bool,
               progress: Progress | None = None, alpha: float = 0.1) -> PartModel:
@@ -216,14 +251,14 @@ def calibrate(model: PartModel, samples: Sequence, *, use_depth: bool,
     within alpha * the size of the ground-truth joints' box). With `use_depth` the frames are
     searched as at run time (depth, the sample's mask); else without depth.
 
-    With depth, also the per-part depth offset (`PartModel.depth_offset_m`): the median, over
-    the parts detected right whose ground truth has a 3-D position, of the joint's depth less
-    the robust depth of the person's surface at the detected pixel (`camera.robust_depth`, as
-    the detector lifts its parts): how far behind the visible surface the joint centre lies.
+    With depth, also how each part is lifted to 3-D: the look-up (`PartModel.depth_lookup`,
+    one of `LOOKUPS` by `choose_depth_lookup`) and the depth offset (`depth_offset_m`) that put
+    most detected joints within 10 cm of the truth in 3-D, the offset being how far behind the
+    visible surface the joint centre lies; a left and a right part share them.
     """
     det = Detector(model)
     xs, ys = [], []
-    behind: list[list[float]] = [[] for _ in model.part_names]
+    seen: list[list] = [[] for _ in model.part_names]  # (right, ray, truth, depths) per part
     it: Iterable = samples
     if progress is not None:
         it = progress(it, 'calibration', len(samples))
@@ -249,10 +284,14 @@ def calibrate(model: PartModel, samples: Sequence, *, use_depth: bool,
         for i in np.flatnonzero(vis):
             xs.append((i, p.part_scores[i], p.score))
             ys.append(float(right[i]))
-        if use_depth and s.depth_m is not None:
-            surface = robust_depth(s.depth_m, p.uv, mask=mask)
-            for i in np.flatnonzero(right & np.isfinite(surface) & np.isfinite(xyz[:, 2])):
-                behind[i].append(float(xyz[i, 2] - surface[i]))
+        if use_depth and s.depth_m is not None and s.intrinsics is not None:
+            k = s.intrinsics
+            depths = np.stack([lift_depth(s.depth_m, p.uv, k, r, q, mask=mask)
+                               for r, q in LOOKUPS], axis=1)
+            rays = np.column_stack([(p.uv[:, 0] - k.cx) / k.fx, (p.uv[:, 1] - k.cy) / k.fy,
+                                    np.ones(len(p.uv))])
+            for i in np.flatnonzero(vis & np.isfinite(xyz).all(axis=1)):
+                seen[i].append((right[i], rays[i], xyz[i], depths[i]))
     cal = np.zeros((model.n_parts, 3), np.float32)
     if xs:
         arr = np.asarray(xs)
@@ -266,10 +305,21 @@ def calibrate(model: PartModel, samples: Sequence, *, use_depth: bool,
             elif sel.any():
                 rate = float(np.clip(yv[sel].mean(), 0.01, 0.99))
                 cal[i] = (0.0, 0.0, np.log(rate / (1 - rate)))
-    offset = None
-    if any(behind):
-        offset = np.array([np.median(b) if b else 0.0 for b in behind], np.float32)
-    return replace(model, calibration=cal, depth_offset_m=offset)
+    if not any(seen):
+        return replace(model, calibration=cal, depth_offset_m=None, depth_lookup=None)
+    lookup = np.array([LOOKUPS[0]] * model.n_parts, np.float32)
+    offset = np.zeros(model.n_parts, np.float32)
+    # a left part and its right twin share one look-up, chosen on both's detections
+    sides = {}
+    for i, name in enumerate(model.part_names):
+        sides.setdefault(name.removeprefix('left_').removeprefix('right_'), []).append(i)
+    for parts in sides.values():
+        obs = [o for i in parts for o in seen[i]]
+        if obs:
+            right, rays, truth, depths = (np.array(a) for a in zip(*obs, strict=True))
+            c, offset[parts] = choose_depth_lookup(right.astype(bool), rays, truth, depths)
+            lookup[parts] = LOOKUPS[c]
+    return replace(model, calibration=cal, depth_offset_m=offset, depth_lookup=lookup)
 
 
 @dataclass
