@@ -11,7 +11,7 @@ from pose4d_ros.core import joints as cj
 from pose4d_ros.core.camera import backproject, cad60_intrinsics, project
 from pose4d_ros.core.joints import JointSet
 from pose4d_ros.core.pipeline import IkStage, TrackerStage, limb_bones, reorder
-from pose4d_ros.core.skeleton import PARTS_10, PARTS_14, SKELETON_14
+from pose4d_ros.core.skeleton import MIDPOINTS, PARTS_10, PARTS_14, PARTS_22, SKELETON_14
 
 
 def _parts(offset=(0.0, 0.0, 0.0), noise_px=0.0, rng=None, drop=()):
@@ -71,6 +71,32 @@ def test_tracker_follows_the_parts_it_gets_ten_or_fourteen():
     assert (out.source == cj.DETECTED).all()
     assert_allclose(out.xyz, xyz, atol=1e-9)
 
+
+
+def test_limb_midpoints_are_labelled_from_their_joints_and_tracked_with_them():
+    xyz = np.array([BODY[n] for n in SKELETON_14])
+    truth = JointSet(SKELETON_14, project(xyz, INTR), xyz,
+                     confidence=np.where(np.array(SKELETON_14) == 'left_wrist', 0.0, 1.0))
+    uv, pos, labelled = truth.labelled(PARTS_22.names)
+    for name, (a, b) in MIDPOINTS.items():
+        i = PARTS_22.index(name)
+        assert PARTS_22.names[PARTS_22.parents[i]] == a  # between its joints in the tree
+        assert PARTS_22.parents[PARTS_22.index(b)] == i
+        ja, jb = SKELETON_14.index(a), SKELETON_14.index(b)
+        assert_allclose(pos[i], (xyz[ja] + xyz[jb]) / 2)
+        assert_allclose(uv[i], (truth.uv[ja] + truth.uv[jb]) / 2)
+        assert labelled[i] == (name != 'left_forearm')  # its wrist is not labelled
+    # the 22 detected parts: tracked as they come, completed to the 14 joints
+    parts = JointSet(PARTS_22.names, np.where(labelled[:, None], uv, np.nan),
+                     np.where(labelled[:, None], pos, np.nan),
+                     confidence=np.where(labelled, 0.9, 0.0).astype(np.float32),
+                     source=np.where(labelled, cj.DETECTED, cj.MISSING).astype(np.uint8))
+    tracked = TrackerStage().step(parts, 1.0, INTR)
+    assert tracked.names == PARTS_22.names
+    out = IkStage().step(tracked, None, INTR)
+    assert out.names == SKELETON_14 and (out.source[[SKELETON_14.index(n) for n in
+                                                       ('left_elbow', 'right_wrist')]]
+                                         == cj.DETECTED).all()
 
 def test_a_part_coasting_off_the_image_is_lost():
     stage = TrackerStage()

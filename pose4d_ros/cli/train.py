@@ -47,7 +47,8 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument('sources', nargs='+', metavar='SOURCE',
                    help='CAD-60 directory or LSPET root')
     p.add_argument('--out', required=True, type=Path, help='model file to write (.npz)')
-    p.add_argument('--parts', choices=('10', '14'), default='10', help='part tree')
+    p.add_argument('--parts', choices=('10', '14', '22'), default='10',
+                   help='part tree (22: the 14 joints and the middle of each limb bone)')
     p.add_argument('--channels', choices=('rgbd', 'rgb'), default='rgbd',
                    help='rgbd: colour + depth filter per type; rgb: colour only')
     p.add_argument('--types', type=int, default=6, help='mixture types per part (K)')

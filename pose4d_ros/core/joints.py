@@ -14,7 +14,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from pose4d_ros.core.camera import MAX_DEPTH_M, Intrinsics
-from pose4d_ros.core.skeleton import ground_truth_name
+from pose4d_ros.core.skeleton import MIDPOINTS, ground_truth_name
 
 DETECTED = 0  # measured by the part detector in this frame
 TRACKED = 1  # estimated by the tracker
@@ -84,11 +84,18 @@ class JointSet:
         """This set as the ground truth of the named joints: (P, 2) pixels, (P, 3) positions
         and (P,) labelled flags (confidence > 0 and a finite pixel); a name the set lacks is
         looked up under its ground-truth alias (`skeleton.ground_truth_name`: a `left_wrist`
-        is CAD-60's `left_hand`); NaN / False for joints it has under neither name."""
+        is CAD-60's `left_hand`); a limb's midpoint (`skeleton.MIDPOINTS`) it lacks is the mean
+        of the limb's two joints, labelled when both are; NaN / False for joints it has under
+        neither name."""
         uv = np.full((len(names), 2), np.nan)
         xyz = np.full((len(names), 3), np.nan)
         labelled = np.zeros(len(names), bool)
         for i, name in enumerate(names):
+            if name in MIDPOINTS and self.get(name) is None:  # a limb's midpoint: its joints'
+                ends = self.labelled(MIDPOINTS[name])
+                uv[i], xyz[i] = ends[0].mean(axis=0), ends[1].mean(axis=0)
+                labelled[i] = bool(ends[2].all())
+                continue
             k = self.get(name)
             k = self.get(ground_truth_name(name)) if k is None else k
             if k is not None:

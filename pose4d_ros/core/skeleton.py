@@ -135,7 +135,32 @@ PARTS_14 = _tree(
     root='neck',
 )
 
-PART_TREES: dict[str, PartTree] = {'10': PARTS_10, '14': PARTS_14}
+# Limb midpoints, parts of the 22-part model (as Yang & Ramanan's 26-part model places parts
+# between the joints of a limb): the midpoint of the two joints named.
+MIDPOINTS: dict[str, tuple[str, str]] = {
+    f'{side}_{limb}': (f'{side}_{a}', f'{side}_{b}')
+    for side in ('left', 'right')
+    for limb, (a, b) in (('upper_arm', ('shoulder', 'elbow')), ('forearm', ('elbow', 'wrist')),
+                         ('thigh', ('hip', 'knee')), ('shin', ('knee', 'ankle')))
+}
+
+# The 14 joints and a part in the middle of each limb bone: 22 parts.
+PARTS_22 = _tree(
+    [
+        ('neck', 'head'),
+        *[edge for side in ('left_', 'right_') for edge in (
+            ('neck', side + 'shoulder'), (side + 'shoulder', side + 'upper_arm'),
+            (side + 'upper_arm', side + 'elbow'), (side + 'elbow', side + 'forearm'),
+            (side + 'forearm', side + 'wrist'))],
+        *[edge for side in ('left_', 'right_') for edge in (
+            (side + 'shoulder', side + 'hip'), (side + 'hip', side + 'thigh'),
+            (side + 'thigh', side + 'knee'), (side + 'knee', side + 'shin'),
+            (side + 'shin', side + 'ankle'))],
+    ],
+    root='neck',
+)
+
+PART_TREES: dict[str, PartTree] = {'10': PARTS_10, '14': PARTS_14, '22': PARTS_22}
 
 
 def tree_for(names: tuple[str, ...] | list[str]) -> PartTree:
