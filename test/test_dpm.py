@@ -225,7 +225,8 @@ def test_lift_parts_reads_each_part_as_the_model_learned() -> None:
 
 def test_model_save_load_round_trip(tmp_path: Path) -> None:
     m = replace(tenpart_model(), depth_offset_m=np.linspace(0.0, 0.09, 10, dtype=np.float32),
-                depth_lookup=np.tile(np.float32([0.055, 0.9]), (10, 1)))
+                depth_lookup=np.tile(np.float32([0.055, 0.9]), (10, 1)),
+                search_range_px=(35.0, 70.0))
     path = tmp_path / 'm.npz'
     save_model(m, path)
     back = load_model(path)
@@ -315,6 +316,18 @@ def test_scale_factor_searches_a_person_that_much_larger() -> None:
     (pose,) = det.detect(col, depth, mask=mask, scale=2 ** 0.4)
     assert_allclose(pose.scale, big.scales[0])
 
+
+
+def test_the_search_without_depth_covers_the_models_search_range() -> None:
+    m = tenpart_model()  # trained range 30-80 px, no search range: the trained range
+    wide = Detector(m).plan((240, 320), None)
+    narrow = Detector(replace(m, search_range_px=(40.0, 60.0))).plan((240, 320), None)
+    for plan, (lo, hi) in ((wide, (30.0, 80.0)), (narrow, (40.0, 60.0))):
+        assert not plan.depth_guided
+        assert_allclose(m.canonical_scale_px / np.array(plan.scales)[[0, -1]], (lo, hi))
+    assert len(narrow.scales) < len(wide.scales)
+    with pytest.raises(ValueError, match='search_range_px'):
+        replace(m, search_range_px=(60.0, 40.0))
 
 def test_bad_inputs_give_flagged_or_empty_results() -> None:
     rng = np.random.default_rng(0)

@@ -95,6 +95,9 @@ def test_train_then_eval_and_bench(tiny_set: Path, tmp_path: Path, capsys) -> No
     # the joint centres lie behind the rendered body's surface
     assert m.depth_offset_m.shape == (10,) and np.all(np.abs(m.depth_offset_m) < 0.3)
     assert np.median(m.depth_offset_m) > 0.02, m.depth_offset_m
+    # the search without depth covers the middle of the trained people's scales
+    lo, hi = m.search_range_px
+    assert m.scale_range_px[0] <= lo < hi <= m.scale_range_px[1]
     # a look-up per part, the same for a left part and its right twin
     assert m.depth_lookup.shape == (10, 2)
     for i, name in enumerate(m.part_names):
@@ -111,6 +114,7 @@ def test_train_then_eval_and_bench(tiny_set: Path, tmp_path: Path, capsys) -> No
     assert (a.filters == m.filters).all() and a.metadata['seed'] == '3'
     assert_allclose(a.depth_offset_m, m.depth_offset_m, atol=1e-6)
     assert_array_equal(a.depth_lookup, m.depth_lookup)
+    assert_allclose(a.search_range_px, m.search_range_px)
     assert json.loads(a.metadata['calibrated'])['frames'] == 8
     out, drawn = tmp_path / 'table.json', tmp_path / 'drawn'
     assert pose4d_main(['eval', str(tiny_set), '--json', str(out), '--model', str(model),

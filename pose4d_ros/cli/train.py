@@ -34,7 +34,13 @@ from pose4d_ros.core.dpm.samples import (
     person_scale,
 )
 from pose4d_ros.core.dpm.threads import set_blas_threads
-from pose4d_ros.core.dpm.train import calibrate, train
+from pose4d_ros.core.dpm.train import (
+    SEARCH_PERCENT,
+    calibrate,
+    positive_scale,
+    scale_span,
+    train,
+)
 from pose4d_ros.datasets.frame import Frame
 from pose4d_ros.models import model_path
 
@@ -266,13 +272,22 @@ def depth_lifting(model: PartModel) -> str:
 
 
 def recalibrate(args: argparse.Namespace, samples: list[Frame], t0: float) -> int:
-    """`--calibrate MODEL`: the calibration step of `train` alone, on `samples` (the same
-    deterministic subset of `TrainConfig.calibration_samples` frames, masked as the model was
-    trained), recorded in the model's metadata."""
+    """`--calibrate MODEL`: the last steps of `train` alone, on `samples`: the person scales
+    searched without depth (from all of them) and the calibration (on the same deterministic
+    subset of `TrainConfig.calibration_samples` frames, masked as the model was trained),
+    recorded in the model's metadata."""
     model = load_model(model_path(str(args.calibrate)))
     cfg = json.loads(model.metadata.get('train_config', '{}'))
     if cfg.get('masked_input'):
         samples = with_foreground_masks(samples)
+    # the search without depth covers the middle of the people's scales, as `train` sets it
+    known = {k: tuple(v) if isinstance(v, list) else v for k, v in cfg.items()
+             if k in TrainConfig.__dataclass_fields__}
+    scales = np.array([positive_scale(s, model.part_names, TrainConfig(**known))
+                       for s in samples])
+    scales = scales[scales > 2]
+    if len(scales):
+        model = replace(model, search_range_px=scale_span(scales, SEARCH_PERCENT))
     usable = [s for s in samples if part_joints(s, model.part_names)[1].sum() >= 2]
     n = int(cfg.get('calibration_samples', TrainConfig.calibration_samples))
     if len(usable) > n:
@@ -288,6 +303,7 @@ def recalibrate(args: argparse.Namespace, samples: list[Frame], t0: float) -> in
         'wall_seconds': round(time.time() - t0, 1)})
     model = replace(model, metadata=meta)
     save_model(model, args.out)
-    print(f'wrote {args.out}: {args.calibrate} calibrated on {len(usable)} frames; '
-          f'{depth_lifting(model)}')
+    span = model.search_range_px or model.scale_range_px
+    print(f'wrote {args.out}: {args.calibrate} calibrated on {len(usable)} frames; person '
+          f'scales searched without depth {span[0]:.1f}-{span[1]:.1f} px; {depth_lifting(model)}')
     return 0

@@ -14,8 +14,9 @@ Yang & Ramanan (PAMI 2013), section 4: for each pyramid level,
 The 4D-DPM's use of depth (Martinez Berti et al.): the person's median depth z over the
 foreground mask gives the person's scale in pixels, fx * L / z (L = `model.scale_length_m`), so
 only the 1-3 pyramid levels that bring it to the model's canonical size are searched, and only
-inside the foreground box plus a margin. Without depth the whole scale range seen in training is
-searched (`SearchConfig.levels_per_octave`), as in Yang & Ramanan.
+inside the foreground box plus a margin. Without depth the scales of the middle 90 % of the
+training people are searched (`PartModel.search_range_px`, `SearchConfig.levels_per_octave`), as
+in Yang & Ramanan over the trained range.
 
 Parallelism on the 2-core target: the GEMM is the only heavy dense kernel, so BLAS owns the
 threads (OpenBLAS's default); HOG, the distance transforms and backtracking are single-threaded
@@ -442,7 +443,7 @@ class Detector:
             margin = cfg.margin * s_pred
             guided = True
         else:
-            lo, hi = m.scale_range_px
+            lo, hi = m.search_range_px or m.scale_range_px
             n = max(int(np.ceil(np.log2(hi / lo) * cfg.levels_per_octave)) + 1, 1)
             scales = tuple(m.canonical_scale_px / (lo * (hi / lo) ** (i / max(n - 1, 1)))
                            for i in range(n))

@@ -78,6 +78,9 @@ class PartModel:
     metadata : free-form strings (data, command, seed, time, git commit, ...).
     depth_offset_m : (P,) float32 how far behind the visible surface each part's joint centre
         lies, metres (rgbd models: learned with the calibration); None = on the surface.
+    search_range_px : (lo, hi) person scales in source pixels that the search without depth
+        covers: the middle 90 % of the training people's scales with a margin (`train`);
+        None = `scale_range_px`.
     depth_lookup : (P, 2) float32 how each part's depth is read (`camera.lift_depth`): the
         window's half-size in metres and the quantile of its depths (rgbd models: chosen with
         the calibration); None = the median of a 3-pixel window for every part.
@@ -101,6 +104,7 @@ class PartModel:
     metadata: Mapping[str, str] = field(default_factory=dict)
     depth_offset_m: NDArray[np.float32] | None = None
     depth_lookup: NDArray[np.float32] | None = None
+    search_range_px: tuple[float, float] | None = None
 
     def __post_init__(self) -> None:
         p = len(self.part_names)
@@ -135,6 +139,10 @@ class PartModel:
         if offset is not None and (offset.shape != (p,) or not (np.abs(offset) < 1.0).all()):
             raise ValueError(f'depth_offset_m must be ({p},) metres within +-1, got '
                              f'{np.asarray(offset).tolist()}')
+        if self.search_range_px is not None and not (
+                0 < self.search_range_px[0] < self.search_range_px[1]):
+            raise ValueError(f'search_range_px must be (lo, hi) with 0 < lo < hi, got '
+                             f'{self.search_range_px}')
         lookup = self.depth_lookup
         if lookup is not None and (lookup.shape != (p, 2) or not (
                 (lookup[:, 0] > 0) & (lookup[:, 0] <= 0.5)
@@ -190,6 +198,8 @@ def save_model(model: PartModel, path: str | Path) -> None:
         'depth_range_m': list(model.depth_range_m), 'masked_input': model.masked_input,
         'metadata': dict(model.metadata),
     }
+    if model.search_range_px is not None:
+        header['search_range_px'] = list(model.search_range_px)
     arrays = {name: getattr(model, name) for name in _ARRAYS}
     for name in _OPTIONAL:
         if getattr(model, name) is not None:
@@ -234,6 +244,8 @@ def load_model(path: str | Path) -> PartModel:
             **{name: contents[name].astype(np.float32) for name in _OPTIONAL
                if name in contents},
             masked_input=bool(header.get('masked_input', False)),
+            search_range_px=(tuple(float(x) for x in header['search_range_px'])
+                             if 'search_range_px' in header else None),
             metadata={str(k): str(v) for k, v in header.get('metadata', {}).items()},
         )
     except (KeyError, TypeError, ValueError) as exc:

@@ -322,6 +322,29 @@ def calibrate(model: PartModel, samples: Sequence, *, use_depth: bool,
     return replace(model, calibration=cal, depth_offset_m=offset, depth_lookup=lookup)
 
 
+# The person scales the training people leave out at each end: 1 % for the trained range
+# (`PartModel.scale_range_px`: mining, and the bounds of the depth-guided search), 5 % for the
+# search without depth (`PartModel.search_range_px`); each widened by SCALE_MARGIN
+SEARCH_PERCENT = 5.0
+SCALE_MARGIN = 1.15
+
+
+def scale_span(scales: NDArray[np.float64], percent: float) -> tuple[float, float]:
+    """(lo, hi) person scales, pixels: the `percent` and 100 - `percent` percentiles of the
+    training people's `scales`, widened by `SCALE_MARGIN`."""
+    return (float(np.percentile(scales, percent) / SCALE_MARGIN),
+            float(np.percentile(scales, 100 - percent) * SCALE_MARGIN))
+
+
+def positive_scale(sample, names: Sequence[str], cfg: TrainConfig) -> float:
+    """The person scale of a frame that makes a positive (every part labelled, or enough of
+    them with `cfg.partial_labels`), pixels; NaN for a frame that does not."""
+    uv, vis = part_joints(sample, names)
+    if not vis.all() and not (cfg.partial_labels and vis.sum() >= cfg.min_labelled):
+        return float('nan')
+    return float(person_scale(sample, names, cfg, uv))
+
+
 @dataclass
 class TrainReport:
     """What happened during training (for the model's metadata and the CLI)."""
@@ -377,11 +400,8 @@ def train(samples: Sequence, negatives: Sequence[Negative], cfg: TrainConfig, *,
     if progress is not None:
         it = progress(it, 'positives', len(samples))
     for idx, s in it:
-        uv, vis = part_joints(s, names)
-        if not vis.all() and not (cfg.partial_labels and vis.sum() >= cfg.min_labelled):
-            continue
-        sc = person_scale(s, names, cfg, uv)
-        if not (np.isfinite(sc) and sc > 2):
+        sc = positive_scale(s, names, cfg)
+        if not sc > 2:
             continue
         scales.append(sc)
         for flipped in (False, True) if cfg.flip else (False,):
@@ -403,10 +423,10 @@ def train(samples: Sequence, negatives: Sequence[Negative], cfg: TrainConfig, *,
                          f'{len(names)} parts labelled); need at least {need}')
     report.n_positives = len(pos)
     sc_arr = np.asarray(scales)
-    scale_range = (float(np.percentile(sc_arr, 1) / 1.15),
-                   float(np.percentile(sc_arr, 99) * 1.15))
+    scale_range = scale_span(sc_arr, 1.0)
     say(f'{len(pos)} positives from {len(samples)} frames; person scale '
-        f'{np.median(sc_arr):.1f} px (search {scale_range[0]:.1f}-{scale_range[1]:.1f} px)')
+        f'{np.median(sc_arr):.1f} px (trained {scale_range[0]:.1f}-{scale_range[1]:.1f} px, '
+        'searched without depth {:.1f}-{:.1f} px)'.format(*scale_span(sc_arr, SEARCH_PERCENT)))
 
     # 2. part types by k-means on offsets; anchors from the quantised cells
     k = cfg.n_types
@@ -532,7 +552,8 @@ def train(samples: Sequence, negatives: Sequence[Negative], cfg: TrainConfig, *,
         say(' '.join(f'{a}={b}' for a, b in info.items()))
         model = model_from_w(w, lay, tree, cfg, anchors, scale_range, white)
 
-    # 5. calibration on training frames (a deterministic subset)
+    # 5. calibration on training frames (a deterministic subset), searched as at run time
+    model = replace(model, search_range_px=scale_span(sc_arr, SEARCH_PERCENT))
     usable = [s for s in samples if part_joints(s, names)[1].sum() >= 2]
     if len(usable) > cfg.calibration_samples:
         idx = np.sort(rng.choice(len(usable), cfg.calibration_samples, replace=False))
