@@ -60,6 +60,21 @@ def test_tracker_coasts_through_dropouts_and_restarts_after_a_gap():
     assert out.track_id == 2
 
 
+
+def test_a_rejected_detection_does_not_give_the_tracked_part_its_depth():
+    stage = TrackerStage()
+    for k in range(10):
+        stage.step(_parts(), 10.0 + k / 30, INTR)
+    i = PARTS_10.index('left_wrist')
+    wrong = _parts()
+    uv, xyz = wrong.uv.copy(), wrong.xyz.copy()
+    uv[i] += (80.0, 0.0)  # an outlier on something 1 m behind the person
+    xyz[i] = backproject(uv[i:i + 1], [xyz[i, 2] + 1.0], INTR)[0]
+    out = stage.step(wrong.with_(uv=uv, xyz=xyz), 10.0 + 10 / 30, INTR)
+    assert out.source[i] == cj.TRACKED
+    assert out.xyz[i, 2] == pytest.approx(2.35)  # the last accepted detection's depth
+    assert np.hypot(*(out.uv[i] - _parts().uv[i])) < 5
+
 def test_tracker_follows_the_parts_it_gets_ten_or_fourteen():
     stage = TrackerStage()
     assert stage.step(_parts(), 1.0, INTR).names == PARTS_10.names

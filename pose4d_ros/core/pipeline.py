@@ -316,7 +316,8 @@ class TrackerStage:
 
         Parts the detector missed are predicted (TRACKED); parts lost for too long are MISSING.
         3-D positions: the tracked pixel back-projected at the part's depth, which is the depth
-        of its detection in this frame or, if not detected now, of its last detection.
+        of its detection in this frame when the filter accepts it, else that of its last
+        accepted detection (a rejected detection lies elsewhere in the image).
         ValueError (and the track untouched) for parts no camera could have seen
         (`joints.check_joints`) or none of which the tree has.
         """
@@ -336,7 +337,8 @@ class TrackerStage:
         out = self.filter.step(uv, np.where(detected, parts.confidence, 0.0), stamp_s)
         if new_track and self.filter.state.active.any():
             self.track_id += 1
-        measured = detected & _valid_xyz(parts.xyz)
+        # a part's depth is its accepted detection's: a rejected one lies elsewhere
+        measured = detected & (out.source == cj.DETECTED) & _valid_xyz(parts.xyz)
         self.depth[measured] = parts.xyz[measured, 2]
         # a part predicted off the image (coasting away) is lost: no stage takes such pixels
         lost = (out.source != cj.MISSING) & ~cj.near_image(out.positions, intrinsics)
