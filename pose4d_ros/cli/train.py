@@ -281,10 +281,9 @@ def recalibrate(args: argparse.Namespace, samples: list[Frame], t0: float) -> in
     if cfg.get('masked_input'):
         samples = with_foreground_masks(samples)
     # the search without depth covers the middle of the people's scales, as `train` sets it
-    known = {k: tuple(v) if isinstance(v, list) else v for k, v in cfg.items()
-             if k in TrainConfig.__dataclass_fields__}
-    scales = np.array([positive_scale(s, model.part_names, TrainConfig(**known))
-                       for s in samples])
+    trained = TrainConfig(**{k: tuple(v) if isinstance(v, list) else v for k, v in cfg.items()
+                             if k in TrainConfig.__dataclass_fields__})
+    scales = np.array([positive_scale(s, model.part_names, trained) for s in samples])
     scales = scales[scales > 2]
     if len(scales):
         model = replace(model, search_range_px=scale_span(scales, SEARCH_PERCENT))

@@ -23,7 +23,7 @@ from __future__ import annotations
 
 import math
 import time
-from collections.abc import Mapping, Sequence
+from collections.abc import Mapping
 from dataclasses import dataclass, replace
 
 import numpy as np
@@ -38,7 +38,7 @@ from pose4d_ros.core.camera import (
     robust_depth,
 )
 from pose4d_ros.core.dpm.infer import Detector, SearchConfig
-from pose4d_ros.core.dpm.model import DEFAULT_DEPTH_LOOKUP, PartModel
+from pose4d_ros.core.dpm.model import PartModel
 from pose4d_ros.core.dpm.scale import PersonScale, ScaleConfig
 from pose4d_ros.core.foreground import (
     ForegroundConfig,
@@ -151,27 +151,22 @@ class ForegroundStage:
 
 
 def lift_parts(model: PartModel, depth_m: NDArray[np.floating], uv: NDArray[np.floating],
-               intrinsics: Intrinsics, mask: NDArray[np.bool_] | None = None,
-               names: Sequence[str] | None = None) -> NDArray[np.float64]:
-    """The depth of each part's joint centre at pixels `uv`, as `model` learned to read it.
+               intrinsics: Intrinsics, mask: NDArray[np.bool_] | None = None
+               ) -> NDArray[np.float64]:
+    """The depth of each of the model's parts' joint centres at pixels `uv` (P, 2), as `model`
+    learned to read it.
 
     Each part has its own look-up (`PartModel.depth_lookup`: a window of a size on the body and
     a quantile of its depths; without one, the median of a `DEPTH_RADIUS_PX` window) and lies
-    its `depth_offset_m` behind the surface the camera sees. `names`: the parts `uv` holds, by
-    name (default: the model's parts, in order); a name the model lacks gets the default look-up
-    and no offset.
+    its `depth_offset_m` behind the surface the camera sees.
     """
-    names = model.part_names if names is None else tuple(names)
-    index = [model.part_names.index(n) if n in model.part_names else -1 for n in names]
-    known = np.array([i >= 0 for i in index], bool)
-    pick = np.array([max(i, 0) for i in index], int)
     if model.depth_lookup is None:
         z = robust_depth(depth_m, uv, radius=DEPTH_RADIUS_PX, mask=mask)
     else:
-        lookup = np.where(known[:, None], model.depth_lookup[pick], DEFAULT_DEPTH_LOOKUP)
-        z = lift_depth(depth_m, uv, intrinsics, lookup[:, 0], lookup[:, 1], mask=mask)
+        z = lift_depth(depth_m, uv, intrinsics, model.depth_lookup[:, 0],
+                       model.depth_lookup[:, 1], mask=mask)
     if model.depth_offset_m is not None:
-        z = z + np.where(known, model.depth_offset_m[pick], 0.0)
+        z = z + model.depth_offset_m
     return z
 
 

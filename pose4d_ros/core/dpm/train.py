@@ -55,7 +55,7 @@ from dataclasses import asdict, dataclass, field, replace
 import numpy as np
 from numpy.typing import NDArray
 
-from pose4d_ros.core.camera import lift_depth
+from pose4d_ros.core.camera import backproject, lift_depth
 from pose4d_ros.core.dpm.infer import Detector
 from pose4d_ros.core.dpm.mining import mine_background, mine_structural, relabel_positives
 from pose4d_ros.core.dpm.model import DEFAULT_DEPTH_LOOKUP, PartModel
@@ -288,8 +288,7 @@ def calibrate(model: PartModel, samples: Sequence, *, use_depth: bool,
             k = s.intrinsics
             depths = np.stack([lift_depth(s.depth_m, p.uv, k, r, q, mask=mask)
                                for r, q in LOOKUPS], axis=1)
-            rays = np.column_stack([(p.uv[:, 0] - k.cx) / k.fx, (p.uv[:, 1] - k.cy) / k.fy,
-                                    np.ones(len(p.uv))])
+            rays = backproject(p.uv, np.ones(len(p.uv)), k)  # (x/z, y/z, 1)
             for i in np.flatnonzero(vis & np.isfinite(xyz).all(axis=1)):
                 seen[i].append((right[i], rays[i], xyz[i], depths[i]))
     cal = np.zeros((model.n_parts, 3), np.float32)
