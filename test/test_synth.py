@@ -371,6 +371,53 @@ def test_pose4d_synth_staging_options(tmp_path: Path) -> None:
     assert video['stature_m'] == 1.8 and 3.2 < video['distance_m'] < 3.8
 
 
+def _flexion_deg(joints: np.ndarray, side: str) -> np.ndarray:
+    upper = joints[:, J[f'{side}_elbow']] - joints[:, J[f'{side}_shoulder']]
+    fore = joints[:, J[f'{side}_wrist']] - joints[:, J[f'{side}_elbow']]
+    cos = np.sum(upper * fore, axis=1) / np.linalg.norm(upper, axis=1) / \
+        np.linalg.norm(fore, axis=1)
+    return np.degrees(np.arccos(np.clip(cos, -1.0, 1.0)))
+
+
+def test_jitter_arms_moves_only_the_arms_keeping_bones_and_elbow_range() -> None:
+    take = synthetic_take(30)
+    out = synth_video.jitter_arms(take, np.random.default_rng(5), 60.0)
+    arms = [J[f'{s}_{j}'] for s in ('left', 'right') for j in ('elbow', 'wrist', 'hand')]
+    others = [i for i in range(20) if i not in arms]
+    assert_array_equal(out[:, others], take[:, others])
+    assert np.abs(out[:, arms] - take[:, arms]).max() > 0.05  # the arms did move
+    for i in arms:
+        p = synth.PARENTS[i]
+        assert_allclose(np.linalg.norm(out[:, i] - out[:, p], axis=1),
+                        np.linalg.norm(take[:, i] - take[:, p], axis=1), atol=1e-9)
+    for side in ('left', 'right'):
+        flex = _flexion_deg(out, side)
+        assert flex.min() >= -1e-6 and flex.max() <= 150.0 + 1e-6
+        # smooth: the angles vary linearly over the window, so no jump between frames
+        assert np.abs(np.diff(out[:, J[f'{side}_wrist']], axis=0)).max() < 0.1
+    again = synth_video.jitter_arms(take, np.random.default_rng(5), 60.0)
+    assert_array_equal(again, out)
+    with pytest.raises(ValueError, match='arm_jitter_deg'):
+        synth_video.Staging(arm_jitter_deg=120.0)
+
+
+def test_pose4d_synth_arm_jitter_changes_only_the_arms(tmp_path: Path) -> None:
+    ut = tmp_path / 'ut'
+    write_utkinect(ut, frames=40)
+    sets = {}
+    for jitter in ('0', '40'):
+        out = tmp_path / f'set{jitter}'
+        assert pose4d_main(['synth', '--utkinect', str(ut), '--out', str(out), '--takes',
+                            's01_e01', '--frames', '3', '--arm-jitter', jitter, '--quiet']) == 0
+        assert json.loads((out / 'synth.json').read_text())['arm_jitter_deg'] == float(jitter)
+        (skeleton,) = out.glob('data1/[0-9]*.txt')
+        sets[jitter] = cad60.read_skeleton(skeleton).joints_mm
+    arms = [CAD60_JOINTS.index(n) for n in CAD60_JOINTS if 'elbow' in n or 'hand' in n]
+    rest = [i for i in range(len(CAD60_JOINTS)) if i not in arms]
+    assert_allclose(sets['40'][:, rest], sets['0'][:, rest], atol=1e-6)
+    assert np.abs(sets['40'][:, arms] - sets['0'][:, arms]).max() > 20.0  # mm
+
+
 def test_windows_spread_over_the_named_actions(tmp_path: Path) -> None:
     ut = tmp_path / 'ut'
     write_utkinect(ut)

@@ -60,6 +60,10 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument('--turn', type=float, nargs=2, metavar=('LO', 'HI'), default=None,
                    help='turn of the motion about the vertical, degrees, drawn uniformly: 0 '
                         'faces the camera, 90 shows the right side (default: -25 25)')
+    p.add_argument('--arm-jitter', type=float, default=0.0, metavar='DEG',
+                   help='pose the arms away from the recorded motion by up to DEG degrees (at '
+                        'the shoulder and the elbow, varying smoothly through each video): arm '
+                        'poses the subjects never made, for training data')
     p.add_argument('--occluders', type=float, default=0.3,
                    help='probability of furniture between camera and person')
     p.add_argument('--width', type=int, default=320, help='image width (CAD-60: 320)')
@@ -136,7 +140,7 @@ def run(args: argparse.Namespace) -> int:
     staging = video.Staging(
         stature_m=tuple(args.stature or default.stature_m),
         distance_m=tuple(args.distance or default.distance_m),
-        turn_deg=tuple(args.turn or default.turn_deg))
+        turn_deg=tuple(args.turn or default.turn_deg), arm_jitter_deg=args.arm_jitter)
     available = [p.name[len('joints_'):-len('.txt')] for p in list_takes(args.utkinect)]
     names = parse_takes(args.takes, available)
     intrinsics = cad60_intrinsics(args.width, args.height)
@@ -191,7 +195,7 @@ def run(args: argparse.Namespace) -> int:
             'actions': args.actions,
             'body_per': args.body_per, 'occluders': args.occluders,
             'stature_m': list(staging.stature_m), 'distance_m': list(staging.distance_m),
-            'turn_deg': list(staging.turn_deg),
+            'turn_deg': list(staging.turn_deg), 'arm_jitter_deg': staging.arm_jitter_deg,
             'size': [args.width, args.height], 'kinect_noise': not args.no_noise,
             'videos': records,
         }

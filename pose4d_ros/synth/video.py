@@ -49,11 +49,14 @@ class Staging:
     distance_m : (lo, hi) the mean hip position's distance ahead of the camera, metres.
     turn_deg : (lo, hi) the turn of the motion about the vertical, degrees: 0 = as recorded
         (UTKinect's subjects face the Kinect), 90 = the person's left side towards the camera.
+    arm_jitter_deg : arms posed away from the recorded motion by up to this much (`jitter_arms`),
+        degrees; 0 = the motion as recorded.
     """
 
     stature_m: tuple[float, float] = render.STATURE_M
     distance_m: tuple[float, float] = (2.4, 3.4)
     turn_deg: tuple[float, float] = (-25.0, 25.0)
+    arm_jitter_deg: float = 0.0
 
     def __post_init__(self) -> None:
         for name, (lo, hi), bounds in (('stature_m', self.stature_m, (1.0, 2.3)),
@@ -62,6 +65,9 @@ class Staging:
             if not bounds[0] <= lo <= hi <= bounds[1]:
                 raise ValueError(f'{name} must be lo <= hi within {bounds[0]:g}-{bounds[1]:g}, '
                                  f'got {lo:g}-{hi:g}')
+        if not 0.0 <= self.arm_jitter_deg <= 90.0:
+            raise ValueError(f'arm_jitter_deg must be within 0-90 degrees, got '
+                             f'{self.arm_jitter_deg:g}')
 
     @property
     def person_zone(self) -> tuple[float, float, float, float]:
@@ -271,6 +277,8 @@ def prepare_video(plan: VideoPlan, motion: TakeMotion, intrinsics: Intrinsics, *
     scene = render.random_scene(rng, intrinsics, occluder_prob=occluder_prob,
                                 person_zone=staging.person_zone)
     room = motion.joints[plan.indices].copy()
+    if staging.arm_jitter_deg > 0:
+        room = jitter_arms(room, video_rng(plan, 4), staging.arm_jitter_deg)
     # The lower foot joint sits a shoe's radius above the floor in every frame: Kinect's foot
     # joints scatter by centimetres (decimetres when mis-tracked) about the fitted floor, and
     # nobody jumps in UTKinect.
@@ -285,6 +293,70 @@ def prepare_video(plan: VideoPlan, motion: TakeMotion, intrinsics: Intrinsics, *
     t = plan.frame_numbers / FPS
     gains = 1.0 + 0.05 * np.sin(2 * np.pi * t / rng.uniform(4.0, 10.0) + rng.uniform(0, 6.3))
     return VideoJob(plan, body, scene, scene.to_optical(room), gains, intrinsics, kinect_noise)
+
+
+# Elbow flexion (0 = straight arm) kept within what an elbow does, radians.
+ELBOW_FLEXION_RAD = (0.0, np.deg2rad(150.0))
+
+
+def _rotate(v: NDArray[np.float64], axis: NDArray[np.float64], angle: NDArray[np.float64]
+            ) -> NDArray[np.float64]:
+    """Rodrigues: rotate the (F, 3) vectors `v` about the (F, 3) unit `axis` by `angle` (F,)."""
+    c, s = np.cos(angle)[:, None], np.sin(angle)[:, None]
+    return v * c + np.cross(axis, v) * s + axis * np.sum(axis * v, axis=1, keepdims=True) * (1 - c)
+
+
+def _unit_rows(v: NDArray[np.float64], fallback: NDArray[np.float64]) -> NDArray[np.float64]:
+    n = np.linalg.norm(v, axis=1, keepdims=True)
+    return np.where(n > 1e-6, v / np.maximum(n, 1e-12), fallback)
+
+
+def jitter_arms(joints: NDArray[np.float64], rng: np.random.Generator, max_deg: float
+                ) -> NDArray[np.float64]:
+    """Pose both arms of a window of motion away from the recording: arm poses its subjects
+    never made, for training data (`pose4d synth --arm-jitter`).
+
+    Per arm, the whole arm turns about the shoulder (about an axis drawn at random) and the
+    elbow bends or straightens about its own hinge; both angles are drawn within +-`max_deg`
+    at the window's first and last frames and vary linearly between, so the motion stays
+    smooth. The elbow's flexion stays within `ELBOW_FLEXION_RAD`; bone lengths are kept.
+
+    Parameters
+    ----------
+    joints : (F, 20, 3) metres, Kinect joints (`render` indices), any frame.
+    rng : the video's random stream.
+    max_deg : degrees.
+
+    Returns
+    -------
+    (F, 20, 3) float64, a new array.
+    """
+    out = np.array(joints, dtype=np.float64)
+    n = len(out)
+    t = np.linspace(0.0, 1.0, n) if n > 1 else np.zeros(1)
+    lim = np.deg2rad(max_deg)
+    for sh, el, wr, ha in ((render.LSH, render.LEL, render.LWR, render.LHA),
+                           (render.RSH, render.REL, render.RWR, render.RHA)):
+        axis = rng.normal(size=3)
+        axis = np.broadcast_to(axis / np.linalg.norm(axis), (n, 3))
+        a0, a1, f0, f1 = rng.uniform(-lim, lim, size=4)
+        turn = a0 + (a1 - a0) * t
+        bend = f0 + (f1 - f0) * t
+        arm = out[:, [el, wr, ha]] - out[:, sh, None]
+        arm = np.stack([_rotate(arm[:, k], axis, turn) for k in range(3)], axis=1)
+        upper = arm[:, 0]
+        fore = arm[:, 1:] - upper[:, None]
+        u = _unit_rows(upper, np.array([0.0, 0.0, -1.0]))
+        # the hinge: perpendicular to upper arm and forearm (any perpendicular for a straight arm)
+        side = np.cross(u, np.array([1.0, 0.0, 0.0]))
+        hinge = _unit_rows(np.cross(u, fore[:, 0]), _unit_rows(side, np.array([0.0, 1.0, 0.0])))
+        flex = np.arctan2(np.linalg.norm(np.cross(u, fore[:, 0]), axis=1),
+                          np.sum(u * fore[:, 0], axis=1))
+        delta = np.clip(flex + bend, *ELBOW_FLEXION_RAD) - flex
+        fore = np.stack([_rotate(fore[:, k], hinge, delta) for k in range(2)], axis=1)
+        out[:, el] = out[:, sh] + upper
+        out[:, [wr, ha]] = out[:, el, None] + fore
+    return out
 
 
 def place_in_room(joints: NDArray[np.float64], scene: Scene, rng: np.random.Generator, *,
