@@ -13,7 +13,17 @@ from numpy.testing import assert_allclose, assert_array_equal
 from pose4d_ros.core.camera import cad60_intrinsics
 from pose4d_ros.core.dpm import Detector, PartModel, SearchConfig, load_model, save_model
 from pose4d_ros.core.dpm.dt import dt1d, dt2d
-from pose4d_ros.core.dpm.infer import backtrack, best_roots, im2col, score_level, tree_dp
+from pose4d_ros.core.dpm.infer import (
+    LIMB_CANDIDATES,
+    arm_limbs,
+    backtrack,
+    best_roots,
+    im2col,
+    limb_candidates,
+    model_arrays,
+    score_level,
+    tree_dp,
+)
 from pose4d_ros.core.dpm.samples import TrainConfig
 from pose4d_ros.core.dpm.solver import Examples, dcd, margins, rebuild_w
 from pose4d_ros.core.dpm.train import choose_depth_lookup, kmeans
@@ -171,6 +181,104 @@ def test_inference_recovers_a_planted_pose_exactly() -> None:
     r = best_roots(res, 1)
     assert_array_equal(r[0, 1:], planted[0])
     assert pose.flags == ()
+
+
+# --------------------------------------------------------------------------- tracking prior
+
+ARM_NAMES = ('neck', 'left_shoulder', 'left_elbow', 'left_wrist')
+
+
+def _arm_model(seed: int = 3) -> PartModel:
+    return replace(random_model((-1, 0, 1, 2), k=2, seed=seed), part_names=ARM_NAMES)
+
+
+def _share(m: PartModel, resp: np.ndarray, c: int, part: np.ndarray, parent: np.ndarray
+           ) -> float:
+    """Part c's share of a pose's score at (type, row, col) `part` below `parent`."""
+    (t, r, q), (pt, pr, pc) = part, parent
+    dx, dy = q - pc - m.anchors[c, t, 0], r - pr - m.anchors[c, t, 1]
+    sp = m.springs[c, t]
+    return float(resp[c, t, r, q] - (sp[0] * dx + sp[1] * dx * dx + sp[2] * dy + sp[3] * dy * dy)
+                 + m.bias[c, pt, t])
+
+
+def test_limb_candidates_start_with_the_dp_arm_and_none_beats_it() -> None:
+    rng = np.random.default_rng(4)
+    m = _arm_model()
+    par = np.asarray(m.parents, np.int64)
+    resp = rng.normal(size=(4, 2, 9, 11)).astype(np.float32)
+    _, ix, iy, ik, score = tree_dp(resp, par, m.springs, m.anchors, m.bias)
+    roots = np.array([[0, 4, 5], [1, 2, 2]], np.int64)
+    parts, local = backtrack(roots, par, resp, ix, iy, ik, m.springs, m.anchors, m.bias)
+    for j in range(len(roots)):
+        cand, loc = limb_candidates(resp, score, ix, iy, ik, par, m.springs, m.anchors, m.bias,
+                                    parts[j], 2, 3, LIMB_CANDIDATES)
+        assert_array_equal(cand[0], parts[j, 2:4])
+        assert_allclose(loc[0], local[j, 2:4], rtol=1e-5, atol=1e-5)
+        assert len(cand) > LIMB_CANDIDATES  # other elbows, each with several wrists
+        # every candidate's shares are the model's own, and the DP's arm is the best of them
+        for (elbow, wrist), shares in zip(cand, loc, strict=True):
+            assert_allclose(shares, [_share(m, resp, 2, elbow, parts[j, 1]),
+                                     _share(m, resp, 3, wrist, elbow)], rtol=1e-5, atol=1e-5)
+        assert loc.sum(1).max() <= loc[0].sum() + 1e-4
+        # elbow cells apart from the DP's are at least 2 cells apart from each other
+        elbows = np.unique(cand[:, 0, 1:], axis=0)
+        for a, b in itertools.combinations(elbows, 2):
+            assert np.abs(a - b).max() >= 2 or (a == parts[j, 2, 1:]).all() or \
+                (b == parts[j, 2, 1:]).all()
+    # a limb without an end (the 10-part tree's wrist) has one share per candidate
+    cand, loc = limb_candidates(resp, score, ix, iy, ik, par, m.springs, m.anchors, m.bias,
+                                parts[0], 3, -1, LIMB_CANDIDATES)
+    assert (cand[:, 1] == -1).all() and (loc[:, 1] == 0).all()
+    assert_array_equal(cand[0, 0], parts[0, 3])
+
+
+def test_arm_limbs_of_the_shipped_trees() -> None:
+    from pose4d_ros.core.skeleton import PARTS_14
+    i14 = PARTS_14.names.index
+    assert arm_limbs(PARTS_14.names, PARTS_14.parents) == (
+        (i14('left_elbow'), i14('left_wrist')), (i14('right_elbow'), i14('right_wrist')))
+    i10 = PARTS_10.names.index
+    assert arm_limbs(PARTS_10.names, PARTS_10.parents) == (
+        (i10('left_wrist'), -1), (i10('right_wrist'), -1))
+    assert arm_limbs(('neck', 'head'), (-1, 0)) == ()
+
+
+def test_the_prior_moves_an_arm_to_the_candidate_near_it_and_only_then() -> None:
+    rng = np.random.default_rng(5)
+    m = _arm_model()
+    (level,) = feature_pyramid(rng.integers(0, 255, (64, 72, 3)).astype(np.uint8), None, [1.0],
+                               sbin=4, pad=(2, 2))
+    det = Detector(m, SearchConfig(subcell=False, arm_prior=50.0))
+    (free,) = det.poses_from_levels([level])
+    _, par, springs, anchors, bias = model_arrays(m)
+    res = score_level(level, m)
+    parts, _ = backtrack(best_roots(res, 1), par, res.resp, res.ix, res.iy, res.ik, springs,
+                         anchors, bias)
+    cand, _ = limb_candidates(res.resp, res.score, res.ix, res.iy, res.ik, par, springs, anchors,
+                              bias, parts[0], 2, 3, LIMB_CANDIDATES)
+    other = cand[len(cand) // 2]
+    assert not (other == cand[0]).all()
+    u, v = level.cell_to_pixel(other[:, 1], other[:, 2], m.filter_shape)
+    prior = np.full((4, 2), np.nan)
+    prior[2:] = np.stack([u, v], 1)
+    (led,) = det.poses_from_levels([level], prior=prior)
+    assert_allclose(led.uv[2:], prior[2:])           # elbow and wrist moved to the prior
+    assert_allclose(led.uv[:2], free.uv[:2])         # the rest of the pose did not
+    assert led.score == pytest.approx(led.part_scores.sum(), rel=1e-5)
+    assert led.score <= free.score + 1e-4
+    # no prior, an unknown one, its own arm or a zero weight: the DP's pose
+    same = [det.poses_from_levels([level], prior=np.full((4, 2), np.nan))[0],
+            det.poses_from_levels([level], prior=free.uv)[0],
+            Detector(m, SearchConfig(subcell=False, arm_prior=0.0)).poses_from_levels(
+                [level], prior=prior)[0]]
+    for pose in same:
+        assert_allclose(pose.uv, free.uv)
+        assert pose.score == pytest.approx(free.score)
+    with pytest.raises(ValueError, match='prior'):
+        det.poses_from_levels([level], prior=np.zeros((3, 2)))
+    with pytest.raises(ValueError, match='arm_prior'):
+        SearchConfig(arm_prior=-1.0)
 
 
 # --------------------------------------------------------------------------- model files

@@ -9,9 +9,19 @@ from numpy.testing import assert_allclose
 
 from pose4d_ros.core import joints as cj
 from pose4d_ros.core.camera import backproject, cad60_intrinsics, project
+from pose4d_ros.core.dpm import load_model
 from pose4d_ros.core.joints import JointSet
-from pose4d_ros.core.pipeline import IkStage, TrackerStage, limb_bones, reorder
+from pose4d_ros.core.pipeline import (
+    PRIOR_MAX_GAP_S,
+    DetectorStage,
+    IkStage,
+    TrackerStage,
+    limb_bones,
+    reorder,
+    warm_up_frame,
+)
 from pose4d_ros.core.skeleton import MIDPOINTS, PARTS_10, PARTS_14, PARTS_22, SKELETON_14
+from pose4d_ros.models import model_path
 
 
 def _parts(offset=(0.0, 0.0, 0.0), noise_px=0.0, rng=None, drop=()):
@@ -226,3 +236,34 @@ def test_a_nearly_unconfident_detection_gives_the_ik_a_joint_it_accepts() -> Non
     assert np.all(np.abs(tracked.covariance) <= 20.0 ** 2)
     skeleton = IkStage(use_depth=False).step(tracked, None, k)
     assert skeleton.source[SKELETON_14.index(names[0])] != cj.MISSING
+
+
+def test_the_detector_stage_guides_a_frame_by_the_previous_one_only_when_recent() -> None:
+    """The previous frame's parts are the arms' prior (`SearchConfig.arm_prior`) when at most
+    `PRIOR_MAX_GAP_S` old; a gap, a stamp going back, a frame without a stamp or `reset` drop
+    it."""
+    stage = DetectorStage(load_model(model_path('rgbd_10')))
+    seen = []
+    detect = stage.detector.detect
+
+    def spy(*args, prior=None, **kwargs):
+        seen.append(None if prior is None else prior.copy())
+        return detect(*args, prior=prior, **kwargs)
+
+    stage.detector.detect = spy
+    color, depth, mask = warm_up_frame(INTR)
+    step = 1.0 / 30.0
+    stamps = [0.0, step, 2 * step, 2 * step + PRIOR_MAX_GAP_S + 0.01, 0.5 * step, None, 1.0]
+    outputs = []
+    for stamp in stamps:
+        seen.clear()
+        out = stage.step(color, depth, INTR, mask=mask, stamp_s=stamp)
+        outputs.append((out, seen[0]))
+    guided = [prior is not None for _, prior in outputs]
+    assert guided == [False, True, True, False, False, False, False]
+    assert_allclose(outputs[1][1], outputs[0][0].uv)  # the previous frame's parts
+    stage.step(color, depth, INTR, mask=mask, stamp_s=2.0)
+    stage.reset()
+    seen.clear()
+    stage.step(color, depth, INTR, mask=mask, stamp_s=2.0 + step)
+    assert seen[0] is None

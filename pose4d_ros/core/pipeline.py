@@ -56,6 +56,10 @@ from pose4d_ros.core.slqe import ConstantVelocityTracker, CvConfig, SlqeConfig, 
 # (the detector's default; `pose4d_ros.peer` lifts MediaPipe's joints with it too)
 DEPTH_RADIUS_PX = 3
 
+# The previous frame's parts guide the detector's arms (`SearchConfig.arm_prior`) when it is
+# at most this old, seconds (a 30 fps camera that drops a few frames; 10 fps recordings)
+PRIOR_MAX_GAP_S = 0.25
+
 
 def _valid_xyz(xyz: NDArray[np.float64]) -> NDArray[np.bool_]:
     """Finite and in front of the camera."""
@@ -189,6 +193,7 @@ class DetectorStage:
         self.detector = Detector(model, search)
         self.person_scale = PersonScale(scale)
         self.last_flags: tuple[str, ...] = ()
+        self._previous: tuple[NDArray[np.float64], float] | None = None  # parts' uv, stamp
         self.configure(search=search, scale=scale, min_confidence=min_confidence)
 
     def configure(self, *, search: SearchConfig | None = None, scale: ScaleConfig | None = None,
@@ -209,6 +214,14 @@ class DetectorStage:
     def reset(self) -> None:
         """Forget the person (the next frame starts a new track)."""
         self.person_scale.reset()
+        self._previous = None
+
+    def _prior(self, stamp_s: float | None) -> NDArray[np.float64] | None:
+        """The previous frame's parts when they are recent enough to guide this frame's arms."""
+        if stamp_s is None or self._previous is None:
+            return None
+        uv, last = self._previous
+        return uv if 0.0 < stamp_s - last <= PRIOR_MAX_GAP_S else None
 
     def warm_up(self, intrinsics: Intrinsics) -> None:
         """Run once on a synthetic frame so the kernels are compiled (`warm_up_frame`), then
@@ -227,7 +240,8 @@ class DetectorStage:
 
         `stamp_s` (the frame's time, seconds) tells the person's scale when a new track starts
         (`core.dpm.scale.PersonScale`: the person unseen for a while); without it, only
-        `reset` does.
+        `reset` does. With it, the previous frame's parts, if at most `PRIOR_MAX_GAP_S` old,
+        guide this frame's arms (`SearchConfig.arm_prior`).
         `last_flags` tells why a result is doubtful ('no_person', 'low_score', 'no_depth').
         ValueError when `intrinsics` are for another image size.
         """
@@ -235,10 +249,13 @@ class DetectorStage:
             intrinsics.check_size(np.shape(color))
         scaled = depth_m is not None and self.model.channels == 'rgbd'
         factors = self.person_scale.factors(stamp_s) if scaled else (1.0,)
+        prior = self._prior(stamp_s)
         found = {f: self.detector.detect(color, depth_m, mask=mask, intrinsics=intrinsics,
-                                         scale=f, blanked=blanked) for f in factors}
+                                         scale=f, blanked=blanked, prior=prior)
+                 for f in factors}
         if not any(found.values()):
             self.last_flags = ('no_person',)
+            self._previous = None
             return JointSet.missing(self.names)
         if scaled:
             chosen = self.person_scale.update(
@@ -250,6 +267,7 @@ class DetectorStage:
         conf = pose.confidence.astype(np.float32)
         src = np.where(conf >= self.min_confidence, cj.DETECTED, cj.MISSING).astype(np.uint8)
         uv = np.where(src[:, None] == cj.DETECTED, pose.uv, np.nan)
+        self._previous = None if stamp_s is None else (uv, float(stamp_s))
         xyz = np.full((len(self.names), 3), np.nan)
         if depth_m is not None and intrinsics is not None:
             xyz = backproject(uv, lift_parts(self.model, depth_m, uv, intrinsics, mask),

@@ -85,13 +85,18 @@ PARAMS = (
           range=(0, 100000), live=True),
     Param('detector.min_confidence', 0.0, 'Parts less confident than this are MISSING.',
           range=(0.0, 1.0), live=True),
+    Param('detector.arm_prior', _S.arm_prior, "Weight of the previous frame's elbows and "
+          'wrists (at most 0.25 s old) when each arm is chosen among the few best the part model '
+          'allows, per squared person scale of distance; 0 = the part model alone.',
+          range=(0.0, 100.0), live=True),
 )
 
 
 def detector_settings(p: dict[str, Any]) -> dict[str, Any]:
     """The live settings of the detector stage (`DetectorStage.configure`) from the
     parameters (also used by the pipeline node)."""
-    return {'search': SearchConfig(n_levels=p['detector.n_levels'], margin=p['detector.margin']),
+    return {'search': SearchConfig(n_levels=p['detector.n_levels'], margin=p['detector.margin'],
+                                   arm_prior=p['detector.arm_prior']),
             'scale': ScaleConfig(factors=tuple(p['detector.person_scales']),
                                  warm_up_frames=p['detector.scale_warm_up_frames'],
                                  probe_every=p['detector.scale_probe_every']),

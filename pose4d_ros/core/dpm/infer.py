@@ -18,6 +18,13 @@ inside the foreground box plus a margin. Without depth the scales of the middle 
 training people are searched (`PartModel.search_range_px`, `SearchConfig.levels_per_octave`), as
 in Yang & Ramanan over the trained range.
 
+Tracking prior (`SearchConfig.arm_prior`): in a video, the previous frame's elbows and wrists
+(`Detector.detect(prior=...)`) choose each arm among the few best the tree allows
+(`limb_candidates`: the best elbow cells given the chosen shoulder, each with its best wrists),
+scored by the tree less the prior's weight times the squared distance to the previous
+positions in person scales. The rest of the pose is the exact optimum; the DP's own arm wins
+ties.
+
 Parallelism on the 2-core target: the GEMM is the only heavy dense kernel, so BLAS owns the
 threads (OpenBLAS's default); HOG, the distance transforms and backtracking are single-threaded
 numba (no `parallel=True`). Measured with `pose4d bench` (see the models' README): a second
@@ -57,6 +64,8 @@ class SearchConfig:
     nms_overlap : top-k suppression: pose boxes overlapping more than this (IoU) are dropped.
     subcell : refine each part below the cell size: a parabola through its subtree score (less
         its spring) at the chosen cell and its two neighbours, per axis (at most half a cell).
+    arm_prior : weight of the previous frame's elbows and wrists when a prior is given (score
+        units per squared person scale of distance); 0 = the tree's choice alone.
     """
 
     n_levels: int = 1
@@ -66,6 +75,7 @@ class SearchConfig:
     low_score: float = 0.0
     nms_overlap: float = 0.5
     subcell: bool = True
+    arm_prior: float = 1.0
 
     def __post_init__(self) -> None:
         if not 1 <= self.n_levels <= 9:
@@ -78,6 +88,8 @@ class SearchConfig:
             raise ValueError(f'margin must be >= 0, got {self.margin}')
         if not 0 < self.nms_overlap <= 1:
             raise ValueError(f'nms_overlap must be in (0, 1], got {self.nms_overlap}')
+        if not self.arm_prior >= 0:
+            raise ValueError(f'arm_prior must be >= 0, got {self.arm_prior}')
 
 
 @dataclass(frozen=True)
@@ -278,6 +290,140 @@ def subcell_offsets(score: NDArray[np.float32], parts: NDArray[np.int64],
     return dr, dc
 
 
+# Cells the tracking prior chooses among: this many best elbow cells (at least 2 cells apart),
+# each with its best wrist and this many more.
+LIMB_CANDIDATES = 4
+
+
+@nb.njit(cache=True)
+def _child_value(src: NDArray[np.float32], springs: NDArray[np.float32],
+                 anchors: NDArray[np.int32], bias: NDArray[np.float32], c: int, pt: int,
+                 pr: int, pc: int, out: NDArray[np.float64], arg: NDArray[np.int64]) -> None:
+    """Part c's best value over its types at every cell with its parent at type `pt`, cell
+    (pr, pc): ``src[c, t] - spring + bias[c, pt, t]`` (`src` = filter responses, or subtree
+    scores to include the part's children), and the type that gives it."""
+    k_n, ny, nx = src.shape[1], src.shape[2], src.shape[3]
+    for r in range(ny):
+        for q in range(nx):
+            best = -np.inf
+            bt = 0
+            for t in range(k_n):
+                dx = q - pc - anchors[c, t, 0]
+                dy = r - pr - anchors[c, t, 1]
+                sp = springs[c, t]
+                v = (src[c, t, r, q] - (sp[0] * dx + sp[1] * dx * dx + sp[2] * dy
+                                        + sp[3] * dy * dy) + bias[c, pt, t])
+                if v > best:
+                    best = v
+                    bt = t
+            out[r, q] = best
+            arg[r, q] = bt
+
+
+@nb.njit(cache=True)
+def _peaks(value: NDArray[np.float64], n: int) -> NDArray[np.int64]:
+    """Up to n (row, col) of the highest cells of `value`, at least 2 cells apart (Chebyshev),
+    best first (`value` is overwritten)."""
+    ny, nx = value.shape
+    out = np.empty((n, 2), np.int64)
+    k = 0
+    while k < n:
+        i = np.argmax(value)
+        r, q = i // nx, i % nx
+        if not np.isfinite(value[r, q]):
+            break
+        out[k, 0] = r
+        out[k, 1] = q
+        k += 1
+        value[max(r - 2, 0):r + 3, max(q - 2, 0):q + 3] = -np.inf
+    return out[:k]
+
+
+@nb.njit(cache=True)
+def _spring_local(resp: NDArray[np.float32], springs: NDArray[np.float32],
+                  anchors: NDArray[np.int32], bias: NDArray[np.float32], c: int, t: int, r: int,
+                  q: int, pt: int, pr: int, pc: int) -> float:
+    """Part c's share of the pose score at type t, cell (r, q) with its parent at (pt, pr, pc)."""
+    dx = q - pc - anchors[c, t, 0]
+    dy = r - pr - anchors[c, t, 1]
+    sp = springs[c, t]
+    return (resp[c, t, r, q] - (sp[0] * dx + sp[1] * dx * dx + sp[2] * dy + sp[3] * dy * dy)
+            + bias[c, pt, t])
+
+
+@nb.njit(cache=True)
+def limb_candidates(resp: NDArray[np.float32], score: NDArray[np.float32],
+                    ix: NDArray[np.int32], iy: NDArray[np.int32], ik: NDArray[np.int32],
+                    parents: NDArray[np.int64], springs: NDArray[np.float32],
+                    anchors: NDArray[np.int32], bias: NDArray[np.float32],
+                    parts: NDArray[np.int64], mid: int, end: int, n: int):
+    """The best few placements of a limb (part `mid` and its child `end`, -1 for none) with
+    the rest of the backtracked pose `parts` (P, 3) fixed.
+
+    The candidates are the DP's own placement first, then `n` best cells of `mid` given its
+    parent (its subtree's best, at least 2 cells apart), each with its best `end` (as the DP
+    backtracks it) and `n` more `end` cells given it.
+
+    Returns
+    -------
+    cand : (M, 2, 3) int64 (type, row, col) of mid and end (end's all -1 without one).
+    local : (M, 2) float64 each one's share of the pose score (0 for a missing end).
+    """
+    ny, nx = score.shape[2], score.shape[3]
+    pt, pr, pc = parts[parents[mid], 0], parts[parents[mid], 1], parts[parents[mid], 2]
+    value = np.empty((ny, nx))
+    vtype = np.empty((ny, nx), np.int64)
+    _child_value(score, springs, anchors, bias, mid, pt, pr, pc, value, vtype)
+    mids = np.empty((n + 1, 3), np.int64)
+    mids[0] = parts[mid]
+    peaks = _peaks(value, n)
+    m_n = 1
+    for i in range(len(peaks)):
+        r, q = peaks[i, 0], peaks[i, 1]
+        t = vtype[r, q]
+        if t == mids[0, 0] and r == mids[0, 1] and q == mids[0, 2]:
+            continue
+        mids[m_n, 0], mids[m_n, 1], mids[m_n, 2] = t, r, q
+        m_n += 1
+    per = 1 if end < 0 else n + 1
+    cand = np.full((m_n * per, 2, 3), -1, np.int64)
+    local = np.zeros((m_n * per, 2))
+    ev = np.empty((ny, nx))
+    et = np.empty((ny, nx), np.int64)
+    k = 0
+    for i in range(m_n):
+        t, r, q = mids[i, 0], mids[i, 1], mids[i, 2]
+        lm = _spring_local(resp, springs, anchors, bias, mid, t, r, q, pt, pr, pc)
+        if end < 0:
+            cand[k, 0] = mids[i]
+            local[k, 0] = lm
+            k += 1
+            continue
+        # the end as the DP backtracks it (for the DP's own mid: the pose's own end)
+        if i == 0:
+            bt, by, bx = parts[end, 0], parts[end, 1], parts[end, 2]
+        else:
+            bt = ik[end, t, r, q]
+            by = iy[end, bt, r, q]
+            bx = ix[end, bt, by, q]
+        cand[k, 0] = mids[i]
+        cand[k, 1, 0], cand[k, 1, 1], cand[k, 1, 2] = bt, by, bx
+        local[k, 0] = lm
+        local[k, 1] = _spring_local(resp, springs, anchors, bias, end, bt, by, bx, t, r, q)
+        k += 1
+        _child_value(resp, springs, anchors, bias, end, t, r, q, ev, et)
+        ends = _peaks(ev, n)
+        for j in range(len(ends)):
+            er, eq = ends[j, 0], ends[j, 1]
+            cand[k, 0] = mids[i]
+            cand[k, 1, 0], cand[k, 1, 1], cand[k, 1, 2] = et[er, eq], er, eq
+            local[k, 0] = lm
+            local[k, 1] = _spring_local(resp, springs, anchors, bias, end, et[er, eq], er, eq,
+                                        t, r, q)
+            k += 1
+    return cand[:k], local[:k]
+
+
 # --------------------------------------------------------------------------- one level
 
 
@@ -376,6 +522,21 @@ class SearchPlan:
     depth_guided: bool
 
 
+def arm_limbs(names: tuple[str, ...], parents: tuple[int, ...] | NDArray
+              ) -> tuple[tuple[int, int], ...]:
+    """(mid, end) part indices of the arms the tracking prior re-chooses: (elbow, wrist) when
+    the wrist hangs from the elbow, else (wrist, -1) (the 10-part tree has no elbows)."""
+    limbs = []
+    for side in ('left_', 'right_'):
+        if side + 'elbow' in names:
+            e = names.index(side + 'elbow')
+            w = names.index(side + 'wrist') if side + 'wrist' in names else -1
+            limbs.append((e, w if w >= 0 and parents[w] == e else -1))
+        elif side + 'wrist' in names:
+            limbs.append((names.index(side + 'wrist'), -1))
+    return tuple(limbs)
+
+
 class Detector:
     """A part model ready to run (its arrays prepared once), with its search settings.
 
@@ -386,6 +547,7 @@ class Detector:
         self.model = model
         self.config = config or SearchConfig()
         self._arrays = model_arrays(model)
+        self._limbs = arm_limbs(model.part_names, model.parents)
 
     # ---------------------------------------------------------------- planning
     def plan(self, shape: tuple[int, int], depth_m: NDArray | None, *,
@@ -496,7 +658,7 @@ class Detector:
     def detect(self, color: NDArray, depth_m: NDArray | None = None, *,
                mask: NDArray[np.bool_] | None = None, box: tuple | None = None,
                intrinsics: Intrinsics | None = None, top_k: int = 1, scale: float = 1.0,
-               blanked: bool = False) -> list[Pose]:
+               blanked: bool = False, prior: NDArray[np.floating] | None = None) -> list[Pose]:
         """The best `top_k` poses in a frame.
 
         Parameters
@@ -512,6 +674,8 @@ class Detector:
         scale : factor on the person scale that depth predicts (see `plan`).
         blanked : colour and depth are already blanked outside `mask` (NaN depth, zero
             colour), as the foreground stage publishes them: not blanked again.
+        prior : (P, 2) pixels of the parts in the previous frame of the video (NaN rows =
+            unknown): its elbows and wrists guide the arms (`SearchConfig.arm_prior`).
 
         Returns
         -------
@@ -533,11 +697,11 @@ class Detector:
             if d is None or not (np.isfinite(d) & (d > 0)).any():
                 flags = ('no_depth',)
         levels = self.pyramid(color, depth_m, plan, mask=mask, blanked=blanked)
-        return self.poses_from_levels(levels, top_k=top_k, flags=flags)
+        return self.poses_from_levels(levels, top_k=top_k, flags=flags, prior=prior)
 
     def poses_from_levels(self, levels: list[Level], *, top_k: int = 1,
-                          threshold: float = -np.inf, flags: tuple[str, ...] = ()
-                          ) -> list[Pose]:
+                          threshold: float = -np.inf, flags: tuple[str, ...] = (),
+                          prior: NDArray[np.floating] | None = None) -> list[Pose]:
         """Run every level and return the best poses over all of them."""
         cands: list[Pose] = []
         per_level = 1 if top_k == 1 else 4 * top_k
@@ -546,7 +710,7 @@ class Detector:
             if res is None:
                 continue
             roots = best_roots(res, per_level, threshold, min_dist=2)
-            cands.extend(self._poses(res, roots, flags))
+            cands.extend(self._poses(res, roots, flags, prior))
         cands.sort(key=lambda p: -p.score)
         if top_k == 1:
             return cands[:1]
@@ -562,14 +726,47 @@ class Detector:
                 break
         return kept
 
-    def _poses(self, res: LevelResult, roots: NDArray[np.int64], flags: tuple[str, ...]
-               ) -> list[Pose]:
+    def _follow_prior(self, res: LevelResult, parts: NDArray[np.int64], local: NDArray,
+                      prior: NDArray[np.float64]) -> None:
+        """Re-choose each arm of a backtracked pose (`parts`, `local`: updated in place) among
+        its `limb_candidates` by score less `arm_prior` x the squared distance of its elbow and
+        wrist to `prior`, in person scales."""
+        _, parents, springs, anchors, bias = self._arrays
+        person_px = self.model.canonical_scale_px / res.level.scale
+        for mid, end in self._limbs:
+            cand, loc = limb_candidates(res.resp, res.score, res.ix, res.iy, res.ik, parents,
+                                        springs, anchors, bias, parts, mid, end,
+                                        LIMB_CANDIDATES)
+            cost = -loc.sum(axis=1)
+            for slot, part in ((0, mid), (1, end)):
+                if part < 0 or not np.isfinite(prior[part]).all():
+                    continue
+                u, v = res.level.cell_to_pixel(cand[:, slot, 1], cand[:, slot, 2],
+                                               self.model.filter_shape)
+                cost += self.config.arm_prior * ((u - prior[part, 0]) ** 2 +
+                                                 (v - prior[part, 1]) ** 2) / person_px ** 2
+            best = int(np.argmin(cost))  # the DP's own arm is first: it wins ties
+            if best:
+                parts[mid] = cand[best, 0]
+                local[mid] = loc[best, 0]
+                if end >= 0:
+                    parts[end] = cand[best, 1]
+                    local[end] = loc[best, 1]
+
+    def _poses(self, res: LevelResult, roots: NDArray[np.int64], flags: tuple[str, ...],
+               prior: NDArray[np.floating] | None = None) -> list[Pose]:
         if len(roots) == 0:
             return []
         _, parents, springs, anchors, bias = self._arrays
         parts, local = backtrack(roots, parents, res.resp, res.ix, res.iy, res.ik, springs,
                                  anchors, bias)
         m = self.model
+        if prior is not None and self.config.arm_prior > 0 and res.score is not None:
+            prior = np.asarray(prior, np.float64)
+            if prior.shape != (m.n_parts, 2):
+                raise ValueError(f'prior must be ({m.n_parts}, 2) pixels, got {prior.shape}')
+            for j in range(len(roots)):
+                self._follow_prior(res, parts[j], local[j], prior)
         out = []
         for j in range(len(roots)):
             rows = parts[j, :, 1].astype(np.float64)
