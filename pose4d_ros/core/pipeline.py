@@ -224,10 +224,11 @@ class DetectorStage:
         return uv if 0.0 < stamp_s - last <= PRIOR_MAX_GAP_S else None
 
     def warm_up(self, intrinsics: Intrinsics) -> None:
-        """Run once on a synthetic frame so the kernels are compiled (`warm_up_frame`), then
-        forget it."""
+        """Run on a synthetic frame (`warm_up_frame`) twice, the second time guided by the
+        first (`SearchConfig.arm_prior`), so the kernels are compiled, then forget it."""
         color, depth, mask = warm_up_frame(intrinsics)
-        self.step(color, depth, intrinsics, mask=mask)
+        for stamp_s in (0.0, 1.0 / 30.0):
+            self.step(color, depth, intrinsics, mask=mask, stamp_s=stamp_s)
         self.reset()
 
     def step(self, color: NDArray[np.uint8], depth_m: NDArray[np.floating] | None,
@@ -554,10 +555,12 @@ class FramePipeline:
         return FrameResult(fg, color_m, depth_mm, parts, tracked, skeleton, cpu_s, wall_s)
 
     def warm_up(self, intrinsics: Intrinsics) -> None:
-        """Compile the kernels on a synthetic frame, then forget it (`warm_up_frame`)."""
+        """Compile the kernels on a synthetic frame, twice (the second frame guided by the
+        first, `SearchConfig.arm_prior`), then forget it (`warm_up_frame`)."""
         self.foreground.warm_up(intrinsics)
         color, depth, _ = warm_up_frame(intrinsics)
-        self.step(color, depth, intrinsics, 0.0)
+        for stamp_s in (0.0, 1.0 / 30.0):
+            self.step(color, depth, intrinsics, stamp_s)
         self.reset()
 
 
