@@ -29,7 +29,7 @@ from pose4d_ros.core.dpm.solver import Examples, dcd, margins, rebuild_w
 from pose4d_ros.core.dpm.train import choose_depth_lookup, kmeans
 from pose4d_ros.core.hog import feature_pyramid
 from pose4d_ros.core.pipeline import lift_parts
-from pose4d_ros.core.skeleton import PARTS_10
+from pose4d_ros.core.skeleton import PARTS_10, PARTS_14, PARTS_22
 
 # --------------------------------------------------------------------------- distance transforms
 
@@ -234,13 +234,15 @@ def test_limb_candidates_start_with_the_dp_arm_and_none_beats_it() -> None:
 
 
 def test_arm_limbs_of_the_shipped_trees() -> None:
-    from pose4d_ros.core.skeleton import PARTS_14
     i14 = PARTS_14.names.index
     assert arm_limbs(PARTS_14.names, PARTS_14.parents) == (
         (i14('left_elbow'), i14('left_wrist')), (i14('right_elbow'), i14('right_wrist')))
     i10 = PARTS_10.names.index
     assert arm_limbs(PARTS_10.names, PARTS_10.parents) == (
         (i10('left_wrist'), -1), (i10('right_wrist'), -1))
+    i22 = PARTS_22.names.index
+    assert arm_limbs(PARTS_22.names, PARTS_22.parents) == (
+        (i22('left_forearm'), i22('left_wrist')), (i22('right_forearm'), i22('right_wrist')))
     assert arm_limbs(('neck', 'head'), (-1, 0)) == ()
 
 

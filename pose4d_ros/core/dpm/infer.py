@@ -524,16 +524,21 @@ class SearchPlan:
 
 def arm_limbs(names: tuple[str, ...], parents: tuple[int, ...] | NDArray
               ) -> tuple[tuple[int, int], ...]:
-    """(mid, end) part indices of the arms the tracking prior re-chooses: (elbow, wrist) when
-    the wrist hangs from the elbow, else (wrist, -1) (the 10-part tree has no elbows)."""
+    """(mid, end) part indices of the arms the tracking prior re-chooses, a subtree of one or
+    two parts ending at a wrist: (elbow, wrist) in the 14-part tree, (forearm, wrist) with limb
+    midpoints, (wrist, -1) where the wrist's parent has other children (the 10-part tree's
+    shoulder). Arms whose wrist is not a leaf are left alone."""
+    parents = [int(p) for p in parents]
     limbs = []
     for side in ('left_', 'right_'):
-        if side + 'elbow' in names:
-            e = names.index(side + 'elbow')
-            w = names.index(side + 'wrist') if side + 'wrist' in names else -1
-            limbs.append((e, w if w >= 0 and parents[w] == e else -1))
-        elif side + 'wrist' in names:
-            limbs.append((names.index(side + 'wrist'), -1))
+        if side + 'wrist' not in names:
+            continue
+        w = names.index(side + 'wrist')
+        if w in parents:
+            continue
+        p = parents[w]
+        only_child = p > 0 and parents.count(p) == 1
+        limbs.append((p, w) if only_child else (w, -1))
     return tuple(limbs)
 
 
