@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 import pytest
 from helpers import BODY, INTR
@@ -267,3 +269,42 @@ def test_the_detector_stage_guides_a_frame_by_the_previous_one_only_when_recent(
     seen.clear()
     stage.step(color, depth, INTR, mask=mask, stamp_s=2.0 + step)
     assert seen[0] is None
+
+
+def test_a_part_placed_beyond_the_image_edge_is_missing() -> None:
+    """The model may place a part whose filter hangs over the border just outside the image (an
+    ankle at v = 241.9 in a 240-row frame): not seen, so MISSING, not a joint off the image."""
+    stage = DetectorStage(load_model(model_path('rgbd_10')))
+    color, depth, mask = warm_up_frame(INTR)
+    (pose,) = stage.detector.detect(color, depth, mask=mask, intrinsics=INTR)
+    k = pose.names.index('left_ankle')
+    edges = [(k, 1, INTR.height + 1.9), (k, 0, -0.4), (k, 0, INTR.width - 1.0)]
+    for part, axis, value in edges:
+        moved = pose.uv.copy()
+        moved[part, axis] = value
+        stage.detector.detect = lambda *a, moved=moved, **kw: [replace(pose, uv=moved)]
+        out = stage.step(color, depth, INTR, mask=mask)
+        on_image = 0 <= value <= (INTR.width if axis == 0 else INTR.height) - 1
+        assert (out.source[part] == cj.DETECTED) == on_image
+        assert np.isnan(out.uv[part]).all() != on_image
+        others = np.arange(len(pose.names)) != part
+        assert_allclose(out.uv[others], pose.uv[others])
+
+
+def test_an_accepted_detection_at_the_edge_stays_on_the_image() -> None:
+    """A part moving fast towards the bottom edge: the filter's prediction overshoots, and the
+    estimate of the accepted detection on the last row must not leave the image (it did: an
+    ankle at v = 241.9 in a 240-row frame, labelled DETECTED)."""
+    k = cad60_intrinsics()
+    names = PARTS_10.names
+    stage = TrackerStage()
+    base = np.column_stack([np.linspace(120, 200, len(names)), np.linspace(40, 200, len(names))])
+    for i in range(13):
+        uv = base.copy()
+        uv[-1, 1] = min(160.0 + 8.0 * i, k.height - 1.0)  # the last part runs to the edge
+        parts = JointSet(names, uv, backproject(uv, np.full(len(names), 2.8), k),
+                         confidence=np.ones(len(names), np.float32),
+                         source=np.full(len(names), cj.DETECTED, np.uint8))
+        out = stage.step(parts, i / 30.0, k)
+    assert out.source[-1] == cj.DETECTED
+    assert 0 <= out.uv[-1, 1] <= k.height - 1

@@ -184,7 +184,8 @@ class DetectorStage:
     search : where and at which scales to search (`core.dpm.infer.SearchConfig`).
     scale : how the person's own scale is chosen per track (`core.dpm.scale`; with an RGB
         model, or without depth, the depth-free search covers every scale anyway).
-    min_confidence : parts less confident than this are reported MISSING.
+    min_confidence : parts less confident than this are reported MISSING (and so are parts
+        placed beyond the image's edge).
     """
 
     def __init__(self, model: PartModel, *, search: SearchConfig | None = None,
@@ -266,7 +267,13 @@ class DetectorStage:
             pose = found[1.0][0]
         self.last_flags = pose.flags
         conf = pose.confidence.astype(np.float32)
-        src = np.where(conf >= self.min_confidence, cj.DETECTED, cj.MISSING).astype(np.uint8)
+        # a part the model places beyond the image's edge (its filter may hang over the border)
+        # is not seen: MISSING, as a joint outside the image is for scoring and tracking
+        h, w = np.shape(color)[:2]
+        on_image = ((pose.uv[:, 0] >= 0) & (pose.uv[:, 0] <= w - 1) & (pose.uv[:, 1] >= 0)
+                    & (pose.uv[:, 1] <= h - 1))
+        src = np.where((conf >= self.min_confidence) & on_image, cj.DETECTED,
+                       cj.MISSING).astype(np.uint8)
         uv = np.where(src[:, None] == cj.DETECTED, pose.uv, np.nan)
         self._previous = None if stamp_s is None else (uv, float(stamp_s))
         xyz = np.full((len(self.names), 3), np.nan)
@@ -354,6 +361,12 @@ class TrackerStage:
         # a part's depth is its accepted detection's: a rejected one lies elsewhere
         measured = detected & (out.source == cj.DETECTED) & _valid_xyz(parts.xyz)
         self.depth[measured] = parts.xyz[measured, 2]
+        # an accepted detection lies on the image, and so does its filtered estimate (the
+        # prediction may overshoot an edge the part moves towards)
+        if intrinsics is not None:
+            held = np.clip(out.positions, 0.0, [intrinsics.width - 1, intrinsics.height - 1])
+            on = (out.source == cj.DETECTED)[:, None]
+            out = replace(out, positions=np.where(on, held, out.positions))
         # a part predicted off the image (coasting away) is lost: no stage takes such pixels
         lost = (out.source != cj.MISSING) & ~cj.near_image(out.positions, intrinsics)
         if lost.any():
