@@ -271,23 +271,23 @@ def test_the_detector_stage_guides_a_frame_by_the_previous_one_only_when_recent(
     assert seen[0] is None
 
 
-def test_a_part_placed_beyond_the_image_edge_is_missing() -> None:
+def test_a_part_placed_beyond_the_image_edge_is_put_on_the_edge() -> None:
     """The model may place a part whose filter hangs over the border just outside the image (an
-    ankle at v = 241.9 in a 240-row frame): not seen, so MISSING, not a joint off the image."""
+    ankle at v = 241.9 in a 240-row frame): the detection is put on the image's edge."""
     stage = DetectorStage(load_model(model_path('rgbd_10')))
     color, depth, mask = warm_up_frame(INTR)
     (pose,) = stage.detector.detect(color, depth, mask=mask, intrinsics=INTR)
     k = pose.names.index('left_ankle')
-    edges = [(k, 1, INTR.height + 1.9), (k, 0, -0.4), (k, 0, INTR.width - 1.0)]
-    for part, axis, value in edges:
+    for axis, value, want in ((1, INTR.height + 1.9, INTR.height - 1.0), (0, -0.4, 0.0),
+                              (0, INTR.width - 1.0, INTR.width - 1.0)):
         moved = pose.uv.copy()
-        moved[part, axis] = value
+        moved[k, axis] = value
         stage.detector.detect = lambda *a, moved=moved, **kw: [replace(pose, uv=moved)]
         out = stage.step(color, depth, INTR, mask=mask)
-        on_image = 0 <= value <= (INTR.width if axis == 0 else INTR.height) - 1
-        assert (out.source[part] == cj.DETECTED) == on_image
-        assert np.isnan(out.uv[part]).all() != on_image
-        others = np.arange(len(pose.names)) != part
+        assert out.source[k] == cj.DETECTED
+        assert out.uv[k, axis] == want
+        assert_allclose(out.uv[:, 1 - axis], pose.uv[:, 1 - axis])
+        others = np.arange(len(pose.names)) != k
         assert_allclose(out.uv[others], pose.uv[others])
 
 

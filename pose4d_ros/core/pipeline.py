@@ -184,8 +184,7 @@ class DetectorStage:
     search : where and at which scales to search (`core.dpm.infer.SearchConfig`).
     scale : how the person's own scale is chosen per track (`core.dpm.scale`; with an RGB
         model, or without depth, the depth-free search covers every scale anyway).
-    min_confidence : parts less confident than this are reported MISSING (and so are parts
-        placed beyond the image's edge).
+    min_confidence : parts less confident than this are reported MISSING.
     """
 
     def __init__(self, model: PartModel, *, search: SearchConfig | None = None,
@@ -267,14 +266,11 @@ class DetectorStage:
             pose = found[1.0][0]
         self.last_flags = pose.flags
         conf = pose.confidence.astype(np.float32)
-        # a part the model places beyond the image's edge (its filter may hang over the border)
-        # is not seen: MISSING, as a joint outside the image is for scoring and tracking
+        src = np.where(conf >= self.min_confidence, cj.DETECTED, cj.MISSING).astype(np.uint8)
+        # a part the model places beyond the image's edge (its filter hanging over the border)
+        # is put on the edge: a detection is a pixel of the image
         h, w = np.shape(color)[:2]
-        on_image = ((pose.uv[:, 0] >= 0) & (pose.uv[:, 0] <= w - 1) & (pose.uv[:, 1] >= 0)
-                    & (pose.uv[:, 1] <= h - 1))
-        src = np.where((conf >= self.min_confidence) & on_image, cj.DETECTED,
-                       cj.MISSING).astype(np.uint8)
-        uv = np.where(src[:, None] == cj.DETECTED, pose.uv, np.nan)
+        uv = np.where(src[:, None] == cj.DETECTED, np.clip(pose.uv, 0.0, [w - 1, h - 1]), np.nan)
         self._previous = None if stamp_s is None else (uv, float(stamp_s))
         xyz = np.full((len(self.names), 3), np.nan)
         if depth_m is not None and intrinsics is not None:
