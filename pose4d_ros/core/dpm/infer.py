@@ -207,6 +207,20 @@ def tree_dp(resp: NDArray[np.float32], parents: NDArray[np.int64],
 
 
 @nb.njit(cache=True)
+def _spring_local(resp: NDArray[np.float32], springs: NDArray[np.float32],
+                  anchors: NDArray[np.int32], bias: NDArray[np.float32], c: int, t: int, r: int,
+                  q: int, pt: int, pr: int, pc: int) -> float:
+    """Part c's share of the pose score at type t, cell (r, q) with its parent at (pt, pr, pc):
+    its map value in `resp` (filter responses; subtree scores give the subtree's) less the
+    spring, plus the type pair's bias."""
+    dx = q - pc - anchors[c, t, 0]
+    dy = r - pr - anchors[c, t, 1]
+    sp = springs[c, t]
+    return (resp[c, t, r, q] - (sp[0] * dx + sp[1] * dx * dx + sp[2] * dy + sp[3] * dy * dy)
+            + bias[c, pt, t])
+
+
+@nb.njit(cache=True)
 def backtrack(roots: NDArray[np.int64], parents: NDArray[np.int64], resp: NDArray[np.float32],
               ix: NDArray[np.int32], iy: NDArray[np.int32], ik: NDArray[np.int32],
               springs: NDArray[np.float32], anchors: NDArray[np.int32],
@@ -241,11 +255,7 @@ def backtrack(roots: NDArray[np.int64], parents: NDArray[np.int64], resp: NDArra
             out[j, c, 0] = k
             out[j, c, 1] = cy
             out[j, c, 2] = cx
-            dx = cx - px - anchors[c, k, 0]
-            dy = cy - py - anchors[c, k, 1]
-            sp = springs[c, k]
-            local[j, c] = (resp[c, k, cy, cx] - (sp[0] * dx + sp[1] * dx * dx + sp[2] * dy
-                                                  + sp[3] * dy * dy) + bias[c, lt, k])
+            local[j, c] = _spring_local(resp, springs, anchors, bias, c, k, cy, cx, lt, py, px)
     return out, local
 
 
@@ -308,11 +318,7 @@ def _child_value(src: NDArray[np.float32], springs: NDArray[np.float32],
             best = -np.inf
             bt = 0
             for t in range(k_n):
-                dx = q - pc - anchors[c, t, 0]
-                dy = r - pr - anchors[c, t, 1]
-                sp = springs[c, t]
-                v = (src[c, t, r, q] - (sp[0] * dx + sp[1] * dx * dx + sp[2] * dy
-                                        + sp[3] * dy * dy) + bias[c, pt, t])
+                v = _spring_local(src, springs, anchors, bias, c, t, r, q, pt, pr, pc)
                 if v > best:
                     best = v
                     bt = t
@@ -337,18 +343,6 @@ def _peaks(value: NDArray[np.float64], n: int) -> NDArray[np.int64]:
         k += 1
         value[max(r - 2, 0):r + 3, max(q - 2, 0):q + 3] = -np.inf
     return out[:k]
-
-
-@nb.njit(cache=True)
-def _spring_local(resp: NDArray[np.float32], springs: NDArray[np.float32],
-                  anchors: NDArray[np.int32], bias: NDArray[np.float32], c: int, t: int, r: int,
-                  q: int, pt: int, pr: int, pc: int) -> float:
-    """Part c's share of the pose score at type t, cell (r, q) with its parent at (pt, pr, pc)."""
-    dx = q - pc - anchors[c, t, 0]
-    dy = r - pr - anchors[c, t, 1]
-    sp = springs[c, t]
-    return (resp[c, t, r, q] - (sp[0] * dx + sp[1] * dx * dx + sp[2] * dy + sp[3] * dy * dy)
-            + bias[c, pt, t])
 
 
 @nb.njit(cache=True)
