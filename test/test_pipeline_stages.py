@@ -19,6 +19,7 @@ from pose4d_ros.core.pipeline import (
     IkStage,
     TrackerStage,
     limb_bones,
+    person_scale_px,
     reorder,
     warm_up_frame,
 )
@@ -58,6 +59,31 @@ def test_tracker_reduces_noise_and_lifts_to_3d():
     # 3-D: the tracked pixel back-projected at the detection's depth
     assert_allclose(out.xyz, backproject(out.uv, det.xyz[:, 2], INTR), atol=1e-9)
     assert (out.covariance[:, 2, 2] > 0).all()
+
+
+def test_the_tracker_sees_a_person_at_any_camera_resolution_alike():
+    """The same noisy motion seen by a 320x240 and a 640x480 camera: the tracked pixels of
+    the larger image are twice those of the smaller (the filter's pixel parameters follow the
+    person's scale, `person_scale_px`), and its 3-D is the same."""
+    big = cad60_intrinsics(2 * INTR.width, 2 * INTR.height)
+    assert person_scale_px(np.array([[0.0, 0.0, 2.0], [0.1, 0.0, 3.0]]), INTR) == \
+        pytest.approx(INTR.fx * 0.5 / 2.5)
+    assert person_scale_px(np.full((3, 3), np.nan), INTR) is None
+    assert person_scale_px(np.ones((3, 3)), None) is None
+    rng = np.random.default_rng(3)
+    small, large = TrackerStage(), TrackerStage()
+    for k in range(60):
+        det = _parts(np.array([0.4 * np.sin(k / 5), 0.0, 0.0]), 2.0, rng)
+        if k % 7 == 3:  # an outlier the gate must reject in both
+            uv = det.uv.copy()
+            uv[4] += 25.0
+            det = replace(det, uv=uv)
+        det2 = replace(det, uv=2.0 * det.uv)  # as `cad60_intrinsics` scales the camera
+        a = small.step(det, 10.0 + k / 30, INTR)
+        b = large.step(det2, 10.0 + k / 30, big)
+        assert (a.source == b.source).all()
+        assert_allclose(2.0 * a.uv, b.uv, atol=1e-6)
+        assert_allclose(a.xyz, b.xyz, atol=1e-9)
 
 
 def test_tracker_coasts_through_dropouts_and_restarts_after_a_gap():

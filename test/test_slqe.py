@@ -329,3 +329,41 @@ def test_irregular_stamps() -> None:
     assert err(pos, truth)[keep].mean() < 0.85 * err(noisy, truth)[keep].mean()
     assert (src[104:, 3] == Source.DETECTED).mean() > 0.9
     assert err(pos[110:, 3], truth[110:, 3]).max() < 10.0
+
+
+# --- person scale ---------------------------------------------------------------------------
+
+
+def test_filter_is_the_same_in_units_of_the_person() -> None:
+    """The same motion seen twice as large (a person half as far, or a camera of twice the
+    resolution) with twice the person scale gives twice the estimates and the same choices:
+    gating, drift re-initialisation and coasting do not depend on the image's size."""
+    rng = np.random.default_rng(5)
+    times, uv = linear_tracks(rng, accel=True)
+    noisy = uv + rng.normal(0, 3, uv.shape)
+    outliers = rng.random(uv.shape[:2]) < 0.1
+    noisy[outliers] += rng.uniform(20, 60, (int(outliers.sum()), 2))
+    noisy[rng.random(uv.shape[:2]) < 0.05] = np.nan
+    outs = []
+    for factor in (1.0, 2.0):
+        tracker = SlqeTracker(SlqeConfig(), PARTS_10)
+        pos, src = [], []
+        for k, stamp in enumerate(times):
+            out = tracker.step(factor * noisy[k], None, stamp, scale_px=factor * 37.0)
+            pos.append(out.positions / factor)
+            src.append(out.source)
+        outs.append((np.array(pos), np.array(src)))
+    assert (outs[0][1] == outs[1][1]).all()
+    assert (outs[0][1] == Source.TRACKED).any()   # some detections were rejected
+    assert_allclose(outs[0][0], outs[1][0], rtol=0, atol=1e-6)
+    # without the scale the doubled motion is filtered differently (the test can fail)
+    tracker = SlqeTracker(SlqeConfig(), PARTS_10)
+    plain = [tracker.step(2.0 * noisy[k], None, stamp).source for k, stamp in enumerate(times)]
+    assert (np.array(plain) != outs[0][1]).any()
+
+
+def test_scale_px_must_be_positive() -> None:
+    tracker = SlqeTracker(SlqeConfig(), PARTS_10)
+    for bad in (0.0, -1.0, math.nan, math.inf):
+        with pytest.raises(ValueError, match='scale_px'):
+            tracker.step(np.zeros((10, 2)), None, 0.0, scale_px=bad)

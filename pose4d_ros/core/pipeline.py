@@ -51,6 +51,7 @@ from pose4d_ros.core.joints import JointSet
 from pose4d_ros.core.kinematics import IkConfig, IkFlag, LimbLengths, infer_middle_joints
 from pose4d_ros.core.skeleton import LIMBS, PARTS_10, SKELETON_14, PartTree, tree_for
 from pose4d_ros.core.slqe import ConstantVelocityTracker, CvConfig, SlqeConfig, SlqeTracker
+from pose4d_ros.core.stats import median
 
 # Half-size of the window of the robust depth look-up that lifts a detected joint to 3-D, pixels
 # (the detector's default; `pose4d_ros.peer` lifts MediaPipe's joints with it too)
@@ -280,6 +281,20 @@ class DetectorStage:
                         source=src, score=float(pose.score))
 
 
+# Metres of body per person scale: the tracker's pixel parameters are stated for a person of
+# `slqe.REFERENCE_SCALE_PX` such scales (the part models' `scale_length_m`)
+PERSON_SCALE_M = 0.5
+
+
+def person_scale_px(xyz: NDArray[np.float64], intrinsics: Intrinsics | None) -> float | None:
+    """The person's scale in the image, pixels per `PERSON_SCALE_M` of body, from the median
+    depth of the parts' 3-D positions `xyz` (N, 3); None without a camera or a valid depth."""
+    if intrinsics is None:
+        return None
+    z = xyz[_valid_xyz(xyz), 2]
+    return intrinsics.fx * PERSON_SCALE_M / median(z) if len(z) else None
+
+
 class TrackerStage:
     """SLQE tracking of the detected parts (or the constant-velocity filter, `kind='cv'`).
 
@@ -351,7 +366,8 @@ class TrackerStage:
             self.depth[:] = np.nan
         detected = parts.source == cj.DETECTED
         uv = np.where(detected[:, None], parts.uv, np.nan)
-        out = self.filter.step(uv, np.where(detected, parts.confidence, 0.0), stamp_s)
+        out = self.filter.step(uv, np.where(detected, parts.confidence, 0.0), stamp_s,
+                               person_scale_px(parts.xyz[detected], intrinsics))
         if new_track and self.filter.state.active.any():
             self.track_id += 1
         # a part's depth is its accepted detection's: a rejected one lies elsewhere

@@ -43,6 +43,14 @@ innovation ``y_i = z_i - H s'_i`` and its covariance ``S_i``:
   ``drift_radius_px`` per 1/30 s of the previous one), the filter is the one that drifted: the
   part is re-initialised on the detection (DETECTED).
 
+Pixels depend on the person's distance and the camera's resolution: a hand moves twice as many
+pixels per second at 1.5 m as at 3 m, or at 640x480 as at 320x240. So the parameters in pixels
+(`process_noise`, `measurement_noise_px`, `drift_radius_px`, `init_velocity_std`,
+`init_accel_std`) are stated for a person of `REFERENCE_SCALE_PX` pixels per half a metre of
+body (a 320x240 Kinect 2.85 m away), and each step may be given the person's scale in its frame
+(``step(..., scale_px=...)``), which multiplies them all by ``scale_px / REFERENCE_SCALE_PX``
+(Q by its square): the same filter, in units of the person.
+
 Parts without a detection (NaN) are predicted only (TRACKED). A part that has had no accepted
 detection for more than ``max_missed_frames`` is dropped (MISSING, NaN) and re-initialised when
 detected again; a time gap over ``max_dt_s``, a stamp going backwards or `reset` restart the
@@ -68,6 +76,12 @@ from pose4d_ros.core.skeleton import PARTS_10, PartTree
 
 # The frame period at which `SlqeConfig.coupling` is stated (the paper's 30 fps Kinect).
 NOMINAL_DT_S = 1.0 / 30.0
+
+# The person scale (pixels per half a metre of body) at which the pixel parameters of
+# `SlqeConfig` hold: a 320x240 Kinect (fx 285 px) seeing a person about 3 m away, the median of
+# the synthetic sets the defaults were tuned and measured on. `SlqeTracker.step`
+# rescales them to the person's scale in each frame.
+REFERENCE_SCALE_PX = 50.0
 
 
 class Source(IntEnum):
@@ -339,7 +353,8 @@ def _prediction_matrices(dt: float, config: SlqeConfig, tree: PartTree,
     return a, q
 
 
-def predict(state: TrackState, dt: float, config: SlqeConfig, tree: PartTree) -> TrackState:
+def predict(state: TrackState, dt: float, config: SlqeConfig, tree: PartTree,
+            px_gain: float = 1.0) -> TrackState:
     """The prediction of eqs. (7)-(9) over `dt` seconds (0 = no motion).
 
     Parameters
@@ -347,6 +362,8 @@ def predict(state: TrackState, dt: float, config: SlqeConfig, tree: PartTree) ->
     state : the state at the previous frame (not modified).
     dt : seconds, >= 0.
     config, tree : the model.
+    px_gain : the person's scale over `REFERENCE_SCALE_PX`; the process noise is `config`'s times
+        it (Q times its square).
 
     Returns
     -------
@@ -360,7 +377,7 @@ def predict(state: TrackState, dt: float, config: SlqeConfig, tree: PartTree) ->
         return state
     a, q = _prediction_matrices(dt, config, tree, tuple(state.active.tolist()))
     x = a @ state.x
-    cov = a @ state.cov @ a.T + q
+    cov = a @ state.cov @ a.T + (px_gain * px_gain) * q
     inactive = np.repeat(~state.active, config.block)
     # Inactive parts carry no information: keep their blocks zero rather than growing noise.
     x[inactive] = 0.0
@@ -386,7 +403,7 @@ def _check_measurement(uv: NDArray, confidence: NDArray | None, n_parts: int
 
 
 def _init_part(x: NDArray, cov: NDArray, i: int, z: NDArray, parent: int,
-               active: NDArray, config: SlqeConfig, r: float) -> None:
+               active: NDArray, config: SlqeConfig, r: float, px_gain: float) -> None:
     """(Re-)start part i at detection z; its velocity/acceleration start as its parent's."""
     b = config.block
     sl = slice(i * b, (i + 1) * b)
@@ -396,14 +413,15 @@ def _init_part(x: NDArray, cov: NDArray, i: int, z: NDArray, parent: int,
         x[i * b + 2:(i + 1) * b] = x[parent * b + 2:(parent + 1) * b]
     cov[sl, :] = 0.0
     cov[:, sl] = 0.0
-    stds = [math.sqrt(r)] * 2 + [config.init_velocity_std] * 2
+    stds = [math.sqrt(r)] * 2 + [px_gain * config.init_velocity_std] * 2
     if config.order == 3:
-        stds += [config.init_accel_std] * 2
+        stds += [px_gain * config.init_accel_std] * 2
     cov[sl, sl] = np.diag(np.square(stds))
 
 
 def update(state: TrackState, uv: NDArray[np.floating], confidence: NDArray[np.floating] | None,
-           config: SlqeConfig, tree: PartTree) -> tuple[TrackState, UpdateInfo]:
+           config: SlqeConfig, tree: PartTree, px_gain: float = 1.0
+           ) -> tuple[TrackState, UpdateInfo]:
     """The measurement update of eqs. (13)-(15) with eq. (16)'s choice per part.
 
     Parameters
@@ -413,6 +431,8 @@ def update(state: TrackState, uv: NDArray[np.floating], confidence: NDArray[np.f
     confidence : (P,) float in [0, 1] or None (all 1); NaN or below `config.min_confidence` =
         not detected. Scales R as ``R / confidence``.
     config, tree : the model.
+    px_gain : the person's scale over `REFERENCE_SCALE_PX`; the pixel parameters are `config`'s
+        times it.
 
     Returns
     -------
@@ -429,7 +449,7 @@ def update(state: TrackState, uv: NDArray[np.floating], confidence: NDArray[np.f
     # start a part with a variance of millions of pixels (metres squared beyond any camera's
     # range once lifted to 3-D, which the next stage rightly refuses)
     safe_conf = np.where(valid, np.maximum(conf, MIN_WEIGHT), 1.0)
-    r_var = config.measurement_noise_px ** 2 / safe_conf
+    r_var = (px_gain * config.measurement_noise_px) ** 2 / safe_conf
     x, cov = state.x.copy(), state.cov.copy()
     active = state.active.copy()
     missed, rejected = state.missed.copy(), state.rejected.copy()
@@ -441,7 +461,7 @@ def update(state: TrackState, uv: NDArray[np.floating], confidence: NDArray[np.f
     # Gate each active part's detection on its own innovation (eq. 16's choice).
     accepted: list[int] = []
     restart: list[int] = []
-    drift_radius = config.drift_radius_px * max(1.0, state.dt / NOMINAL_DT_S)
+    drift_radius = px_gain * config.drift_radius_px * max(1.0, state.dt / NOMINAL_DT_S)
     gated = np.flatnonzero(valid & active)
     if len(gated):
         pos = gated[:, None] * b + np.arange(2)[None, :]
@@ -485,7 +505,7 @@ def update(state: TrackState, uv: NDArray[np.floating], confidence: NDArray[np.f
 
     # New parts and drifted parts start on their detection, parents first.
     for i in sorted(set(np.flatnonzero(valid & ~state.active)) | set(restart)):
-        _init_part(x, cov, i, z[i], tree.parents[i], active, config, r_var[i])
+        _init_part(x, cov, i, z[i], tree.parents[i], active, config, r_var[i], px_gain)
         active[i] = True
         source[i] = Source.DETECTED
         missed[i] = 0
@@ -514,11 +534,12 @@ def update(state: TrackState, uv: NDArray[np.floating], confidence: NDArray[np.f
 
 
 def output(state: TrackState, info: UpdateInfo, uv: NDArray[np.floating],
-           confidence: NDArray[np.floating] | None, config: SlqeConfig) -> TrackOutput:
+           confidence: NDArray[np.floating] | None, config: SlqeConfig, px_gain: float = 1.0
+           ) -> TrackOutput:
     """Positions, per-part covariance, source and confidence of an updated state.
 
     `uv` and `confidence` are the frame's detections (used when ``config.output ==
-    'detection'``).
+    'detection'``); `px_gain` as in `update`.
     """
     n_parts, b = state.n_parts, config.block
     xs = state.x.reshape(n_parts, b)
@@ -530,7 +551,7 @@ def output(state: TrackState, info: UpdateInfo, uv: NDArray[np.floating],
         det = info.source == Source.DETECTED
         pos[det] = z[det]
         safe = np.where(det, np.maximum(np.nan_to_num(conf, nan=1.0), 1e-6), 1.0)
-        r_var = config.measurement_noise_px ** 2 / safe
+        r_var = (px_gain * config.measurement_noise_px) ** 2 / safe
         covs[det] = r_var[det, None, None] * np.eye(2)
     missing = info.source == Source.MISSING
     pos[missing] = np.nan
@@ -550,8 +571,10 @@ class SlqeTracker:
     >>> out = tracker.step(uv, confidence, stamp_s)   # doctest: +SKIP
 
     `uv` is (P, 2) pixels in `tree.names` order with NaN rows for undetected parts, `confidence`
-    (P,) in [0, 1] (or None), `stamp_s` the frame's capture time in seconds. The tracker restarts
-    by itself when the stamps jump back or leave a gap over `config.max_dt_s`.
+    (P,) in [0, 1] (or None), `stamp_s` the frame's capture time in seconds, and the optional
+    `scale_px` the person's scale in this frame (pixels per half a metre of body), to which the
+    pixel parameters are rescaled (see the module's notes). The tracker restarts by itself
+    when the stamps jump back or leave a gap over `config.max_dt_s`.
     """
 
     config: SlqeConfig = field(default_factory=SlqeConfig)
@@ -566,20 +589,26 @@ class SlqeTracker:
         self.state = initial_state(len(self.tree), self.config)
 
     def step(self, uv: NDArray[np.floating], confidence: NDArray[np.floating] | None,
-             stamp_s: float) -> TrackOutput:
-        """Predict to `stamp_s`, update with the frame's detections and return the estimates."""
+             stamp_s: float, scale_px: float | None = None) -> TrackOutput:
+        """Predict to `stamp_s`, update with the frame's detections and return the estimates
+        (`scale_px`: the person's scale, pixels; None = `REFERENCE_SCALE_PX`)."""
         stamp_s = float(stamp_s)
         if not math.isfinite(stamp_s):
             raise ValueError(f'stamp must be finite seconds, got {stamp_s}')
+        px_gain = 1.0
+        if scale_px is not None:
+            if not (math.isfinite(scale_px) and scale_px > 0):
+                raise ValueError(f'scale_px must be a positive number of pixels, got {scale_px}')
+            px_gain = scale_px / REFERENCE_SCALE_PX
         last = self.state.stamp
         if last is not None and not 0.0 <= stamp_s - last <= self.config.max_dt_s:
             self.reset()  # time went backwards (a looped bag) or the track was lost in a gap
             last = None
         dt = 0.0 if last is None else stamp_s - last
-        state = predict(self.state, dt, self.config, self.tree)
-        state, info = update(state, uv, confidence, self.config, self.tree)
+        state = predict(self.state, dt, self.config, self.tree, px_gain)
+        state, info = update(state, uv, confidence, self.config, self.tree, px_gain)
         self.state = replace(state, stamp=stamp_s)
-        return output(self.state, info, uv, confidence, self.config)
+        return output(self.state, info, uv, confidence, self.config, px_gain)
 
 
 @dataclass(frozen=True)

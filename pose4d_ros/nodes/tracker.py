@@ -38,9 +38,12 @@ PARAMS = (
     Param('tracker.coupling', _D.coupling, "Pull of a part's velocity and acceleration towards "
           "its parent's per 1/30 s (0 = independent parts).", range=(0.0, 0.99), live=True),
     Param('tracker.process_noise', _D.process_noise, 'White jerk spectral density (square '
-          'root), px/s^3 per sqrt(Hz) (Q).', range=(1e-3, 1e7), live=True),
+          'root), px/s^3 per sqrt(Hz) (Q), for a person of 50 px per half metre (a 320x240 '
+          "camera 2.85 m away): scaled with the person's size in the image.",
+          range=(1e-3, 1e7), live=True),
     Param('tracker.measurement_noise_px', _D.measurement_noise_px, 'Detection standard '
-          'deviation per axis at confidence 1, pixels (R).', range=(0.01, 1000.0), live=True),
+          'deviation per axis at confidence 1, pixels (R), for a person of 50 px per half metre: '
+          "scaled with the person's size in the image.", range=(0.01, 1000.0), live=True),
     Param('tracker.gate_chi2', _D.gate_chi2, 'Gate on the squared Mahalanobis innovation '
           '(eq. 16): beyond it a detection is rejected and the prediction used.',
           range=(0.1, 1e9), live=True),
