@@ -26,8 +26,6 @@ from numpy.typing import NDArray
 
 from pose4d_ros.cli._dpm import git_commit, load_frames, log, machine
 from pose4d_ros.cli._progress import progress
-from pose4d_ros.core.depth_refine import features as refine_features
-from pose4d_ros.core.depth_refine import fit_refiner
 from pose4d_ros.core.dpm.model import PartModel, load_model, save_model
 from pose4d_ros.core.dpm.samples import (
     Negative,
@@ -45,6 +43,8 @@ from pose4d_ros.core.dpm.train import (
     train,
 )
 from pose4d_ros.core.pipeline import DetectorStage, ForegroundStage
+from pose4d_ros.core.refine import features as refine_features
+from pose4d_ros.core.refine import fit_refiner, targets
 from pose4d_ros.datasets.frame import Frame
 from pose4d_ros.models import model_path
 
@@ -107,12 +107,13 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument('--calibrate', type=Path, metavar='MODEL.npz',
                    help="no training: fit MODEL's part confidences and depth offsets again on "
                         'SOURCE (as the last step of training does) and write it to --out')
-    p.add_argument('--refine-depth', type=Path, metavar='MODEL.npz',
+    p.add_argument('--refine', type=Path, metavar='MODEL.npz',
                    help="no training: run the foreground and MODEL's detector over SOURCE's "
-                        "labelled RGB-D frames as the nodes do, fit MODEL's depth refiner "
-                        '(core.depth_refine) on its detections and write it to --out')
-    p.add_argument('--trees', type=int, default=200, help='--refine-depth: trees per part group')
-    p.add_argument('--tree-depth', type=int, default=5, help='--refine-depth: depth of a tree')
+                        "labelled RGB-D frames as the nodes do, fit MODEL's part refiner "
+                        '(core.refine) on its detections and write it to --out')
+    p.add_argument('--trees', type=int, default=200,
+                   help='--refine: trees per part group and output')
+    p.add_argument('--tree-depth', type=int, default=5, help='--refine: depth of a tree')
     p.add_argument('--blas-threads', type=int, default=1,
                    help='OpenBLAS threads (1: the measured best on 2 shared cores)')
     p.set_defaults(func=run)
@@ -238,8 +239,8 @@ def run(args: argparse.Namespace) -> int:
                           max_frames=args.max_frames)
     if args.calibrate is not None:
         return recalibrate(args, samples, t0)
-    if args.refine_depth is not None:
-        return refine_depth(args, samples, t0)
+    if args.refine is not None:
+        return refine(args, samples, t0)
     if cfg.channels == 'rgbd' and not any(s.depth_m is not None for s in samples):
         raise ValueError(f'{", ".join(args.sources)}: no depth images; use --channels rgb')
     if cfg.masked_input:
@@ -322,18 +323,18 @@ def recalibrate(args: argparse.Namespace, samples: list[Frame], t0: float) -> in
 
 def refiner_samples(model: PartModel, samples: list[Frame]
                     ) -> tuple[NDArray[np.float32], NDArray[np.int64], NDArray[np.float64]]:
-    """The depth refiner's training samples: the foreground and `model`'s detector (its depth
-    refiner left out) run over `samples` as the nodes run them (each video in order, the
-    previous frame guiding the arms), and for every labelled part with a detection and a lifted
-    depth its features (`core.depth_refine.features`), its index and its true depth less the
-    lifted one."""
+    """The part refiner's training samples: the foreground and `model`'s detector (its refiner
+    left out) run over `samples` as the nodes run them (each video in order, the previous frame
+    guiding the arms), and for every labelled part with a detection and a lifted depth its
+    features (`core.refine.features`), its index and what the refiner is to learn
+    (`core.refine.targets`)."""
     foreground = ForegroundStage()
-    detector = DetectorStage(replace(model, depth_refiner=None))
-    xs, parts, targets = [], [], []
+    detector = DetectorStage(replace(model, refiner=None))
+    xs, parts, ys = [], [], []
     video = None
     for f in progress(samples, 'detections', len(samples)):
         if f.depth_m is None or f.intrinsics is None:
-            raise ValueError(f'{f.key}: --refine-depth needs RGB-D frames with camera intrinsics')
+            raise ValueError(f'{f.key}: --refine needs RGB-D frames with camera intrinsics')
         if f.video != video:
             foreground.reset()
             detector.reset()
@@ -344,35 +345,36 @@ def refiner_samples(model: PartModel, samples: list[Frame]
         z = found.xyz[:, 2]
         x = refine_features(found.names, model.parents, found.uv, z, found.confidence, depth,
                             f.intrinsics, fg.mask)
-        _, truth, labelled = f.truth.labelled(found.names)
-        use = labelled & np.isfinite(truth).all(axis=1) & np.isfinite(x[:, 0])
+        true_uv, truth, labelled = f.truth.labelled(found.names)
+        y = targets(found.names, found.uv, z, true_uv, truth[:, 2], f.intrinsics.fx)
+        use = labelled & np.isfinite(y).all(axis=1) & np.isfinite(x[:, 0])
         xs.append(x[use])
         parts.append(np.flatnonzero(use))
-        targets.append(truth[use, 2] - z[use])
-    return np.concatenate(xs), np.concatenate(parts), np.concatenate(targets)
+        ys.append(y[use])
+    return np.concatenate(xs), np.concatenate(parts), np.concatenate(ys)
 
 
-def refine_depth(args: argparse.Namespace, samples: list[Frame], t0: float) -> int:
-    """`--refine-depth MODEL`: fit MODEL's depth refiner on `samples`, recorded in the model's
+def refine(args: argparse.Namespace, samples: list[Frame], t0: float) -> int:
+    """`--refine MODEL`: fit MODEL's part refiner on `samples`, recorded in the model's
     metadata."""
-    model = load_model(model_path(str(args.refine_depth)))
+    model = load_model(model_path(str(args.refine)))
     if model.channels != 'rgbd':
-        raise ValueError(f'{args.refine_depth}: an RGB model lifts nothing to 3-D')
+        raise ValueError(f'{args.refine}: the refiner reads depth; an RGB model has none')
     x, part, target = refiner_samples(model, samples)
     t1 = time.time()
     refiner = fit_refiner(model.part_names, x, part, target, trees=args.trees,
                           depth=args.tree_depth)
     meta = dict(model.metadata)
-    meta['depth_refiner'] = json.dumps({
+    meta['refiner'] = json.dumps({
         'command': 'pose4d train ' + ' '.join(shlex.quote(a) for a in sys.argv[2:])
                    if sys.argv[1:2] == ['train'] else '',
         'data': ' '.join(str(Path(s).resolve()) for s in args.sources), 'frames': len(samples),
         'samples': len(target), 'trees': args.trees, 'depth': args.tree_depth,
         'fit_seconds': round(time.time() - t1, 1), 'git_commit': git_commit(),
         'at': time.strftime('%Y-%m-%dT%H:%M:%S%z'), 'wall_seconds': round(time.time() - t0, 1)})
-    model = replace(model, depth_refiner=refiner, metadata=meta)
+    model = replace(model, refiner=refiner, metadata=meta)
     save_model(model, args.out)
-    print(f'wrote {args.out}: {args.refine_depth} with a depth refiner fitted on {len(target)} '
-          f'parts of {len(samples)} frames ({", ".join(refiner.groups)}; {args.trees} trees of '
-          f'depth {args.tree_depth} each), {(time.time() - t0) / 60:.1f} min')
+    print(f'wrote {args.out}: {args.refine} with a part refiner fitted on {len(target)} parts '
+          f'of {len(samples)} frames ({", ".join(refiner.groups)}; {args.trees} trees of depth '
+          f'{args.tree_depth} per group and output), {(time.time() - t0) / 60:.1f} min')
     return 0

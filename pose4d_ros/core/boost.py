@@ -86,7 +86,7 @@ def predict_kernel(x: NDArray[np.float32], ensemble: NDArray[np.int64],
                    threshold: NDArray[np.float32], leaf: NDArray[np.float32]
                    ) -> NDArray[np.float64]:
     """`predict_stacked` without its checks, for arrays already known to fit (C-contiguous
-    `x`; a caller that checked the trees once, such as `core.depth_refine`)."""
+    `x`; a caller that checked the trees once, such as `core.refine`)."""
     _, n_trees, n_nodes = feature.shape
     out = np.zeros(x.shape[0])
     for i in range(x.shape[0]):

@@ -37,7 +37,6 @@ from pose4d_ros.core.camera import (
     project,
     robust_depth,
 )
-from pose4d_ros.core.depth_refine import features as refine_features
 from pose4d_ros.core.dpm.infer import Detector, SearchConfig
 from pose4d_ros.core.dpm.model import PartModel
 from pose4d_ros.core.dpm.scale import PersonScale, ScaleConfig
@@ -157,16 +156,14 @@ class ForegroundStage:
 
 
 def lift_parts(model: PartModel, depth_m: NDArray[np.floating], uv: NDArray[np.floating],
-               intrinsics: Intrinsics, mask: NDArray[np.bool_] | None = None,
-               confidence: NDArray[np.floating] | None = None) -> NDArray[np.float64]:
+               intrinsics: Intrinsics, mask: NDArray[np.bool_] | None = None
+               ) -> NDArray[np.float64]:
     """The depth of each of the model's parts' joint centres at pixels `uv` (P, 2), as `model`
     learned to read it.
 
     Each part has its own look-up (`PartModel.depth_lookup`: a window of a size on the body and
     a quantile of its depths; without one, the median of a `DEPTH_RADIUS_PX` window) and lies
-    its `depth_offset_m` behind the surface the camera sees; with the parts' `confidence` (P,),
-    a model's `depth_refiner` then corrects each depth from the depths around the part and its
-    place in the pose (`core.depth_refine`).
+    its `depth_offset_m` behind the surface the camera sees.
     """
     if model.depth_lookup is None:
         z = robust_depth(depth_m, uv, radius=DEPTH_RADIUS_PX, mask=mask)
@@ -175,10 +172,6 @@ def lift_parts(model: PartModel, depth_m: NDArray[np.floating], uv: NDArray[np.f
                        model.depth_lookup[:, 1], mask=mask)
     if model.depth_offset_m is not None:
         z = z + model.depth_offset_m
-    if model.depth_refiner is not None and confidence is not None:
-        x = refine_features(model.part_names, model.parents, uv, z, confidence, depth_m,
-                            intrinsics, mask)
-        z = z + model.depth_refiner.correction(model.part_names, x)
     return z
 
 
@@ -282,8 +275,13 @@ class DetectorStage:
         self._previous = None if stamp_s is None else (uv, float(stamp_s))
         xyz = np.full((len(self.names), 3), np.nan)
         if depth_m is not None and intrinsics is not None:
-            xyz = backproject(uv, lift_parts(self.model, depth_m, uv, intrinsics, mask, conf),
-                              intrinsics)
+            z = lift_parts(self.model, depth_m, uv, intrinsics, mask)
+            if self.model.refiner is not None:
+                # where the joints really are, learned (`core.refine`); still on the image
+                uv, z = self.model.refiner.apply(self.names, self.model.parents, uv, z, conf,
+                                                 depth_m, intrinsics, mask)
+                uv = np.clip(uv, 0.0, [w - 1, h - 1])
+            xyz = backproject(uv, z, intrinsics)
         return JointSet(self.names, uv, xyz, confidence=np.where(src == cj.DETECTED, conf, 0),
                         source=src, score=float(pose.score))
 

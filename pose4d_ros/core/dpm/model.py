@@ -35,9 +35,9 @@ from pathlib import Path
 import numpy as np
 from numpy.typing import NDArray
 
-from pose4d_ros.core.depth_refine import DepthRefiner
 from pose4d_ros.core.files import write_atomic
 from pose4d_ros.core.hog import N_FEATURES
+from pose4d_ros.core.refine import PartRefiner
 
 CHANNELS = ('rgb', 'rgbd')
 DEPTH_ENCODINGS = ('float', 'u8')
@@ -85,8 +85,8 @@ class PartModel:
     depth_lookup : (P, 2) float32 how each part's depth is read (`camera.lift_depth`): the
         window's half-size in metres and the quantile of its depths (rgbd models: chosen with
         the calibration); None = the median of a 3-pixel window for every part.
-    depth_refiner : the learned correction of each part's lifted depth
-        (`core.depth_refine`, fitted by `pose4d train --refine-depth`); None = none.
+    refiner : the learned correction of each detected part's pixel and depth (`core.refine`,
+        fitted by `pose4d train --refine`); None = none.
     """
 
     part_names: tuple[str, ...]
@@ -108,7 +108,7 @@ class PartModel:
     depth_offset_m: NDArray[np.float32] | None = None
     depth_lookup: NDArray[np.float32] | None = None
     search_range_px: tuple[float, float] | None = None
-    depth_refiner: DepthRefiner | None = None
+    refiner: PartRefiner | None = None
 
     def __post_init__(self) -> None:
         p = len(self.part_names)
@@ -188,7 +188,7 @@ class PartModel:
 
 _ARRAYS = ('filters', 'springs', 'anchors', 'bias')
 _OPTIONAL = ('calibration', 'depth_offset_m', 'depth_lookup')  # float32 arrays a model may have
-_REFINER = 'depth_refiner_'  # prefix of the depth refiner's arrays (`DepthRefiner.arrays`)
+_REFINER = 'refiner_'  # prefix of the refiner's arrays (`PartRefiner.arrays`)
 
 
 def save_model(model: PartModel, path: str | Path) -> None:
@@ -209,8 +209,8 @@ def save_model(model: PartModel, path: str | Path) -> None:
     for name in _OPTIONAL:
         if getattr(model, name) is not None:
             arrays[name] = getattr(model, name)
-    if model.depth_refiner is not None:
-        arrays.update({_REFINER + k: v for k, v in model.depth_refiner.arrays().items()})
+    if model.refiner is not None:
+        arrays.update({_REFINER + k: v for k, v in model.refiner.arrays().items()})
     buffer = io.BytesIO()
     np.savez_compressed(buffer, header=np.array(json.dumps(header)), **arrays)
     write_atomic(path, buffer.getvalue())
@@ -254,7 +254,7 @@ def load_model(path: str | Path) -> PartModel:
             search_range_px=(tuple(float(x) for x in header['search_range_px'])
                              if 'search_range_px' in header else None),
             metadata={str(k): str(v) for k, v in header.get('metadata', {}).items()},
-            depth_refiner=DepthRefiner.from_arrays(
+            refiner=PartRefiner.from_arrays(
                 {k[len(_REFINER):]: v for k, v in contents.items() if k.startswith(_REFINER)})
             if _REFINER + 'groups' in contents else None,
         )

@@ -1,4 +1,4 @@
-"""Boosted trees (core/boost.py) and the learned depth correction (core/depth_refine.py)."""
+"""Boosted trees (core/boost.py) and the learned corrections of the parts (core/refine.py)."""
 
 from __future__ import annotations
 
@@ -10,17 +10,20 @@ from helpers import INTR
 from numpy.testing import assert_allclose
 
 from pose4d_ros.core.boost import BoostedTrees, fit, predict_stacked
-from pose4d_ros.core.depth_refine import (
-    MAX_CORRECTION_M,
+from pose4d_ros.core.dpm import load_model, save_model
+from pose4d_ros.core.pipeline import DetectorStage, warm_up_frame
+from pose4d_ros.core.refine import (
+    MAX_DEPTH_M,
+    MAX_SHIFT_SCALES,
     N_FEATURES,
     QUANTILES,
-    DepthRefiner,
+    PartRefiner,
     features,
     fit_refiner,
     group_of,
+    person_scale,
+    targets,
 )
-from pose4d_ros.core.dpm import load_model, save_model
-from pose4d_ros.core.pipeline import lift_parts
 from pose4d_ros.core.skeleton import PARTS_14
 from pose4d_ros.models import model_path
 
@@ -131,54 +134,86 @@ def test_features_read_the_windows_and_the_pose() -> None:
 
 def test_a_refiner_learns_where_a_hidden_joint_lies_and_survives_the_model_file(tmp_path
                                                                                 ) -> None:
-    """Frames where the right wrist is either on the slab or 25 cm behind it, which its
-    windows alone cannot tell but its 2-D offset from the elbow can: fitted, the refiner puts
-    each wrist within 2 cm of its depth, leaves the other parts where they are, and the model
-    file keeps it (lift_parts gives the same depths after a save and a load)."""
+    """Frames where the right wrist is either on the slab or hidden 25 cm behind it and 5 px
+    below where it was detected, which its windows alone cannot tell but its 2-D offset from
+    the elbow can: fitted, the refiner puts each wrist within a pixel and 2 cm of the truth,
+    leaves the other parts where they are, and the model file keeps it."""
     rng = np.random.default_rng(2)
     names = PARTS_14.names
     w, e = names.index('right_wrist'), names.index('right_elbow')
-    xs, part, target, cases = [], [], [], []
+    xs, part, ys, cases = [], [], [], []
     for k in range(600):
         hidden = k % 2 == 1
         _, uv, z, truth, depth, mask = _scene(0.25 if hidden else 0.0)
         uv = uv + rng.normal(0, 1.0, uv.shape)
         uv[w] = uv[e] + ([-12.0, 0.0] if hidden else [12.0, 0.0])
-        x = features(names, PARTS_14.parents, uv, z, np.ones(len(names)), depth, INTR, mask)
-        xs.append(x)
-        part.append(np.arange(len(names)))
-        target.append(truth - z)
-        cases.append((uv, z, truth, depth, mask))
-    refiner = fit_refiner(names, np.concatenate(xs), np.concatenate(part),
-                          np.concatenate(target), trees=60, depth=3)
-    assert set(refiner.groups) == {group_of(n) for n in names}
-    model = replace(load_model(model_path('rgbd_14')), depth_refiner=refiner,
-                    depth_offset_m=None, depth_lookup=None)
-    save_model(model, tmp_path / 'm.npz')
-    again = load_model(tmp_path / 'm.npz')
-    for uv, z, truth, depth, mask in cases[-4:]:
+        true_uv = uv.copy()
+        true_uv[w, 1] += 5.0 if hidden else 0.0
         conf = np.ones(len(names))
-        got = lift_parts(model, depth, uv, INTR, mask, conf)
-        assert_allclose(got, lift_parts(again, depth, uv, INTR, mask, conf), atol=1e-9)
-        # lift_parts reads the slab (2.5 m, no offset): the refiner adds what the truth has
-        assert_allclose(got, truth, atol=0.02)
-        # without the confidences (as the calibration lifts parts) no correction is made
-        assert_allclose(lift_parts(model, depth, uv, INTR, mask), 2.5, atol=1e-6)
-    corr = refiner.correction(names, np.full((len(names), N_FEATURES), 9.0, np.float32))
-    assert (np.abs(corr) <= MAX_CORRECTION_M).all()
+        xs.append(features(names, PARTS_14.parents, uv, z, conf, depth, INTR, mask))
+        part.append(np.arange(len(names)))
+        ys.append(targets(names, uv, z, true_uv, truth, INTR.fx))
+        cases.append((uv, z, true_uv, truth, depth, mask))
+    refiner = fit_refiner(names, np.concatenate(xs), np.concatenate(part),
+                          np.concatenate(ys), trees=60, depth=3)
+    assert set(refiner.groups) == {group_of(n) for n in names}
+    model = replace(load_model(model_path('rgbd_14')), refiner=refiner)
+    save_model(model, tmp_path / 'm.npz')
+    again = load_model(tmp_path / 'm.npz').refiner
+    assert again is not None and again.groups == refiner.groups
+    for uv, z, true_uv, truth, depth, mask in cases[-4:]:
+        conf = np.ones(len(names))
+        got_uv, got_z = refiner.apply(names, PARTS_14.parents, uv, z, conf, depth, INTR, mask)
+        assert_allclose(got_uv, true_uv, atol=1.0)
+        assert_allclose(got_z, truth, atol=0.02)
+        uv2, z2 = again.apply(names, PARTS_14.parents, uv, z, conf, depth, INTR, mask)
+        assert_allclose(uv2, got_uv, atol=1e-9)
+        assert_allclose(z2, got_z, atol=1e-9)
+    corr = refiner.corrections(names, np.full((len(names), N_FEATURES), 9.0, np.float32))
+    assert (np.abs(corr) <= [MAX_SHIFT_SCALES, MAX_SHIFT_SCALES, MAX_DEPTH_M]).all()
+
+
+def _constant_refiner(du: float, dv: float, dz: float, groups=('wrist',)) -> PartRefiner:
+    """Trees that always say (du, dv, dz): one tree of depth 1 per output, leaves 0."""
+    trees = [BoostedTrees(v, np.zeros((1, 1), np.int16), np.full((1, 1), np.inf, np.float32),
+                          np.zeros((1, 2), np.float32)) for v in (du, dv, dz)] * len(groups)
+    return PartRefiner.stack(groups, trees)
+
+
+def test_the_detector_stage_moves_its_parts_as_the_refiner_says() -> None:
+    """A refiner that moves wrists 0.2 person scales outwards and down and 10 cm back: the
+    detector stage's wrists move so (the right one mirrored), on the image, the others not."""
+    model = load_model(model_path('rgbd_14'))
+    color, depth, mask = warm_up_frame(INTR)
+    plain = DetectorStage(replace(model, refiner=None)).step(color, depth, INTR, mask=mask)
+    moved = DetectorStage(replace(model, refiner=_constant_refiner(0.2, 0.2, 0.1))).step(
+        color, depth, INTR, mask=mask)
+    names = plain.names
+    scale = person_scale(plain.xyz[:, 2], INTR.fx)
+    for n in names:
+        i = names.index(n)
+        if group_of(n) != 'wrist':
+            assert_allclose(moved.uv[i], plain.uv[i])
+            assert_allclose(moved.xyz[i], plain.xyz[i])
+            continue
+        sign = -1.0 if n.startswith('right_') else 1.0
+        want = np.clip(plain.uv[i] + scale * np.array([0.2 * sign, 0.2]), 0, [INTR.width - 1,
+                                                                           INTR.height - 1])
+        assert_allclose(moved.uv[i], want, atol=1e-5)     # float32 trees
+        assert moved.xyz[i, 2] == pytest.approx(plain.xyz[i, 2] + 0.1, abs=1e-6)
 
 
 def test_a_damaged_refiner_in_a_model_file_is_refused(tmp_path) -> None:
     model = load_model(model_path('rgbd_14'))
-    trees = fit(np.random.default_rng(0).uniform(size=(200, N_FEATURES)), np.zeros(200),
-                trees=2, depth=2)
-    good = DepthRefiner.stack(['wrist'], [trees])
+    good = _constant_refiner(0.0, 0.0, 0.0)
     with pytest.raises(ValueError, match='feature indices'):
         replace(good, feature=np.full_like(good.feature, N_FEATURES))
+    with pytest.raises(ValueError, match='inconsistent arrays'):
+        replace(good, base=good.base[:2])
     path = tmp_path / 'm.npz'
-    save_model(replace(model, depth_refiner=good), path)
+    save_model(replace(model, refiner=good), path)
     data = dict(np.load(path))
-    data['depth_refiner_leaf'] = data['depth_refiner_leaf'][:, :, :-1]
+    data['refiner_leaf'] = data['refiner_leaf'][:, :, :-1]
     np.savez(path, **data)
-    with pytest.raises(ValueError, match=f'{path}: bad part model: depth refiner'):
+    with pytest.raises(ValueError, match=f'{path}: bad part model: part refiner'):
         load_model(path)

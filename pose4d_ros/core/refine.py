@@ -1,20 +1,23 @@
-"""Where a joint centre lies behind what the camera sees, learned from the depth around it.
+"""Where a detected joint really is: learned corrections of each part's pixel and depth.
 
-A detected part is lifted to 3-D with its look-up's depth plus a constant offset behind the
-surface (`PartModel.depth_lookup`, `depth_offset_m`). That constant is right for a joint whose
-own surface the camera sees, and wrong by tens of centimetres for one it does not: the far
-shoulder of a person turned away, an elbow behind the torso, a hip behind a hand; the look-up
-then reads the body in front. `DepthRefiner` learns the rest of the correction, per part, from
-what the frame shows around it: boosted regression trees (`core.boost`, absolute error) on the
-depths of windows of three sizes on the body at the part's pixel (their 10th, 50th and 90th
-percentiles against the lifted depth), the lifted depths of its parent, of the root and the
-median of the parts', its image offset from its parent in person scales, its 3-D distance from
-the parent and its confidence (`features`). Its target is the joint's true depth less the lifted
-one along the same pixel's ray, so the detected pixel is kept and only the depth moves.
+A detected part is a HOG cell of the part model, lifted to 3-D with its look-up's depth plus a
+constant offset behind the surface (`PartModel.depth_lookup`, `depth_offset_m`). Both are right
+on average and wrong in ways a frame shows: the constant is tens of centimetres short for a
+joint the camera does not see (the far shoulder of a person turned away, an elbow behind the
+torso, a hip behind a hand: the look-up reads the body in front), and a part's cell sits where
+its filter matched, which for a knee or an ankle is often a cell off along the leg.
+`PartRefiner` learns both corrections, per part, from what the frame shows around it: boosted
+regression trees (`core.boost`, absolute error) on the depths of windows of three sizes on the
+body at the part's pixel (their 10th, 50th and 90th percentiles against the lifted depth), the
+lifted depths of its parent, of the root and the median of the parts', its image offset from
+its parent in person scales, its 3-D distance from the parent and its confidence (`features`).
+Three ensembles per group of parts predict the joint's true pixel less the detected one in
+person scales (`OUTPUTS`: du, dv) and its true depth less the lifted one (dz), so a part moves
+both across the image and along its ray (`PartRefiner.apply`).
 
-It is fitted on the pipeline's own detections of labelled frames (`pose4d train --refine-depth`,
-`fit_refiner`), a left part and its right twin pooled (one ensemble per group, the image
-offsets of right parts mirrored).
+It is fitted on the pipeline's own detections of labelled frames (`pose4d train --refine`,
+`fit_refiner`), a left part and its right twin pooled (one set of ensembles per group, the
+horizontal offsets of right parts mirrored).
 """
 
 from __future__ import annotations
@@ -42,8 +45,20 @@ SCALE_M = 0.5
 N_FEATURES = len(WINDOWS_M) * len(QUANTILES) + 8
 _WINDOWS, _QUANTILES = np.array(WINDOWS_M), np.array(QUANTILES)
 _NO_MASK = np.zeros((0, 0), np.bool_)
-# Largest correction learned or applied, metres
-MAX_CORRECTION_M = 0.4
+# What each part's ensembles predict: its true pixel less the detected one, in person scales
+# (du mirrored for right parts), and its true depth less the lifted one, metres
+OUTPUTS = ('du', 'dv', 'dz')
+# Largest correction learned or applied: person scales across the image, metres of depth
+MAX_SHIFT_SCALES = 1.0
+MAX_DEPTH_M = 0.4
+
+
+def person_scale(z: NDArray[np.floating], fx: float) -> float:
+    """Pixels per `SCALE_M` of body at the median of the parts' lifted depths `z` (NaN
+    ignored); NaN when none is known."""
+    z = np.asarray(z, np.float64)
+    z = z[np.isfinite(z) & (z > 0)]
+    return fx * SCALE_M / float(np.median(z)) if len(z) else float('nan')
 
 
 @nb.njit(cache=True)
@@ -139,15 +154,16 @@ def _mirrored(names: tuple[str, ...]) -> NDArray[np.bool_]:
 
 
 @dataclass(frozen=True)
-class DepthRefiner:
-    """One ensemble of boosted trees (`core.boost`) per group of parts (`group_of`), stacked.
+class PartRefiner:
+    """For each group of parts (`group_of`) one ensemble of boosted trees (`core.boost`) per
+    output (`OUTPUTS`), stacked: ensemble g * len(OUTPUTS) + k predicts output k of group g.
 
     Attributes
     ----------
     groups : G group names ('wrist', ...).
-    base : (G,) float32 each ensemble's starting value.
-    feature, threshold : (G, T, N) int16 and float32, the trees' nodes.
-    leaf : (G, T, N + 1) float32 their leaves.
+    base : (E,) float32 each ensemble's starting value, E = G * len(OUTPUTS).
+    feature, threshold : (E, T, N) int16 and float32, the trees' nodes.
+    leaf : (E, T, N + 1) float32 their leaves.
     """
 
     groups: tuple[str, ...]
@@ -157,37 +173,59 @@ class DepthRefiner:
     leaf: NDArray[np.float32]
 
     def __post_init__(self) -> None:
-        g = len(self.groups)
-        if len(set(self.groups)) != g or self.base.shape != (g,) or self.feature.ndim != 3 or \
-                self.feature.shape[0] != g or self.threshold.shape != self.feature.shape or \
+        e = len(self.groups) * len(OUTPUTS)
+        if len(set(self.groups)) != len(self.groups) or self.base.shape != (e,) or \
+                self.feature.ndim != 3 or self.feature.shape[0] != e or \
+                self.threshold.shape != self.feature.shape or \
                 self.leaf.shape != (*self.feature.shape[:2], self.feature.shape[2] + 1):
-            raise ValueError(f'depth refiner: inconsistent arrays for groups {self.groups}: '
+            raise ValueError(f'part refiner: inconsistent arrays for groups {self.groups}: '
                              f'base {self.base.shape}, feature {self.feature.shape}, threshold '
                              f'{self.threshold.shape}, leaf {self.leaf.shape}')
         if self.feature.size and not (0 <= self.feature.min() and
                                       self.feature.max() < N_FEATURES):
-            raise ValueError(f'depth refiner: feature indices outside 0..{N_FEATURES - 1}')
+            raise ValueError(f'part refiner: feature indices outside 0..{N_FEATURES - 1}')
         if not (np.isfinite(self.base).all() and np.isfinite(self.leaf).all()):
-            raise ValueError('depth refiner: values must be finite')
+            raise ValueError('part refiner: values must be finite')
 
     @classmethod
-    def stack(cls, groups: Sequence[str], trees: Sequence[BoostedTrees]) -> DepthRefiner:
-        """One refiner of ensembles of one shape, one per group."""
+    def stack(cls, groups: Sequence[str], trees: Sequence[BoostedTrees]) -> PartRefiner:
+        """A refiner from ensembles of one shape, `len(OUTPUTS)` per group, group-major."""
         return cls(tuple(groups), np.array([t.base for t in trees], np.float32),
                    np.stack([t.feature for t in trees]), np.stack([t.threshold for t in trees]),
                    np.stack([t.leaf for t in trees]))
 
-    def correction(self, names: Sequence[str], x: NDArray[np.floating]) -> NDArray[np.float64]:
-        """(P,) metres to add to the lifted depths of parts `names` with features `x` (P, F);
-        0 for a part whose group has no ensemble or whose features are unknown."""
+    def corrections(self, names: Sequence[str], x: NDArray[np.floating]
+                    ) -> NDArray[np.float64]:
+        """(P, 3) du, dv (person scales, du mirrored for right parts) and dz (metres) of parts
+        `names` with features `x` (P, F); 0 for a part whose group has no ensembles or whose
+        features are unknown."""
         x = np.asarray(x, np.float32)
-        ensemble = np.where(np.isfinite(x[:, 0]), _ensembles(self.groups, tuple(names)), -1)
         if x.shape != (len(names), N_FEATURES):
             raise ValueError(f'features must be ({len(names)}, {N_FEATURES}), got {x.shape}')
+        first = np.where(np.isfinite(x[:, 0]), _first_ensembles(self.groups, tuple(names)), -1)
+        k = len(OUTPUTS)
+        ensemble = np.where(first[:, None] >= 0, first[:, None] + np.arange(k), -1).ravel()
         # the arrays were checked when the refiner was made: straight to the kernel
-        out = predict_kernel(np.ascontiguousarray(x), ensemble, self.base.astype(np.float64),
-                             self.feature, self.threshold, self.leaf)
-        return np.clip(out, -MAX_CORRECTION_M, MAX_CORRECTION_M)
+        out = predict_kernel(np.ascontiguousarray(np.repeat(x, k, axis=0)), ensemble,
+                             self.base.astype(np.float64), self.feature, self.threshold,
+                             self.leaf).reshape(len(names), k)
+        limit = np.array([MAX_SHIFT_SCALES, MAX_SHIFT_SCALES, MAX_DEPTH_M])
+        return np.clip(out, -limit, limit)
+
+    def apply(self, names: Sequence[str], parents: Sequence[int], uv: NDArray[np.floating],
+              z: NDArray[np.floating], confidence: NDArray[np.floating],
+              depth_m: NDArray[np.floating], intrinsics: Intrinsics,
+              mask: NDArray[np.bool_] | None = None
+              ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+        """The parts' corrected pixels (P, 2) and depths (P,), from their detected pixels `uv`
+        and lifted depths `z` (arguments as `features`)."""
+        x = features(names, parents, uv, z, confidence, depth_m, intrinsics, mask)
+        c = self.corrections(names, x)
+        scale = person_scale(z, intrinsics.fx)
+        if not np.isfinite(scale):
+            return np.asarray(uv, np.float64), np.asarray(z, np.float64)
+        du = np.where(_mirrored(tuple(names)), -c[:, 0], c[:, 0])
+        return uv + scale * np.column_stack([du, c[:, 1]]), z + c[:, 2]
 
     def arrays(self) -> dict[str, NDArray]:
         """The refiner as named arrays (for `core.dpm.model.save_model`)."""
@@ -195,7 +233,7 @@ class DepthRefiner:
                 'threshold': self.threshold, 'leaf': self.leaf}
 
     @classmethod
-    def from_arrays(cls, a: dict[str, NDArray]) -> DepthRefiner:
+    def from_arrays(cls, a: dict[str, NDArray]) -> PartRefiner:
         """Inverse of `arrays`; ValueError for inconsistent or out-of-range arrays."""
         return cls(tuple(str(g) for g in a['groups']), np.asarray(a['base'], np.float32),
                    np.asarray(a['feature'], np.int16), np.asarray(a['threshold'], np.float32),
@@ -203,28 +241,41 @@ class DepthRefiner:
 
 
 @functools.lru_cache(maxsize=16)
-def _ensembles(groups: tuple[str, ...], names: tuple[str, ...]) -> NDArray[np.int64]:
-    """The index in `groups` of each part's group (-1: none)."""
-    index = {g: i for i, g in enumerate(groups)}
+def _first_ensembles(groups: tuple[str, ...], names: tuple[str, ...]) -> NDArray[np.int64]:
+    """The index of each part's group's first ensemble (-1: none)."""
+    index = {g: i * len(OUTPUTS) for i, g in enumerate(groups)}
     return np.array([index.get(group_of(n), -1) for n in names], np.int64)
+
+
+def targets(names: Sequence[str], uv: NDArray[np.floating], z: NDArray[np.floating],
+            true_uv: NDArray[np.floating], true_z: NDArray[np.floating], fx: float
+            ) -> NDArray[np.float64]:
+    """(P, 3) what the refiner learns for detected parts (`uv`, lifted depths `z`) whose joints
+    are at `true_uv`, `true_z`: `OUTPUTS`, NaN where either is unknown."""
+    scale = person_scale(z, fx)
+    d = (np.asarray(true_uv, np.float64) - uv) / scale
+    d[:, 0] = np.where(_mirrored(tuple(names)), -d[:, 0], d[:, 0])
+    return np.column_stack([d, np.asarray(true_z, np.float64) - z])
 
 
 def fit_refiner(names: Sequence[str], x: NDArray[np.floating], part: NDArray[np.integer],
                 target: NDArray[np.floating], *, trees: int = 200, depth: int = 5,
-                min_samples: int = 200) -> DepthRefiner:
-    """Fit one ensemble per group of `names` on samples `x` (N, F) of parts `part` (N,) (indices
-    into `names`) with `target` (N,) = true depth less lifted depth, metres (clipped to
-    +-`MAX_CORRECTION_M`). Groups with fewer than `min_samples` samples get none."""
+                min_samples: int = 200) -> PartRefiner:
+    """Fit the ensembles of each group of `names` on samples `x` (N, F) of parts `part` (N,)
+    (indices into `names`) with `target` (N, 3) (`targets`; clipped to the largest
+    corrections). Groups with fewer than `min_samples` samples get none."""
     x = np.asarray(x, np.float64)
     part = np.asarray(part)
-    target = np.clip(np.asarray(target, np.float64), -MAX_CORRECTION_M, MAX_CORRECTION_M)
-    ok = np.isfinite(x[:, 0]) & np.isfinite(target)
+    limit = np.array([MAX_SHIFT_SCALES, MAX_SHIFT_SCALES, MAX_DEPTH_M])
+    target = np.clip(np.asarray(target, np.float64), -limit, limit)
+    ok = np.isfinite(x[:, 0]) & np.isfinite(target).all(axis=1)
     groups, ensembles = [], []
     for g in dict.fromkeys(group_of(n) for n in names):
         sel = ok & np.isin(part, [i for i, n in enumerate(names) if group_of(n) == g])
         if sel.sum() >= min_samples:
             groups.append(g)
-            ensembles.append(fit(x[sel], target[sel], trees=trees, depth=depth))
+            ensembles += [fit(x[sel], target[sel, k], trees=trees, depth=depth)
+                          for k in range(len(OUTPUTS))]
     if not groups:
-        raise ValueError(f'too few samples to fit a depth refiner ({int(ok.sum())})')
-    return DepthRefiner.stack(groups, ensembles)
+        raise ValueError(f'too few samples to fit a part refiner ({int(ok.sum())})')
+    return PartRefiner.stack(groups, ensembles)
