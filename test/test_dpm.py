@@ -333,7 +333,7 @@ def test_lift_parts_reads_each_part_as_the_model_learned() -> None:
 def test_model_save_load_round_trip(tmp_path: Path) -> None:
     m = replace(tenpart_model(), depth_offset_m=np.linspace(0.0, 0.09, 10, dtype=np.float32),
                 depth_lookup=np.tile(np.float32([0.055, 0.9]), (10, 1)),
-                search_range_px=(35.0, 70.0))
+                search_range_px=(35.0, 70.0), scale_prior=2.0)
     path = tmp_path / 'm.npz'
     save_model(m, path)
     back = load_model(path)
@@ -435,6 +435,25 @@ def test_the_search_without_depth_covers_the_models_search_range() -> None:
     assert len(narrow.scales) < len(wide.scales)
     with pytest.raises(ValueError, match='search_range_px'):
         replace(m, search_range_px=(60.0, 40.0))
+
+
+def test_the_scale_prior_ranks_the_levels_searched_without_depth() -> None:
+    col, depth, mask = person_frame(np.random.default_rng(0))
+    m = tenpart_model()
+    by_depth = Detector(m).detect(col, depth, mask=mask)[0]
+    sizes = m.canonical_scale_px / np.array(Detector(m).plan(col.shape[:2], None).scales)
+    found = {}
+    for prior in (-100.0, 0.0, 100.0):
+        det = Detector(replace(m, scale_prior=prior))
+        (pose,) = det.detect(col, None)
+        assert_allclose(pose.part_scores.sum(), pose.score, rtol=1e-5)  # its own score
+        found[prior] = m.canonical_scale_px / pose.scale
+        assert_allclose(det.detect(col, depth, mask=mask)[0].uv, by_depth.uv)  # by depth: none
+    assert_allclose(found[100.0], sizes.max())   # a strong prior: the largest person
+    assert_allclose(found[-100.0], sizes.min())  # a strong negative one: the smallest
+    assert sizes.min() <= found[0.0] <= sizes.max()
+    with pytest.raises(ValueError, match='scale_prior'):
+        replace(m, scale_prior=float('nan'))
 
 def test_bad_inputs_give_flagged_or_empty_results() -> None:
     rng = np.random.default_rng(0)

@@ -217,3 +217,42 @@ def test_a_damaged_refiner_in_a_model_file_is_refused(tmp_path) -> None:
     np.savez(path, **data)
     with pytest.raises(ValueError, match=f'{path}: bad part model: part refiner'):
         load_model(path)
+
+
+def test_the_stages_of_a_cascade_apply_one_after_the_other(tmp_path) -> None:
+    """Two stages: the second reads the parts where the first put them and moves them on; the
+    model file keeps both, a file from before cascades holds one stage, and a part with a
+    lifted depth is moved even where its windows read no body."""
+    names, uv, z, _, depth, mask = _scene(0.0)
+    parents, conf = PARTS_14.parents, np.ones(len(names))
+    first, second = _constant_refiner(0.1, 0.0, 0.05), _constant_refiner(0.0, -0.2, 0.02)
+    both = first.then(second)
+    assert both.stages == 2
+    uv1, z1 = first.apply(names, parents, uv, z, conf, depth, INTR, mask)
+    for got, want in zip(both.apply(names, parents, uv, z, conf, depth, INTR, mask, stages=1),
+                         (uv1, z1)):
+        assert_allclose(got, want)
+    uv2, z2 = second.apply(names, parents, uv1, z1, conf, depth, INTR, mask)
+    got_uv, got_z = both.apply(names, parents, uv, z, conf, depth, INTR, mask)
+    assert_allclose(got_uv, uv2)
+    assert_allclose(got_z, z2)
+    w = names.index('left_wrist')
+    scale = person_scale(z, INTR.fx)
+    assert_allclose(got_uv[w], uv[w] + scale * np.array([0.1, -0.2]), atol=1e-4)
+    assert got_z[w] == pytest.approx(z[w] + 0.07, abs=1e-6)
+    assert_allclose(np.delete(got_uv, [w, names.index('right_wrist')], axis=0),
+                    np.delete(uv, [w, names.index('right_wrist')], axis=0))
+    off_body, _ = both.apply(names, parents, uv, z, conf, depth, INTR, np.zeros_like(mask))
+    assert_allclose(off_body, got_uv)
+    model = replace(load_model(model_path('rgbd_14')), refiner=both)
+    save_model(model, tmp_path / 'm.npz')
+    again = load_model(tmp_path / 'm.npz').refiner
+    assert again is not None and again.stages == 2
+    assert_allclose(again.apply(names, parents, uv, z, conf, depth, INTR, mask)[0], got_uv)
+    old = first.arrays()
+    del old['stages']
+    assert PartRefiner.from_arrays(old).stages == 1
+    with pytest.raises(ValueError, match='cannot follow'):
+        first.then(_constant_refiner(0.0, 0.0, 0.0, groups=('elbow',)))
+    with pytest.raises(ValueError, match='stage 2 of a 2-stage'):
+        both.corrections(names, np.zeros((len(names), N_FEATURES), np.float32), stage=2)

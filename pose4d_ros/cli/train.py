@@ -18,7 +18,7 @@ import shlex
 import sys
 import time
 from collections import defaultdict
-from dataclasses import replace
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
@@ -26,6 +26,7 @@ from numpy.typing import NDArray
 
 from pose4d_ros.cli._dpm import git_commit, load_frames, log, machine
 from pose4d_ros.cli._progress import progress
+from pose4d_ros.core.camera import Intrinsics
 from pose4d_ros.core.dpm.model import PartModel, load_model, save_model
 from pose4d_ros.core.dpm.samples import (
     Negative,
@@ -43,8 +44,8 @@ from pose4d_ros.core.dpm.train import (
     train,
 )
 from pose4d_ros.core.pipeline import DetectorStage, ForegroundStage
+from pose4d_ros.core.refine import PartRefiner, fit_refiner, known_parts, targets
 from pose4d_ros.core.refine import features as refine_features
-from pose4d_ros.core.refine import fit_refiner, targets
 from pose4d_ros.datasets.frame import Frame
 from pose4d_ros.models import model_path
 
@@ -114,6 +115,9 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument('--trees', type=int, default=200,
                    help='--refine: trees per part group and output')
     p.add_argument('--tree-depth', type=int, default=5, help='--refine: depth of a tree')
+    p.add_argument('--stages', type=int, default=1,
+                   help='--refine: stages of the cascade, each fitted on the parts as the '
+                        'stages before it move them')
     p.add_argument('--blas-threads', type=int, default=1,
                    help='OpenBLAS threads (1: the measured best on 2 shared cores)')
     p.set_defaults(func=run)
@@ -317,20 +321,34 @@ def recalibrate(args: argparse.Namespace, samples: list[Frame], t0: float) -> in
     save_model(model, args.out)
     span = model.search_range_px or model.scale_range_px
     print(f'wrote {args.out}: {args.calibrate} calibrated on {len(usable)} frames; person '
-          f'scales searched without depth {span[0]:.1f}-{span[1]:.1f} px; {depth_lifting(model)}')
+          f'scales searched without depth {span[0]:.1f}-{span[1]:.1f} px'
+          + (f', ranked with a scale prior of {model.scale_prior:g} per octave'
+             if model.channels == 'rgb' else '') + f'; {depth_lifting(model)}')
     return 0
 
 
-def refiner_samples(model: PartModel, samples: list[Frame]
-                    ) -> tuple[NDArray[np.float32], NDArray[np.int64], NDArray[np.float64]]:
-    """The part refiner's training samples: the foreground and `model`'s detector (its refiner
-    left out) run over `samples` as the nodes run them (each video in order, the previous frame
-    guiding the arms), and for every labelled part with a detection and a lifted depth its
-    features (`core.refine.features`), its index and what the refiner is to learn
-    (`core.refine.targets`)."""
+@dataclass
+class RefinerFrame:
+    """What a refiner stage learns from, per labelled frame: the detector's parts (`uv`, lifted
+    depths `z`, `confidence`), the frame's depth on the person (NaN elsewhere) and its camera,
+    and the joints' true pixels and depths where `labelled`."""
+
+    uv: NDArray[np.float64]
+    z: NDArray[np.float64]
+    confidence: NDArray[np.float64]
+    depth: NDArray[np.float32]
+    intrinsics: Intrinsics
+    true_uv: NDArray[np.float64]
+    true_z: NDArray[np.float64]
+    labelled: NDArray[np.bool_]
+
+
+def refiner_frames(model: PartModel, samples: list[Frame]) -> list[RefinerFrame]:
+    """The foreground and `model`'s detector (its refiner left out) run over `samples` as the
+    nodes run them (each video in order, the previous frame guiding the arms)."""
     foreground = ForegroundStage()
     detector = DetectorStage(replace(model, refiner=None))
-    xs, parts, ys = [], [], []
+    out = []
     video = None
     for f in progress(samples, 'detections', len(samples)):
         if f.depth_m is None or f.intrinsics is None:
@@ -342,12 +360,30 @@ def refiner_samples(model: PartModel, samples: list[Frame]
         fg, color, depth = foreground.step(f.color, f.depth_m, f.intrinsics)
         found = detector.step(color, depth, f.intrinsics, mask=fg.mask,
                               stamp_s=f.stamp_ns * 1e-9, blanked=True)
-        z = found.xyz[:, 2]
-        x = refine_features(found.names, model.parents, found.uv, z, found.confidence, depth,
-                            f.intrinsics, fg.mask)
         true_uv, truth, labelled = f.truth.labelled(found.names)
-        y = targets(found.names, found.uv, z, true_uv, truth[:, 2], f.intrinsics.fx)
-        use = labelled & np.isfinite(y).all(axis=1) & np.isfinite(x[:, 0])
+        out.append(RefinerFrame(found.uv, found.xyz[:, 2], found.confidence.astype(np.float64),
+                                np.where(fg.mask, depth, np.nan).astype(np.float32),
+                                f.intrinsics, true_uv, truth[:, 2], labelled))
+    return out
+
+
+def refiner_samples(model: PartModel, frames: list[RefinerFrame],
+                    earlier: PartRefiner | None = None
+                    ) -> tuple[NDArray[np.float32], NDArray[np.int64], NDArray[np.float64]]:
+    """The training samples of a refiner stage: for every labelled part of `frames` with a
+    detection and a lifted depth, moved by the `earlier` stages, its features
+    (`core.refine.features`), its index and what the stage is to learn
+    (`core.refine.targets`)."""
+    names = model.part_names
+    xs, parts, ys = [], [], []
+    for f in frames:
+        uv, z = f.uv, f.z
+        if earlier is not None:
+            uv, z = earlier.apply(names, model.parents, uv, z, f.confidence, f.depth,
+                                  f.intrinsics)
+        x = refine_features(names, model.parents, uv, z, f.confidence, f.depth, f.intrinsics)
+        y = targets(names, uv, z, f.true_uv, f.true_z, f.intrinsics.fx)
+        use = f.labelled & np.isfinite(y).all(axis=1) & known_parts(x)
         xs.append(x[use])
         parts.append(np.flatnonzero(use))
         ys.append(y[use])
@@ -355,26 +391,37 @@ def refiner_samples(model: PartModel, samples: list[Frame]
 
 
 def refine(args: argparse.Namespace, samples: list[Frame], t0: float) -> int:
-    """`--refine MODEL`: fit MODEL's part refiner on `samples`, recorded in the model's
-    metadata."""
+    """`--refine MODEL`: fit MODEL's part refiner on `samples`, `--stages` stages one after
+    the other, recorded in the model's metadata."""
     model = load_model(model_path(str(args.refine)))
     if model.channels != 'rgbd':
         raise ValueError(f'{args.refine}: the refiner reads depth; an RGB model has none')
-    x, part, target = refiner_samples(model, samples)
+    if args.stages < 1:
+        raise ValueError(f'--stages must be >= 1, got {args.stages}')
+    frames = refiner_frames(model, samples)
     t1 = time.time()
-    refiner = fit_refiner(model.part_names, x, part, target, trees=args.trees,
-                          depth=args.tree_depth)
+    refiner = None
+    for stage in range(args.stages):
+        x, part, target = refiner_samples(model, frames, refiner)
+        fitted = fit_refiner(model.part_names, x, part, target, trees=args.trees,
+                             depth=args.tree_depth)
+        refiner = fitted if refiner is None else refiner.then(fitted)
+        print(f'refiner stage {stage + 1}: {len(target)} parts, median residual '
+              f'{1000 * np.median(np.abs(target[:, 2])):.1f} mm in depth, '
+              f'{np.median(np.hypot(*target[:, :2].T)):.3f} person scales across')
     meta = dict(model.metadata)
     meta['refiner'] = json.dumps({
         'command': 'pose4d train ' + ' '.join(shlex.quote(a) for a in sys.argv[2:])
                    if sys.argv[1:2] == ['train'] else '',
         'data': ' '.join(str(Path(s).resolve()) for s in args.sources), 'frames': len(samples),
-        'samples': len(target), 'trees': args.trees, 'depth': args.tree_depth,
-        'fit_seconds': round(time.time() - t1, 1), 'git_commit': git_commit(),
-        'at': time.strftime('%Y-%m-%dT%H:%M:%S%z'), 'wall_seconds': round(time.time() - t0, 1)})
+        'samples': len(target), 'stages': args.stages, 'trees': args.trees,
+        'depth': args.tree_depth, 'fit_seconds': round(time.time() - t1, 1),
+        'git_commit': git_commit(), 'at': time.strftime('%Y-%m-%dT%H:%M:%S%z'),
+        'wall_seconds': round(time.time() - t0, 1)})
     model = replace(model, refiner=refiner, metadata=meta)
     save_model(model, args.out)
-    print(f'wrote {args.out}: {args.refine} with a part refiner fitted on {len(target)} parts '
-          f'of {len(samples)} frames ({", ".join(refiner.groups)}; {args.trees} trees of depth '
+    print(f'wrote {args.out}: {args.refine} with a {args.stages}-stage part refiner fitted on '
+          f'{len(target)} parts of {len(samples)} frames ({", ".join(refiner.groups)}; '
+          f'{args.trees} trees of depth '
           f'{args.tree_depth} per group and output), {(time.time() - t0) / 60:.1f} min')
     return 0

@@ -280,7 +280,6 @@ class DetectorStage:
                 # where the joints really are, learned (`core.refine`); still on the image
                 uv, z = self.model.refiner.apply(self.names, self.model.parents, uv, z, conf,
                                                  depth_m, intrinsics, mask)
-                uv = np.clip(uv, 0.0, [w - 1, h - 1])
             xyz = backproject(uv, z, intrinsics)
         return JointSet(self.names, uv, xyz, confidence=np.where(src == cj.DETECTED, conf, 0),
                         source=src, score=float(pose.score))

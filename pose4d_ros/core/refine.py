@@ -13,11 +13,13 @@ lifted depths of its parent, of the root and the median of the parts', its image
 its parent in person scales, its 3-D distance from the parent and its confidence (`features`).
 Three ensembles per group of parts predict the joint's true pixel less the detected one in
 person scales (`OUTPUTS`: du, dv) and its true depth less the lifted one (dz), so a part moves
-both across the image and along its ray (`PartRefiner.apply`).
+both across the image and along its ray (`PartRefiner.apply`). The refiner is a cascade: each
+stage reads the frame again where the stages before it put the parts and corrects what they
+left.
 
-It is fitted on the pipeline's own detections of labelled frames (`pose4d train --refine`,
-`fit_refiner`), a left part and its right twin pooled (one set of ensembles per group, the
-horizontal offsets of right parts mirrored).
+Each stage is fitted on the pipeline's own detections of labelled frames, moved by the stages
+before it (`pose4d train --refine`, `fit_refiner`), a left part and its right twin pooled (one
+set of ensembles per group, the horizontal offsets of right parts mirrored).
 """
 
 from __future__ import annotations
@@ -43,6 +45,8 @@ WINDOW_SAMPLES = 6
 # Metres of body per person scale (the part models' scale_length_m)
 SCALE_M = 0.5
 N_FEATURES = len(WINDOWS_M) * len(QUANTILES) + 8
+# The feature that is the part's lifted depth: known exactly when the part has one
+_LIFTED = len(WINDOWS_M) * len(QUANTILES)
 _WINDOWS, _QUANTILES = np.array(WINDOWS_M), np.array(QUANTILES)
 _NO_MASK = np.zeros((0, 0), np.bool_)
 # What each part's ensembles predict: its true pixel less the detected one, in person scales
@@ -117,6 +121,12 @@ def _features(depth: NDArray[np.float32], mask: NDArray[np.bool_], uv: NDArray[n
     return out
 
 
+def known_parts(x: NDArray[np.floating]) -> NDArray[np.bool_]:
+    """Which rows of features `x` (P, `N_FEATURES`) belong to parts with a lifted depth (the
+    others are NaN throughout and are not corrected)."""
+    return np.isfinite(np.asarray(x)[:, _LIFTED])
+
+
 def group_of(name: str) -> str:
     """'left_wrist' and 'right_wrist' -> 'wrist'."""
     return name.removeprefix('left_').removeprefix('right_')
@@ -155,15 +165,17 @@ def _mirrored(names: tuple[str, ...]) -> NDArray[np.bool_]:
 
 @dataclass(frozen=True)
 class PartRefiner:
-    """For each group of parts (`group_of`) one ensemble of boosted trees (`core.boost`) per
-    output (`OUTPUTS`), stacked: ensemble g * len(OUTPUTS) + k predicts output k of group g.
+    """For each stage of the cascade and each group of parts (`group_of`) one ensemble of
+    boosted trees (`core.boost`) per output (`OUTPUTS`), stacked: ensemble
+    (s * G + g) * len(OUTPUTS) + k predicts output k of group g at stage s.
 
     Attributes
     ----------
     groups : G group names ('wrist', ...).
-    base : (E,) float32 each ensemble's starting value, E = G * len(OUTPUTS).
+    base : (E,) float32 each ensemble's starting value, E = stages * G * len(OUTPUTS).
     feature, threshold : (E, T, N) int16 and float32, the trees' nodes.
     leaf : (E, T, N + 1) float32 their leaves.
+    stages : how many corrections are applied one after the other.
     """
 
     groups: tuple[str, ...]
@@ -171,16 +183,19 @@ class PartRefiner:
     feature: NDArray[np.int16]
     threshold: NDArray[np.float32]
     leaf: NDArray[np.float32]
+    stages: int = 1
 
     def __post_init__(self) -> None:
-        e = len(self.groups) * len(OUTPUTS)
-        if len(set(self.groups)) != len(self.groups) or self.base.shape != (e,) or \
+        e = self.stages * len(self.groups) * len(OUTPUTS)
+        if self.stages < 1 or len(set(self.groups)) != len(self.groups) or \
+                self.base.shape != (e,) or \
                 self.feature.ndim != 3 or self.feature.shape[0] != e or \
                 self.threshold.shape != self.feature.shape or \
                 self.leaf.shape != (*self.feature.shape[:2], self.feature.shape[2] + 1):
-            raise ValueError(f'part refiner: inconsistent arrays for groups {self.groups}: '
-                             f'base {self.base.shape}, feature {self.feature.shape}, threshold '
-                             f'{self.threshold.shape}, leaf {self.leaf.shape}')
+            raise ValueError(f'part refiner: inconsistent arrays for {self.stages} stages of '
+                             f'groups {self.groups}: base {self.base.shape}, feature '
+                             f'{self.feature.shape}, threshold {self.threshold.shape}, leaf '
+                             f'{self.leaf.shape}')
         if self.feature.size and not (0 <= self.feature.min() and
                                       self.feature.max() < N_FEATURES):
             raise ValueError(f'part refiner: feature indices outside 0..{N_FEATURES - 1}')
@@ -189,20 +204,35 @@ class PartRefiner:
 
     @classmethod
     def stack(cls, groups: Sequence[str], trees: Sequence[BoostedTrees]) -> PartRefiner:
-        """A refiner from ensembles of one shape, `len(OUTPUTS)` per group, group-major."""
+        """A one-stage refiner from ensembles of one shape, `len(OUTPUTS)` per group,
+        group-major."""
         return cls(tuple(groups), np.array([t.base for t in trees], np.float32),
                    np.stack([t.feature for t in trees]), np.stack([t.threshold for t in trees]),
                    np.stack([t.leaf for t in trees]))
 
-    def corrections(self, names: Sequence[str], x: NDArray[np.floating]
+    def then(self, other: PartRefiner) -> PartRefiner:
+        """This cascade followed by `other`'s stages (same groups, trees of the same shape)."""
+        if other.groups != self.groups or other.feature.shape[1:] != self.feature.shape[1:]:
+            raise ValueError(f'part refiner: a stage of groups {other.groups} and trees '
+                             f'{other.feature.shape[1:]} cannot follow groups {self.groups} and '
+                             f'trees {self.feature.shape[1:]}')
+        return PartRefiner(self.groups, *(np.concatenate([getattr(self, a), getattr(other, a)])
+                                          for a in ('base', 'feature', 'threshold', 'leaf')),
+                           stages=self.stages + other.stages)
+
+    def corrections(self, names: Sequence[str], x: NDArray[np.floating], stage: int = 0
                     ) -> NDArray[np.float64]:
         """(P, 3) du, dv (person scales, du mirrored for right parts) and dz (metres) of parts
-        `names` with features `x` (P, F); 0 for a part whose group has no ensembles or whose
-        features are unknown."""
+        `names` with features `x` (P, F) at `stage` of the cascade; 0 for a part whose group
+        has no ensembles or whose features are unknown."""
         x = np.asarray(x, np.float32)
         if x.shape != (len(names), N_FEATURES):
             raise ValueError(f'features must be ({len(names)}, {N_FEATURES}), got {x.shape}')
-        first = np.where(np.isfinite(x[:, 0]), _first_ensembles(self.groups, tuple(names)), -1)
+        if not 0 <= stage < self.stages:
+            raise ValueError(f'stage {stage} of a {self.stages}-stage part refiner')
+        first = _first_ensembles(self.groups, tuple(names))
+        first = np.where(known_parts(x) & (first >= 0),
+                         first + stage * len(self.groups) * len(OUTPUTS), -1)
         k = len(OUTPUTS)
         ensemble = np.where(first[:, None] >= 0, first[:, None] + np.arange(k), -1).ravel()
         # the arrays were checked when the refiner was made: straight to the kernel
@@ -215,29 +245,37 @@ class PartRefiner:
     def apply(self, names: Sequence[str], parents: Sequence[int], uv: NDArray[np.floating],
               z: NDArray[np.floating], confidence: NDArray[np.floating],
               depth_m: NDArray[np.floating], intrinsics: Intrinsics,
-              mask: NDArray[np.bool_] | None = None
+              mask: NDArray[np.bool_] | None = None, stages: int | None = None
               ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-        """The parts' corrected pixels (P, 2) and depths (P,), from their detected pixels `uv`
-        and lifted depths `z` (arguments as `features`)."""
-        x = features(names, parents, uv, z, confidence, depth_m, intrinsics, mask)
-        c = self.corrections(names, x)
-        scale = person_scale(z, intrinsics.fx)
-        if not np.isfinite(scale):
-            return np.asarray(uv, np.float64), np.asarray(z, np.float64)
-        du = np.where(_mirrored(tuple(names)), -c[:, 0], c[:, 0])
-        return uv + scale * np.column_stack([du, c[:, 1]]), z + c[:, 2]
+        """The parts' corrected pixels (P, 2; on the image) and depths (P,), from their
+        detected pixels `uv` and lifted depths `z` (arguments as `features`), after the first
+        `stages` stages of the cascade (None: all)."""
+        uv, z = np.asarray(uv, np.float64), np.asarray(z, np.float64)
+        edge = np.array([intrinsics.width - 1, intrinsics.height - 1], np.float64)
+        for stage in range(self.stages if stages is None else stages):
+            scale = person_scale(z, intrinsics.fx)
+            if not np.isfinite(scale):
+                break
+            x = features(names, parents, uv, z, confidence, depth_m, intrinsics, mask)
+            c = self.corrections(names, x, stage)
+            du = np.where(_mirrored(tuple(names)), -c[:, 0], c[:, 0])
+            uv = np.clip(uv + scale * np.column_stack([du, c[:, 1]]), 0.0, edge)
+            z = z + c[:, 2]
+        return uv, z
 
     def arrays(self) -> dict[str, NDArray]:
         """The refiner as named arrays (for `core.dpm.model.save_model`)."""
         return {'groups': np.array(self.groups), 'base': self.base, 'feature': self.feature,
-                'threshold': self.threshold, 'leaf': self.leaf}
+                'threshold': self.threshold, 'leaf': self.leaf,
+                'stages': np.array(self.stages, np.int64)}
 
     @classmethod
     def from_arrays(cls, a: dict[str, NDArray]) -> PartRefiner:
         """Inverse of `arrays`; ValueError for inconsistent or out-of-range arrays."""
         return cls(tuple(str(g) for g in a['groups']), np.asarray(a['base'], np.float32),
                    np.asarray(a['feature'], np.int16), np.asarray(a['threshold'], np.float32),
-                   np.asarray(a['leaf'], np.float32))
+                   np.asarray(a['leaf'], np.float32),
+                   stages=int(a['stages']) if 'stages' in a else 1)
 
 
 @functools.lru_cache(maxsize=16)
@@ -268,7 +306,7 @@ def fit_refiner(names: Sequence[str], x: NDArray[np.floating], part: NDArray[np.
     part = np.asarray(part)
     limit = np.array([MAX_SHIFT_SCALES, MAX_SHIFT_SCALES, MAX_DEPTH_M])
     target = np.clip(np.asarray(target, np.float64), -limit, limit)
-    ok = np.isfinite(x[:, 0]) & np.isfinite(target).all(axis=1)
+    ok = known_parts(x) & np.isfinite(target).all(axis=1)
     groups, ensembles = [], []
     for g in dict.fromkeys(group_of(n) for n in names):
         sel = ok & np.isin(part, [i for i, n in enumerate(names) if group_of(n) == g])

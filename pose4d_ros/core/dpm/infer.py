@@ -696,12 +696,17 @@ class Detector:
             if d is None or not (np.isfinite(d) & (d > 0)).any():
                 flags = ('no_depth',)
         levels = self.pyramid(color, depth_m, plan, mask=mask, blanked=blanked)
-        return self.poses_from_levels(levels, top_k=top_k, flags=flags, prior=prior)
+        return self.poses_from_levels(
+            levels, top_k=top_k, flags=flags, prior=prior,
+            scale_prior=0.0 if plan.depth_guided else self.model.scale_prior)
 
     def poses_from_levels(self, levels: list[Level], *, top_k: int = 1,
                           threshold: float = -np.inf, flags: tuple[str, ...] = (),
-                          prior: NDArray[np.floating] | None = None) -> list[Pose]:
-        """Run every level and return the best poses over all of them."""
+                          prior: NDArray[np.floating] | None = None,
+                          scale_prior: float = 0.0) -> list[Pose]:
+        """Run every level and return the best poses over all of them, ranked by their score
+        plus `scale_prior` per octave of the person scale they were found at (the search
+        without depth, `PartModel.scale_prior`; the poses keep their own scores)."""
         cands: list[Pose] = []
         per_level = 1 if top_k == 1 else 4 * top_k
         for level in levels:
@@ -710,7 +715,8 @@ class Detector:
                 continue
             roots = best_roots(res, per_level, threshold, min_dist=2)
             cands.extend(self._poses(res, roots, flags, prior))
-        cands.sort(key=lambda p: -p.score)
+        canonical = self.model.canonical_scale_px
+        cands.sort(key=lambda p: -(p.score + scale_prior * np.log2(canonical / p.scale)))
         if top_k == 1:
             return cands[:1]
         kept: list[Pose] = []

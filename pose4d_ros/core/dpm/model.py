@@ -87,6 +87,9 @@ class PartModel:
         the calibration); None = the median of a 3-pixel window for every part.
     refiner : the learned correction of each detected part's pixel and depth (`core.refine`,
         fitted by `pose4d train --refine`); None = none.
+    scale_prior : score per octave of person scale added when the search without depth ranks
+        the poses of its levels (a model whose filters also fire on texture at small scales
+        prefers people of the size it was trained on; chosen by the calibration, 0 = none).
     """
 
     part_names: tuple[str, ...]
@@ -109,6 +112,7 @@ class PartModel:
     depth_lookup: NDArray[np.float32] | None = None
     search_range_px: tuple[float, float] | None = None
     refiner: PartRefiner | None = None
+    scale_prior: float = 0.0
 
     def __post_init__(self) -> None:
         p = len(self.part_names)
@@ -156,6 +160,9 @@ class PartModel:
         if p > 1 and not ((self.springs[1:, :, 1] > 0).all()
                           and (self.springs[1:, :, 3] > 0).all()):
             raise ValueError('spring weights w_dx2 and w_dy2 must be > 0')
+        if not (np.isfinite(self.scale_prior) and abs(self.scale_prior) <= 100):
+            raise ValueError(f'scale_prior must be a finite score within +-100, got '
+                             f'{self.scale_prior}')
         if not (self.canonical_scale_px > 0 and self.scale_length_m > 0):
             raise ValueError('canonical_scale_px and scale_length_m must be > 0')
         for name, arr in (('filters', f), ('springs', self.springs), ('bias', self.bias)):
@@ -205,6 +212,8 @@ def save_model(model: PartModel, path: str | Path) -> None:
     }
     if model.search_range_px is not None:
         header['search_range_px'] = list(model.search_range_px)
+    if model.scale_prior:
+        header['scale_prior'] = model.scale_prior
     arrays = {name: getattr(model, name) for name in _ARRAYS}
     for name in _OPTIONAL:
         if getattr(model, name) is not None:
@@ -254,6 +263,7 @@ def load_model(path: str | Path) -> PartModel:
             search_range_px=(tuple(float(x) for x in header['search_range_px'])
                              if 'search_range_px' in header else None),
             metadata={str(k): str(v) for k, v in header.get('metadata', {}).items()},
+            scale_prior=float(header.get('scale_prior', 0.0)),
             refiner=PartRefiner.from_arrays(
                 {k[len(_REFINER):]: v for k, v in contents.items() if k.startswith(_REFINER)})
             if _REFINER + 'groups' in contents else None,

@@ -245,17 +245,59 @@ def choose_depth_lookup(right: NDArray[np.bool_], rays: NDArray[np.float64],
     return best, best_offset
 
 
+# The scale priors the calibration of a model searched without depth chooses from (score per
+# octave of person scale, `PartModel.scale_prior`)
+SCALE_PRIORS = (0.0, 0.5, 1.0, 2.0, 3.0, 4.0)
+
+
+def choose_scale_prior(model: PartModel, samples: Sequence, *, alpha: float = 0.1,
+                       progress: Progress | None = None) -> float:
+    """The `SCALE_PRIORS` value under which the search without depth places most labelled
+    parts of `samples` within alpha * the size of their joints' box (the smallest on a tie).
+
+    Each sample is searched once: the best pose of every pyramid level, then each prior ranks
+    them.
+    """
+    det = Detector(replace(model, scale_prior=0.0))
+    right = np.zeros(len(SCALE_PRIORS))
+    it: Iterable = samples
+    if progress is not None:
+        it = progress(it, 'scale prior', len(samples))
+    for s in it:
+        uv, _, vis = s.truth.labelled(model.part_names)
+        if vis.sum() < 2:
+            continue
+        plan = det.plan(s.color.shape[:2], None)
+        if plan is None:
+            continue
+        best = [p[0] for p in (det.poses_from_levels([lev])
+                               for lev in det.pyramid(s.color, None, plan)) if p]
+        if not best:
+            continue
+        size = np.max(np.ptp(uv[vis], axis=0))
+        octave = np.log2(model.canonical_scale_px / np.array([p.scale for p in best]))
+        score = np.array([p.score for p in best])
+        for i, prior in enumerate(SCALE_PRIORS):
+            p = best[int(np.argmax(score + prior * octave))]
+            right[i] += np.sum(vis & (np.hypot(*(p.uv - uv).T) <= alpha * size))
+    return float(SCALE_PRIORS[int(np.argmax(right))])
+
+
 def calibrate(model: PartModel, samples: Sequence, *, use_depth: bool,
               progress: Progress | None = None, alpha: float = 0.1) -> PartModel:
     """Fit the per-part logistic confidence on detections of `samples` (a part is 'right' when
     within alpha * the size of the ground-truth joints' box). With `use_depth` the frames are
     searched as at run time (depth, the sample's mask); else without depth.
 
+    Without depth, first the model's `scale_prior` (`choose_scale_prior`, on the same samples).
     With depth, also how each part is lifted to 3-D: the look-up (`PartModel.depth_lookup`,
     one of `LOOKUPS` by `choose_depth_lookup`) and the depth offset (`depth_offset_m`) that put
     most detected joints within 10 cm of the truth in 3-D, the offset being how far behind the
     visible surface the joint centre lies; a left and a right part share them.
     """
+    if not use_depth:
+        model = replace(model, scale_prior=choose_scale_prior(model, samples,
+                                                              progress=progress))
     det = Detector(model)
     xs, ys = [], []
     seen: list[list] = [[] for _ in model.part_names]  # (right, ray, truth, depths) per part
