@@ -114,7 +114,7 @@ def test_features_read_the_windows_and_the_pose() -> None:
     assert_allclose(x[:, :3 * nq], 0.0, atol=1e-6)
     assert_allclose(x[:, 3 * nq], 2.5)               # the lifted depth
     assert_allclose(x[:, 3 * nq + 1:3 * nq + 4], 0.0, atol=1e-9)  # parent, root, median
-    assert_allclose(x[:, -1], 0.7, atol=1e-6)
+    assert_allclose(x[:, 3 * nq + 7], 0.7, atol=1e-6)
     # a right part's horizontal offset from its parent is mirrored
     i, j = names.index('left_elbow'), names.index('right_elbow')
     mirrored = uv.copy()
@@ -130,6 +130,31 @@ def test_features_read_the_windows_and_the_pose() -> None:
     assert np.isnan(x2[3]).all() and np.isnan(x2[:, :3 * nq]).all()
     with pytest.raises(ValueError, match='differ in shape'):
         features(names, PARTS_14.parents, uv, z, z, depth, INTR, mask[1:])
+
+
+def test_the_probes_read_the_body_along_the_limb_and_across_it() -> None:
+    """A forearm pointing right (left wrist) and its mirror image (right wrist) on the slab,
+    whose upper half is 5 cm nearer: back along the forearm and on it the probes read the body,
+    further on (beyond the slab) nothing; across it, the mirrored part's sides are mirrored."""
+    names, _, z, _, depth, mask = _scene(0.0)
+    depth[90:146] = 2.45
+    uv = np.full((len(names), 2), 160.0)
+    le, lw = names.index('left_elbow'), names.index('left_wrist')
+    re, rw = names.index('right_elbow'), names.index('right_wrist')
+    uv[le], uv[lw] = (150.0, 150.0), (170.0, 150.0)
+    uv[re], uv[rw] = (170.0, 150.0), (150.0, 150.0)
+    x = features(names, PARTS_14.parents, uv, z, np.ones(len(names)), depth, INTR, mask)
+    step = 0.06 * INTR.fx / 2.5
+    assert 170 + step + 1 < 180 < 170 + 2 * step - 1  # the third probe is off the slab
+    probes = 3 * len(QUANTILES) + 8
+    for i in (lw, rw):
+        back, on, further, side_a, side_b = x[i, probes:probes + 5]
+        assert back == pytest.approx(0.0, abs=1e-6) and on == pytest.approx(0.0, abs=1e-6)
+        assert np.isnan(further)
+        assert side_a == pytest.approx(0.0, abs=1e-6)        # below the forearm: 2.5 m
+        assert side_b == pytest.approx(-0.05, abs=1e-6)      # above it: 2.45 m
+    assert np.isnan(x[names.index(PARTS_14.names[PARTS_14.parents.index(-1)]),
+                     probes:]).all()  # the root has no limb
 
 
 def test_a_refiner_learns_where_a_hidden_joint_lies_and_survives_the_model_file(tmp_path
@@ -230,7 +255,7 @@ def test_the_stages_of_a_cascade_apply_one_after_the_other(tmp_path) -> None:
     assert both.stages == 2
     uv1, z1 = first.apply(names, parents, uv, z, conf, depth, INTR, mask)
     for got, want in zip(both.apply(names, parents, uv, z, conf, depth, INTR, mask, stages=1),
-                         (uv1, z1)):
+                         (uv1, z1), strict=True):
         assert_allclose(got, want)
     uv2, z2 = second.apply(names, parents, uv1, z1, conf, depth, INTR, mask)
     got_uv, got_z = both.apply(names, parents, uv, z, conf, depth, INTR, mask)
@@ -256,3 +281,22 @@ def test_the_stages_of_a_cascade_apply_one_after_the_other(tmp_path) -> None:
         first.then(_constant_refiner(0.0, 0.0, 0.0, groups=('elbow',)))
     with pytest.raises(ValueError, match='stage 2 of a 2-stage'):
         both.corrections(names, np.zeros((len(names), N_FEATURES), np.float32), stage=2)
+
+
+def test_a_depth_only_stage_learns_the_depth_and_leaves_the_pixels() -> None:
+    rng = np.random.default_rng(5)
+    names = PARTS_14.names
+    x = rng.uniform(0, 1, (3000, N_FEATURES)).astype(np.float32)
+    part = rng.integers(0, len(names), 3000)
+    target = np.column_stack([np.full(3000, 0.3), np.full(3000, -0.3),
+                              np.where(x[:, 2] > 0.5, 0.2, -0.1)])
+    refiner = fit_refiner(names, x, part, target, trees=100, depth=2, min_samples=50,
+                          outputs=('dz',))
+    probe = np.tile(x[:2], (len(names) // 2, 1))
+    probe[::2, 2], probe[1::2, 2] = 0.9, 0.1
+    c = refiner.corrections(names, probe)
+    assert (c[:, :2] == 0).all()
+    assert_allclose(c[::2, 2], 0.2, atol=0.02)
+    assert_allclose(c[1::2, 2], -0.1, atol=0.02)
+    with pytest.raises(ValueError, match='outputs'):
+        fit_refiner(names, x, part, target, outputs=('dx',))

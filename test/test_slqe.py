@@ -239,6 +239,26 @@ def test_drifted_filter_yields_to_consistent_detections() -> None:
     assert err(np.array(pos[40:]), truth[40:, 7]).max() < 5.0
 
 
+@pytest.mark.parametrize('stop', [True, False])
+def test_a_body_that_stops_dead_is_followed_at_once(stop: bool) -> None:
+    """A body moving 16 px a frame stops: the prediction overshoots the detections at rest
+    beyond the gate; with the stop hypothesis they restart the parts where they stopped,
+    without it the filter coasts on past them for two frames."""
+    rng = np.random.default_rng(1)
+    t = np.arange(40) / FPS
+    truth = np.tile(rng.uniform(100, 200, (10, 2)), (40, 1, 1))
+    truth[:30, :, 0] += (16.0 * np.arange(30) - 16.0 * 29)[:, None]
+    tracker = SlqeTracker(SlqeConfig(stop_hypothesis=stop), PARTS_10)
+    pos, src = run(tracker, t, truth + rng.normal(0, 1.0, truth.shape))
+    assert (src[:30] == Source.DETECTED).all()  # the motion itself is followed
+    if stop:
+        assert (src[30:] == Source.DETECTED).all()
+        assert err(pos[30:], truth[30:]).max() < 15.0
+    else:
+        assert (src[30:32, 3] == Source.TRACKED).all()
+        assert err(pos[31, 3], truth[31, 3]) > 20.0
+
+
 def test_reset_and_time_going_back() -> None:
     tracker = SlqeTracker(SlqeConfig(), PARTS_10)
     z = np.tile([[100.0, 100.0]], (10, 1))

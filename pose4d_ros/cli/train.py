@@ -44,7 +44,7 @@ from pose4d_ros.core.dpm.train import (
     train,
 )
 from pose4d_ros.core.pipeline import DetectorStage, ForegroundStage
-from pose4d_ros.core.refine import PartRefiner, fit_refiner, known_parts, targets
+from pose4d_ros.core.refine import OUTPUTS, PartRefiner, fit_refiner, known_parts, targets
 from pose4d_ros.core.refine import features as refine_features
 from pose4d_ros.datasets.frame import Frame
 from pose4d_ros.models import model_path
@@ -118,6 +118,8 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument('--stages', type=int, default=1,
                    help='--refine: stages of the cascade, each fitted on the parts as the '
                         'stages before it move them')
+    p.add_argument('--depth-stages', type=int, default=0,
+                   help='--refine: further stages after those that correct only the depth')
     p.add_argument('--blas-threads', type=int, default=1,
                    help='OpenBLAS threads (1: the measured best on 2 shared cores)')
     p.set_defaults(func=run)
@@ -396,15 +398,17 @@ def refine(args: argparse.Namespace, samples: list[Frame], t0: float) -> int:
     model = load_model(model_path(str(args.refine)))
     if model.channels != 'rgbd':
         raise ValueError(f'{args.refine}: the refiner reads depth; an RGB model has none')
-    if args.stages < 1:
-        raise ValueError(f'--stages must be >= 1, got {args.stages}')
+    if args.stages < 1 or args.depth_stages < 0:
+        raise ValueError(f'--stages must be >= 1 and --depth-stages >= 0, got {args.stages} '
+                         f'and {args.depth_stages}')
     frames = refiner_frames(model, samples)
     t1 = time.time()
     refiner = None
-    for stage in range(args.stages):
+    for stage in range(args.stages + args.depth_stages):
         x, part, target = refiner_samples(model, frames, refiner)
         fitted = fit_refiner(model.part_names, x, part, target, trees=args.trees,
-                             depth=args.tree_depth)
+                             depth=args.tree_depth,
+                             outputs=OUTPUTS if stage < args.stages else ('dz',))
         refiner = fitted if refiner is None else refiner.then(fitted)
         print(f'refiner stage {stage + 1}: {len(target)} parts, median residual '
               f'{1000 * np.median(np.abs(target[:, 2])):.1f} mm in depth, '
@@ -414,13 +418,15 @@ def refine(args: argparse.Namespace, samples: list[Frame], t0: float) -> int:
         'command': 'pose4d train ' + ' '.join(shlex.quote(a) for a in sys.argv[2:])
                    if sys.argv[1:2] == ['train'] else '',
         'data': ' '.join(str(Path(s).resolve()) for s in args.sources), 'frames': len(samples),
-        'samples': len(target), 'stages': args.stages, 'trees': args.trees,
+        'samples': len(target), 'stages': args.stages, 'depth_stages': args.depth_stages,
+        'trees': args.trees,
         'depth': args.tree_depth, 'fit_seconds': round(time.time() - t1, 1),
         'git_commit': git_commit(), 'at': time.strftime('%Y-%m-%dT%H:%M:%S%z'),
         'wall_seconds': round(time.time() - t0, 1)})
     model = replace(model, refiner=refiner, metadata=meta)
     save_model(model, args.out)
-    print(f'wrote {args.out}: {args.refine} with a {args.stages}-stage part refiner fitted on '
+    print(f'wrote {args.out}: {args.refine} with a {refiner.stages}-stage part refiner '
+          f'({args.depth_stages} of depth only) fitted on '
           f'{len(target)} parts of {len(samples)} frames ({", ".join(refiner.groups)}; '
           f'{args.trees} trees of depth '
           f'{args.tree_depth} per group and output), {(time.time() - t0) / 60:.1f} min')

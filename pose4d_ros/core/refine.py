@@ -10,7 +10,10 @@ its filter matched, which for a knee or an ankle is often a cell off along the l
 regression trees (`core.boost`, absolute error) on the depths of windows of three sizes on the
 body at the part's pixel (their 10th, 50th and 90th percentiles against the lifted depth), the
 lifted depths of its parent, of the root and the median of the parts', its image offset from
-its parent in person scales, its 3-D distance from the parent and its confidence (`features`).
+its parent in person scales, its 3-D distance from the parent, its confidence, and the body's
+depth at five probes 6 cm apart along its limb (back, on and further on from the part, in the
+parent -> part direction) and across it (`features`): whether the arm goes on beyond a wrist
+or ends before it, which the windows, round about the part, cannot tell.
 Three ensembles per group of parts predict the joint's true pixel less the detected one in
 person scales (`OUTPUTS`: du, dv) and its true depth less the lifted one (dz), so a part moves
 both across the image and along its ray (`PartRefiner.apply`). The refiner is a cascade: each
@@ -44,7 +47,11 @@ MAX_WINDOW_PX = 20
 WINDOW_SAMPLES = 6
 # Metres of body per person scale (the part models' scale_length_m)
 SCALE_M = 0.5
-N_FEATURES = len(WINDOWS_M) * len(QUANTILES) + 8
+# Probes along the limb: steps of PROBE_M on the body from the part, along its parent -> part
+# direction (back, on, further on) and across it (to either side, mirrored for right parts)
+PROBE_M = 0.06
+_PROBES = np.array([[-1.0, 0.0], [1.0, 0.0], [2.0, 0.0], [0.0, 1.0], [0.0, -1.0]])
+N_FEATURES = len(WINDOWS_M) * len(QUANTILES) + 8 + len(_PROBES)
 # The feature that is the part's lifted depth: known exactly when the part has one
 _LIFTED = len(WINDOWS_M) * len(QUANTILES)
 _WINDOWS, _QUANTILES = np.array(WINDOWS_M), np.array(QUANTILES)
@@ -69,15 +76,15 @@ def person_scale(z: NDArray[np.floating], fx: float) -> float:
 def _features(depth: NDArray[np.float32], mask: NDArray[np.bool_], uv: NDArray[np.float64],
               z: NDArray[np.float64], confidence: NDArray[np.float64], up: NDArray[np.int64],
               root: int, mirror: NDArray[np.bool_], windows_m: NDArray[np.float64],
-              quantiles: NDArray[np.float64], fx: float, fy: float, cx: float, cy: float
-              ) -> NDArray[np.float32]:
+              quantiles: NDArray[np.float64], probes: NDArray[np.float64], fx: float,
+              fy: float, cx: float, cy: float) -> NDArray[np.float32]:
     """The body of `features` (same arguments, `up` the parent of each part, the root its
     own)."""
     h, w = depth.shape
     n_p = len(z)
     n_w, n_q = len(windows_m), len(quantiles)
     reps = n_w * n_q
-    out = np.full((n_p, reps + 8), np.nan, np.float32)
+    out = np.full((n_p, reps + 8 + len(probes)), np.nan, np.float32)
     known = np.isfinite(z) & (z > 0) & np.isfinite(uv[:, 0]) & np.isfinite(uv[:, 1])
     if not known.any():
         return out
@@ -118,6 +125,27 @@ def _features(depth: NDArray[np.float32], mask: NDArray[np.bool_], uv: NDArray[n
         dy = (uv[p, 1] - cy) / fy * z[p] - (uv[q, 1] - cy) / fy * z[q]
         out[p, reps + 6] = np.sqrt(dx * dx + dy * dy + (z[p] - z[q]) ** 2)
         out[p, reps + 7] = confidence[p]
+        # the body along the limb and across it: the mean depth of a 3x3 patch at each probe
+        ex, ey = uv[p, 0] - uv[q, 0], uv[p, 1] - uv[q, 1]
+        length = np.sqrt(ex * ex + ey * ey)
+        if q == p or length < 1.0:
+            continue
+        step = PROBE_M * fx / z[p]
+        ex, ey = ex / length, ey / length
+        side = -1.0 if mirror[p] else 1.0
+        for j in range(len(probes)):
+            a, b = probes[j, 0], probes[j, 1] * side
+            pc = int(np.rint(uv[p, 0] + step * (a * ex - b * ey)))
+            pr = int(np.rint(uv[p, 1] + step * (a * ey + b * ex)))
+            total, n = 0.0, 0
+            for y in range(max(pr - 1, 0), min(pr + 2, h)):
+                for x in range(max(pc - 1, 0), min(pc + 2, w)):
+                    d = depth[y, x]
+                    if d == d and d > 0 and (mask.size == 0 or mask[y, x]):
+                        total += d
+                        n += 1
+            if n:
+                out[p, reps + 8 + j] = total / n - z[p]
     return out
 
 
@@ -155,7 +183,8 @@ def features(names: Sequence[str], parents: Sequence[int], uv: NDArray[np.floati
                      np.asarray(uv, np.float64), np.asarray(z, np.float64),
                      np.asarray(confidence, np.float64),
                      np.where(par >= 0, par, np.arange(len(par))), int(np.argmin(par)),
-                     _mirrored(tuple(names)), _WINDOWS, _QUANTILES, k.fx, k.fy, k.cx, k.cy)
+                     _mirrored(tuple(names)), _WINDOWS, _QUANTILES, _PROBES, k.fx, k.fy, k.cx,
+                     k.cy)
 
 
 @functools.lru_cache(maxsize=16)
@@ -202,6 +231,11 @@ class PartRefiner:
         if not (np.isfinite(self.base).all() and np.isfinite(self.leaf).all()):
             raise ValueError('part refiner: values must be finite')
 
+    @functools.cached_property
+    def _silent(self) -> NDArray[np.bool_]:
+        """Which ensembles predict 0 whatever their input (an output a stage leaves alone)."""
+        return (self.base == 0) & ~self.leaf.reshape(len(self.leaf), -1).any(axis=1)
+
     @classmethod
     def stack(cls, groups: Sequence[str], trees: Sequence[BoostedTrees]) -> PartRefiner:
         """A one-stage refiner from ensembles of one shape, `len(OUTPUTS)` per group,
@@ -235,6 +269,7 @@ class PartRefiner:
                          first + stage * len(self.groups) * len(OUTPUTS), -1)
         k = len(OUTPUTS)
         ensemble = np.where(first[:, None] >= 0, first[:, None] + np.arange(k), -1).ravel()
+        ensemble[self._silent[ensemble] & (ensemble >= 0)] = -1
         # the arrays were checked when the refiner was made: straight to the kernel
         out = predict_kernel(np.ascontiguousarray(np.repeat(x, k, axis=0)), ensemble,
                              self.base.astype(np.float64), self.feature, self.threshold,
@@ -298,10 +333,13 @@ def targets(names: Sequence[str], uv: NDArray[np.floating], z: NDArray[np.floati
 
 def fit_refiner(names: Sequence[str], x: NDArray[np.floating], part: NDArray[np.integer],
                 target: NDArray[np.floating], *, trees: int = 200, depth: int = 5,
-                min_samples: int = 200) -> PartRefiner:
+                min_samples: int = 200, outputs: Sequence[str] = OUTPUTS) -> PartRefiner:
     """Fit the ensembles of each group of `names` on samples `x` (N, F) of parts `part` (N,)
     (indices into `names`) with `target` (N, 3) (`targets`; clipped to the largest
-    corrections). Groups with fewer than `min_samples` samples get none."""
+    corrections); only those of `outputs` (the others correct nothing). Groups with fewer than
+    `min_samples` samples get none."""
+    if not outputs or not set(outputs) <= set(OUTPUTS):
+        raise ValueError(f'outputs must be some of {OUTPUTS}, got {tuple(outputs)}')
     x = np.asarray(x, np.float64)
     part = np.asarray(part)
     limit = np.array([MAX_SHIFT_SCALES, MAX_SHIFT_SCALES, MAX_DEPTH_M])
@@ -313,7 +351,16 @@ def fit_refiner(names: Sequence[str], x: NDArray[np.floating], part: NDArray[np.
         if sel.sum() >= min_samples:
             groups.append(g)
             ensembles += [fit(x[sel], target[sel, k], trees=trees, depth=depth)
-                          for k in range(len(OUTPUTS))]
+                          if out in outputs else _nothing(trees, depth)
+                          for k, out in enumerate(OUTPUTS)]
     if not groups:
         raise ValueError(f'too few samples to fit a part refiner ({int(ok.sum())})')
     return PartRefiner.stack(groups, ensembles)
+
+
+def _nothing(trees: int, depth: int) -> BoostedTrees:
+    """An ensemble of the shape `fit` gives that predicts 0 (skipped by the predictor)."""
+    n = 2 ** depth - 1
+    return BoostedTrees(0.0, np.zeros((trees, n), np.int16),
+                        np.full((trees, n), np.inf, np.float32),
+                        np.zeros((trees, n + 1), np.float32))

@@ -38,7 +38,10 @@ innovation ``y_i = z_i - H s'_i`` and its covariance ``S_i``:
 - ``y_i^T S_i^-1 y_i <= gate_chi2``: the detection agrees with the prediction; it is used for the
   update and the part is DETECTED (its output is the filtered estimate, or the detection itself
   with ``output='detection'``, the literal reading of eq. 16).
-- beyond the gate: an outlier; the detection is rejected and the prediction is used (TRACKED).
+- beyond the gate: an outlier; the detection is rejected and the prediction is used (TRACKED),
+  unless it is within the gate of where the part was at the previous frame: a hand that stops or
+  turns back, which the prediction overshoots, is restarted on its detection
+  (`stop_hypothesis`).
 - when ``drift_frames`` consecutive detections are rejected but agree with each other (each within
   ``drift_radius_px`` per 1/30 s of the previous one), the filter is the one that drifted: the
   part is re-initialised on the detection (DETECTED).
@@ -125,6 +128,9 @@ class SlqeConfig:
     init_accel_std : prior standard deviation of a new part's acceleration, px/s^2.
     min_confidence : detections with a lower confidence are ignored (treated as missing).
     confidence_decay : factor applied to a part's confidence per frame it is only predicted.
+    stop_hypothesis : a detection beyond the gate that is within it of where the part was at
+        the previous frame (a part that stopped or turned back, which a constant-acceleration
+        prediction overshoots) restarts the part there, DETECTED, instead of being rejected.
     """
 
     order: int = 3
@@ -141,6 +147,7 @@ class SlqeConfig:
     init_accel_std: float = 1000.0
     min_confidence: float = 0.0
     confidence_decay: float = 0.9
+    stop_hypothesis: bool = True
 
     def __post_init__(self) -> None:
         if self.order not in (2, 3):
@@ -420,8 +427,8 @@ def _init_part(x: NDArray, cov: NDArray, i: int, z: NDArray, parent: int,
 
 
 def update(state: TrackState, uv: NDArray[np.floating], confidence: NDArray[np.floating] | None,
-           config: SlqeConfig, tree: PartTree, px_gain: float = 1.0
-           ) -> tuple[TrackState, UpdateInfo]:
+           config: SlqeConfig, tree: PartTree, px_gain: float = 1.0,
+           before: TrackState | None = None) -> tuple[TrackState, UpdateInfo]:
     """The measurement update of eqs. (13)-(15) with eq. (16)'s choice per part.
 
     Parameters
@@ -479,6 +486,13 @@ def update(state: TrackState, uv: NDArray[np.floating], confidence: NDArray[np.f
             rejected[i] = 0
             last_rejected[i] = np.nan
             continue
+        if config.stop_hypothesis and before is not None and before.active[i]:
+            p0 = np.arange(i * b, i * b + 2)
+            y0 = z[i] - before.x[p0]
+            s0 = before.cov[np.ix_(p0, p0)] + r_var[i] * np.eye(2)
+            if float(y0 @ np.linalg.solve(s0, y0)) <= config.gate_chi2:
+                restart.append(int(i))
+                continue
         consistent = np.all(np.isfinite(last_rejected[i])) and \
             float(np.hypot(*(z[i] - last_rejected[i]))) <= drift_radius
         rejected[i] = rejected[i] + 1 if consistent else 1
@@ -606,7 +620,8 @@ class SlqeTracker:
             last = None
         dt = 0.0 if last is None else stamp_s - last
         state = predict(self.state, dt, self.config, self.tree, px_gain)
-        state, info = update(state, uv, confidence, self.config, self.tree, px_gain)
+        state, info = update(state, uv, confidence, self.config, self.tree, px_gain,
+                             before=self.state)
         self.state = replace(state, stamp=stamp_s)
         return output(self.state, info, uv, confidence, self.config, px_gain)
 
