@@ -252,3 +252,19 @@ def test_frame_pck_scores_each_frame_by_the_table_rule(tiny_set: Path) -> None:
     pck = _draw.frame_pck('rgbd', row, frames)
     assert pck[0] == 100 and pck[1] == 0
     assert pck[2] == pytest.approx(100 * 7 / 14)
+
+
+def test_train_refine_runs_the_detector_and_refuses_too_few_parts(tiny_set: Path,
+                                                                   tmp_path: Path,
+                                                                   capsys) -> None:
+    """`--refine` runs the foreground and the shipped detector over the frames and fits each
+    stage on what it found; eight frames hold too few parts per group, which is said, and no
+    model file is written; stage counts below one are refused."""
+    out = tmp_path / 'refined.npz'
+    assert pose4d_main(['train', str(tiny_set), '--refine', 'rgbd_14', '--stages', '1',
+                        '--depth-stages', '1', '--out', str(out)]) == 2
+    assert 'too few samples to fit a part refiner' in capsys.readouterr().err
+    assert not out.exists()
+    assert pose4d_main(['train', str(tiny_set), '--refine', 'rgbd_14', '--stages', '0',
+                        '--out', str(out)]) == 2
+    assert '--stages must be >= 1' in capsys.readouterr().err

@@ -347,7 +347,9 @@ class RefinerFrame:
 
 def refiner_frames(model: PartModel, samples: list[Frame]) -> list[RefinerFrame]:
     """The foreground and `model`'s detector (its refiner left out) run over `samples` as the
-    nodes run them (each video in order, the previous frame guiding the arms)."""
+    nodes run them (each video in order, the previous frame guiding the arms), once for all
+    the stages: each frame's depth is kept in memory (0.3 MB at 320x240; 11,092 frames, 3.4
+    GB)."""
     foreground = ForegroundStage()
     detector = DetectorStage(replace(model, refiner=None))
     out = []
