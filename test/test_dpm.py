@@ -622,6 +622,8 @@ def test_jittered_positive_moves_the_crop_origin_not_the_labels() -> None:
         prepare_positive(f, 0, False, 20.0, cfg.tree, cfg, (-1, 0))
     with pytest.raises(ValueError, match='jitter'):
         TrainConfig(jitter=9)
+    with pytest.raises(ValueError, match='search_percent'):
+        TrainConfig(search_percent=50.0)
 
 
 def test_background_rooms_come_first_and_lose_depth_for_rgb() -> None:

@@ -116,6 +116,12 @@ def test_train_then_eval_and_bench(tiny_set: Path, tmp_path: Path, capsys) -> No
     assert_array_equal(a.depth_lookup, m.depth_lookup)
     assert_allclose(a.search_range_px, m.search_range_px)
     assert json.loads(a.metadata['calibrated'])['frames'] == 8
+    # a narrower search without depth: the middle 60 % of the people's scales
+    narrow = tmp_path / 'narrow.npz'
+    assert pose4d_main(['train', str(tiny_set), '--calibrate', str(model), '--search-percent',
+                        '20', '--out', str(narrow)]) == 0
+    lo20, hi20 = load_model(narrow).search_range_px
+    assert lo <= lo20 <= hi20 <= hi and (lo20, hi20) != (lo, hi)
     out, drawn = tmp_path / 'table.json', tmp_path / 'drawn'
     assert pose4d_main(['eval', str(tiny_set), '--json', str(out), '--model', str(model),
                         '--draw', str(drawn)]) == 0

@@ -37,7 +37,6 @@ from pose4d_ros.core.dpm.samples import (
 )
 from pose4d_ros.core.dpm.threads import set_blas_threads
 from pose4d_ros.core.dpm.train import (
-    SEARCH_PERCENT,
     calibrate,
     positive_scale,
     scale_span,
@@ -105,6 +104,9 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument('--cache-limit', type=int, default=20000, help='constraint cache size')
     p.add_argument('--max-negative-images', type=int, default=1500)
     p.add_argument('--no-flip', action='store_true', help='no mirrored positives')
+    p.add_argument('--search-percent', type=float, default=TrainConfig.search_percent,
+                   help='the search without depth covers the training people\'s person scales '
+                        'from this percentile to 100 minus it (also with --calibrate)')
     p.add_argument('--calibrate', type=Path, metavar='MODEL.npz',
                    help="no training: fit MODEL's part confidences and depth offsets again on "
                         'SOURCE (as the last step of training does) and write it to --out')
@@ -238,6 +240,7 @@ def run(args: argparse.Namespace) -> int:
                       structural_per_positive=args.poses_per_frame,
                       latent_radius=args.latent_radius, partial_labels=args.partial_labels,
                       min_labelled=args.min_labelled, jitter=args.jitter,
+                      search_percent=args.search_percent,
                       cache_limit=args.cache_limit, seed=args.seed)
     if args.out.suffix != '.npz':
         raise ValueError(f'{args.out}: the model file must end in .npz')
@@ -305,7 +308,7 @@ def recalibrate(args: argparse.Namespace, samples: list[Frame], t0: float) -> in
     scales = np.array([positive_scale(s, model.part_names, trained) for s in samples])
     scales = scales[scales > 2]
     if len(scales):
-        model = replace(model, search_range_px=scale_span(scales, SEARCH_PERCENT))
+        model = replace(model, search_range_px=scale_span(scales, args.search_percent))
     usable = [s for s in samples if part_joints(s, model.part_names)[1].sum() >= 2]
     n = int(cfg.get('calibration_samples', TrainConfig.calibration_samples))
     if len(usable) > n:

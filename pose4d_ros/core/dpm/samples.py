@@ -61,6 +61,8 @@ class TrainConfig:
         which a round's QP stops.
     lda_lambda : ridge of the background covariance, relative to its mean variance.
     calibration_samples : frames used to fit the confidence calibration.
+    search_percent : the search without depth covers the training people's person scales from
+        this percentile to 100 - it (`PartModel.search_range_px`, widened by a margin).
     levels_per_octave : pyramid density when mining background images.
     seed : everything random is drawn from it.
     """
@@ -94,6 +96,7 @@ class TrainConfig:
     qp_tol: float = 0.01
     lda_lambda: float = 0.1
     calibration_samples: int = 300
+    search_percent: float = 5.0
     levels_per_octave: int = 5
     seed: int = 0
 
@@ -115,6 +118,8 @@ class TrainConfig:
                              f'latent), got latent_radius {self.latent_radius}')
         if not 0 <= self.jitter <= 8:
             raise ValueError(f'jitter must be in 0..8 copies, got {self.jitter}')
+        if not 0 <= self.search_percent < 50:
+            raise ValueError(f'search_percent must be in [0, 50), got {self.search_percent}')
         if self.mining_rounds < 0:
             raise ValueError(f'mining_rounds must be >= 0, got {self.mining_rounds}')
 

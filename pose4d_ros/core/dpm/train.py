@@ -364,9 +364,9 @@ def calibrate(model: PartModel, samples: Sequence, *, use_depth: bool,
 
 
 # The person scales the training people leave out at each end: 1 % for the trained range
-# (`PartModel.scale_range_px`: mining, and the bounds of the depth-guided search), 5 % for the
-# search without depth (`PartModel.search_range_px`); each widened by SCALE_MARGIN
-SEARCH_PERCENT = 5.0
+# (`PartModel.scale_range_px`: mining, and the bounds of the depth-guided search),
+# `TrainConfig.search_percent` for the search without depth (`PartModel.search_range_px`);
+# each widened by SCALE_MARGIN
 SCALE_MARGIN = 1.15
 
 
@@ -467,7 +467,8 @@ def train(samples: Sequence, negatives: Sequence[Negative], cfg: TrainConfig, *,
     scale_range = scale_span(sc_arr, 1.0)
     say(f'{len(pos)} positives from {len(samples)} frames; person scale '
         f'{np.median(sc_arr):.1f} px (trained {scale_range[0]:.1f}-{scale_range[1]:.1f} px, '
-        'searched without depth {:.1f}-{:.1f} px)'.format(*scale_span(sc_arr, SEARCH_PERCENT)))
+        'searched without depth {:.1f}-{:.1f} px)'.format(*scale_span(sc_arr,
+                                                                     cfg.search_percent)))
 
     # 2. part types by k-means on offsets; anchors from the quantised cells
     k = cfg.n_types
@@ -594,7 +595,7 @@ def train(samples: Sequence, negatives: Sequence[Negative], cfg: TrainConfig, *,
         model = model_from_w(w, lay, tree, cfg, anchors, scale_range, white)
 
     # 5. calibration on training frames (a deterministic subset), searched as at run time
-    model = replace(model, search_range_px=scale_span(sc_arr, SEARCH_PERCENT))
+    model = replace(model, search_range_px=scale_span(sc_arr, cfg.search_percent))
     usable = [s for s in samples if part_joints(s, names)[1].sum() >= 2]
     if len(usable) > cfg.calibration_samples:
         idx = np.sort(rng.choice(len(usable), cfg.calibration_samples, replace=False))
