@@ -374,22 +374,26 @@ def refiner_frames(model: PartModel, samples: list[Frame]) -> list[RefinerFrame]
     return out
 
 
-def refiner_samples(model: PartModel, frames: list[RefinerFrame],
-                    earlier: PartRefiner | None = None
+def moved(frame: RefinerFrame, model: PartModel, stage: PartRefiner) -> RefinerFrame:
+    """`frame` with its parts where `stage` (one or more of `model`'s refiner stages) puts
+    them."""
+    uv, z = stage.apply(model.part_names, model.parents, frame.uv, frame.z, frame.confidence,
+                        frame.depth, frame.intrinsics)
+    return replace(frame, uv=uv, z=z)
+
+
+def refiner_samples(model: PartModel, frames: list[RefinerFrame]
                     ) -> tuple[NDArray[np.float32], NDArray[np.int64], NDArray[np.float64]]:
     """The training samples of a refiner stage: for every labelled part of `frames` with a
-    detection and a lifted depth, moved by the `earlier` stages, its features
+    detection and a lifted depth, where the stages before it put it, its features
     (`core.refine.features`), its index and what the stage is to learn
     (`core.refine.targets`)."""
     names = model.part_names
     xs, parts, ys = [], [], []
     for f in frames:
-        uv, z = f.uv, f.z
-        if earlier is not None:
-            uv, z = earlier.apply(names, model.parents, uv, z, f.confidence, f.depth,
-                                  f.intrinsics)
-        x = refine_features(names, model.parents, uv, z, f.confidence, f.depth, f.intrinsics)
-        y = targets(names, uv, z, f.true_uv, f.true_z, f.intrinsics.fx)
+        x = refine_features(names, model.parents, f.uv, f.z, f.confidence, f.depth,
+                            f.intrinsics)
+        y = targets(names, f.uv, f.z, f.true_uv, f.true_z, f.intrinsics.fx)
         use = f.labelled & np.isfinite(y).all(axis=1) & known_parts(x)
         xs.append(x[use])
         parts.append(np.flatnonzero(use))
@@ -408,13 +412,16 @@ def refine(args: argparse.Namespace, samples: list[Frame], t0: float) -> int:
                          f'and {args.depth_stages}')
     frames = refiner_frames(model, samples)
     t1 = time.time()
-    refiner = None
-    for stage in range(args.stages + args.depth_stages):
-        x, part, target = refiner_samples(model, frames, refiner)
+    refiner: PartRefiner | None = None
+    n_stages = args.stages + args.depth_stages
+    for stage in range(n_stages):
+        x, part, target = refiner_samples(model, frames)
         fitted = fit_refiner(model.part_names, x, part, target, trees=args.trees,
                              depth=args.tree_depth,
                              outputs=OUTPUTS if stage < args.stages else ('dz',))
         refiner = fitted if refiner is None else refiner.then(fitted)
+        if stage + 1 < n_stages:  # the next stage learns where this one puts the parts
+            frames = [moved(f, model, fitted) for f in frames]
         print(f'refiner stage {stage + 1}: {len(target)} parts, median residual '
               f'{1000 * np.median(np.abs(target[:, 2])):.1f} mm in depth, '
               f'{np.median(np.hypot(*target[:, :2].T)):.3f} person scales across')

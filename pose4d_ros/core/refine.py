@@ -62,6 +62,7 @@ OUTPUTS = ('du', 'dv', 'dz')
 # Largest correction learned or applied: person scales across the image, metres of depth
 MAX_SHIFT_SCALES = 1.0
 MAX_DEPTH_M = 0.4
+_LIMITS = np.array([MAX_SHIFT_SCALES, MAX_SHIFT_SCALES, MAX_DEPTH_M])  # per output
 
 
 def person_scale(z: NDArray[np.floating], fx: float) -> float:
@@ -274,8 +275,7 @@ class PartRefiner:
         out = predict_kernel(np.ascontiguousarray(np.repeat(x, k, axis=0)), ensemble,
                              self.base.astype(np.float64), self.feature, self.threshold,
                              self.leaf).reshape(len(names), k)
-        limit = np.array([MAX_SHIFT_SCALES, MAX_SHIFT_SCALES, MAX_DEPTH_M])
-        return np.clip(out, -limit, limit)
+        return np.clip(out, -_LIMITS, _LIMITS)
 
     def apply(self, names: Sequence[str], parents: Sequence[int], uv: NDArray[np.floating],
               z: NDArray[np.floating], confidence: NDArray[np.floating],
@@ -342,8 +342,7 @@ def fit_refiner(names: Sequence[str], x: NDArray[np.floating], part: NDArray[np.
         raise ValueError(f'outputs must be some of {OUTPUTS}, got {tuple(outputs)}')
     x = np.asarray(x, np.float64)
     part = np.asarray(part)
-    limit = np.array([MAX_SHIFT_SCALES, MAX_SHIFT_SCALES, MAX_DEPTH_M])
-    target = np.clip(np.asarray(target, np.float64), -limit, limit)
+    target = np.clip(np.asarray(target, np.float64), -_LIMITS, _LIMITS)
     ok = known_parts(x) & np.isfinite(target).all(axis=1)
     groups, ensembles = [], []
     for g in dict.fromkeys(group_of(n) for n in names):

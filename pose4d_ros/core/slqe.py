@@ -426,6 +426,16 @@ def _init_part(x: NDArray, cov: NDArray, i: int, z: NDArray, parent: int,
     cov[sl, sl] = np.diag(np.square(stds))
 
 
+def _mahalanobis2(y: NDArray[np.float64], s: NDArray[np.float64]) -> NDArray[np.float64]:
+    """y_n^T S_n^-1 y_n for innovations `y` (N, 2) and covariances `s` (N, 2, 2), in closed
+    form; inf where S_n is not positive definite."""
+    det = s[:, 0, 0] * s[:, 1, 1] - s[:, 0, 1] * s[:, 1, 0]
+    with np.errstate(divide='ignore', invalid='ignore'):
+        d2 = (s[:, 1, 1] * y[:, 0] ** 2 + s[:, 0, 0] * y[:, 1] ** 2
+              - (s[:, 0, 1] + s[:, 1, 0]) * y[:, 0] * y[:, 1]) / det
+    return np.where(det > 0, d2, math.inf)
+
+
 def update(state: TrackState, uv: NDArray[np.floating], confidence: NDArray[np.floating] | None,
            config: SlqeConfig, tree: PartTree, px_gain: float = 1.0,
            before: TrackState | None = None) -> tuple[TrackState, UpdateInfo]:
@@ -474,11 +484,7 @@ def update(state: TrackState, uv: NDArray[np.floating], confidence: NDArray[np.f
         pos = gated[:, None] * b + np.arange(2)[None, :]
         y_all = z[gated] - x[pos]
         s_all = cov[pos[:, :, None], pos[:, None, :]] + r_var[gated, None, None] * np.eye(2)
-        det = s_all[:, 0, 0] * s_all[:, 1, 1] - s_all[:, 0, 1] * s_all[:, 1, 0]
-        with np.errstate(divide='ignore', invalid='ignore'):
-            d2_all = (s_all[:, 1, 1] * y_all[:, 0] ** 2 + s_all[:, 0, 0] * y_all[:, 1] ** 2
-                      - (s_all[:, 0, 1] + s_all[:, 1, 0]) * y_all[:, 0] * y_all[:, 1]) / det
-        d2_all = np.where(det > 0, d2_all, math.inf)
+        d2_all = _mahalanobis2(y_all, s_all)
         nis[gated] = d2_all
     for i, d2 in zip(gated, d2_all if len(gated) else [], strict=True):
         if d2 <= config.gate_chi2:
@@ -488,9 +494,8 @@ def update(state: TrackState, uv: NDArray[np.floating], confidence: NDArray[np.f
             continue
         if config.stop_hypothesis and before is not None and before.active[i]:
             p0 = np.arange(i * b, i * b + 2)
-            y0 = z[i] - before.x[p0]
             s0 = before.cov[np.ix_(p0, p0)] + r_var[i] * np.eye(2)
-            if float(y0 @ np.linalg.solve(s0, y0)) <= config.gate_chi2:
+            if _mahalanobis2((z[i] - before.x[p0])[None], s0[None])[0] <= config.gate_chi2:
                 restart.append(int(i))
                 continue
         consistent = np.all(np.isfinite(last_rejected[i])) and \

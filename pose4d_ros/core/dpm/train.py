@@ -245,6 +245,14 @@ def choose_depth_lookup(right: NDArray[np.bool_], rays: NDArray[np.float64],
     return best, best_offset
 
 
+def right_parts(found: NDArray[np.floating], uv: NDArray[np.floating],
+                vis: NDArray[np.bool_], alpha: float) -> NDArray[np.bool_]:
+    """Which of the labelled parts (`vis`) at `uv` the detected ones at `found` place within
+    alpha * the size of the labelled parts' box (the calibration's 'right')."""
+    size = np.max(np.ptp(uv[vis], axis=0))
+    return vis & (np.hypot(*(found - uv).T) <= alpha * size)
+
+
 # The scale priors the calibration of a model searched without depth chooses from (score per
 # octave of person scale, `PartModel.scale_prior`)
 SCALE_PRIORS = (0.0, 0.5, 1.0, 2.0, 3.0, 4.0)
@@ -274,12 +282,11 @@ def choose_scale_prior(model: PartModel, samples: Sequence, *, alpha: float = 0.
                                for lev in det.pyramid(s.color, None, plan)) if p]
         if not best:
             continue
-        size = np.max(np.ptp(uv[vis], axis=0))
         octave = np.log2(model.canonical_scale_px / np.array([p.scale for p in best]))
         score = np.array([p.score for p in best])
         for i, prior in enumerate(SCALE_PRIORS):
             p = best[int(np.argmax(score + prior * octave))]
-            right[i] += np.sum(vis & (np.hypot(*(p.uv - uv).T) <= alpha * size))
+            right[i] += np.sum(right_parts(p.uv, uv, vis, alpha))
     return float(SCALE_PRIORS[int(np.argmax(right))])
 
 
@@ -321,8 +328,7 @@ def calibrate(model: PartModel, samples: Sequence, *, use_depth: bool,
         if not poses:
             continue
         p = poses[0]
-        size = np.max(np.ptp(uv[vis], axis=0))
-        right = vis & (np.hypot(*(p.uv - uv).T) <= alpha * size)
+        right = right_parts(p.uv, uv, vis, alpha)
         for i in np.flatnonzero(vis):
             xs.append((i, p.part_scores[i], p.score))
             ys.append(float(right[i]))
