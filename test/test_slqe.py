@@ -66,7 +66,7 @@ def test_transition_has_tree_block_structure() -> None:
     dt = 1.0 / FPS
     a = transition_matrix(dt, cfg, CHAIN)
     assert a.shape == (18, 18)
-    f = axis_transition(dt, 3)
+    f = axis_transition(dt, 3, cfg.accel_time_s)
     k = coupling_at(dt, 0.3)
     assert_allclose(k, 0.3)
     blk = {(i, j): a[6 * i:6 * i + 6, 6 * j:6 * j + 6] for i in range(3) for j in range(3)}
@@ -109,6 +109,21 @@ def test_irregular_dt_composes() -> None:
         qa, qb = axis_process_noise(0.03, order, 7.0), axis_process_noise(0.11, order, 7.0)
         assert_allclose(fb @ qa @ fb.T + qb, axis_process_noise(0.14, order, 7.0), rtol=1e-9)
     assert_allclose(coupling_at(0.1, 0.2), 1 - 0.8 ** 3)
+
+
+def test_singer_acceleration_decays_and_composes() -> None:
+    """With `accel_time_s` the acceleration decays as exp(-dt / tau), integrated exactly into
+    velocity and position (so irregular steps still compose); a long time constant is the
+    paper's constant acceleration."""
+    tau = 0.2
+    fa, fb = axis_transition(0.03, 3, tau), axis_transition(0.11, 3, tau)
+    assert_allclose(fb @ fa, axis_transition(0.14, 3, tau), atol=1e-12)
+    s = axis_transition(0.1, 3, tau) @ np.array([0.0, 0.0, 100.0])
+    assert_allclose(s[2], 100.0 * math.exp(-0.5))
+    assert_allclose(s[1], 100.0 * tau * (1 - math.exp(-0.5)))  # the integral of a(t)
+    assert 0 < s[0] < 0.5 * 100.0 * 0.1 ** 2
+    assert_allclose(axis_transition(0.1, 3, 1e6), axis_transition(0.1, 3), atol=1e-6)
+    assert_allclose(axis_transition(0.1, 2, tau), axis_transition(0.1, 2))  # order 2: no-op
 
 
 def test_process_noise_is_block_diagonal_psd() -> None:
@@ -259,6 +274,27 @@ def test_a_body_that_stops_dead_is_followed_at_once(stop: bool) -> None:
         assert err(pos[31, 3], truth[31, 3]) > 20.0
 
 
+@pytest.mark.parametrize('shadow', [5, 0])
+def test_a_restart_on_wrong_detections_is_undone(shadow: int) -> None:
+    """Three detections of a wrist agree on a wrong place 40 px away, so the filter restarts
+    there (it cannot tell a drift from a stuck detector); when the right detections come back,
+    the track kept from before the restart takes them at once instead of rejecting them as
+    outliers of the wrong track."""
+    rng = np.random.default_rng(2)
+    t, truth = linear_tracks(rng, 60)
+    noisy = truth + rng.normal(0, 1.0, truth.shape)
+    noisy[30:33, 3] += [40.0, 0.0]
+    tracker = SlqeTracker(SlqeConfig(shadow_frames=shadow), PARTS_10)
+    pos, src = run(tracker, t, noisy)
+    assert (src[30:32, 3] == Source.TRACKED).all() and src[32, 3] == Source.DETECTED
+    assert err(pos[32, 3], truth[32, 3]) > 30.0  # followed the wrong place
+    if shadow:
+        assert (src[33:, 3] == Source.DETECTED).all()
+        assert err(pos[33:, 3], truth[33:, 3]).max() < 8.0
+    else:
+        assert src[33, 3] == Source.TRACKED and err(pos[33, 3], truth[33, 3]) > 20.0
+
+
 def test_reset_and_time_going_back() -> None:
     tracker = SlqeTracker(SlqeConfig(), PARTS_10)
     z = np.tile([[100.0, 100.0]], (10, 1))
@@ -313,6 +349,7 @@ def test_bad_input_is_refused(uv, conf, stamp) -> None:
 @pytest.mark.parametrize('kwargs', [
     {'order': 4}, {'coupling': 1.0}, {'coupling': -0.1}, {'process_noise': 0.0},
     {'gate_chi2': -1.0}, {'output': 'best'}, {'confidence_decay': 0.0},
+    {'accel_time_s': 0.0}, {'shadow_frames': -1},
 ])
 def test_bad_config_is_refused(kwargs) -> None:
     with pytest.raises(ValueError):

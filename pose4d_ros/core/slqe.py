@@ -20,11 +20,16 @@ acceleration are blended with its parent's before they are integrated,
     d_c <- (1 - k) d_c + k d_p          (d = velocity and acceleration)
     A_cc = F(dt) diag(1, 1 - k, 1 - k) (x) I2,      A_cp = F(dt) diag(0, k, k) (x) I2,
 
-with ``F(dt)`` the constant-acceleration transition of one axis (``A1`` of the paper) and ``k``
+with ``F(dt)`` the kinematic transition of one axis (``A1`` of the paper) and ``k``
 the coupling (`SlqeConfig.coupling` per 1/30 s, rescaled for other ``dt`` so that the pull per
 second does not depend on the frame rate). ``k = 0`` gives independent parts. The root (neck)
 has ``A_rr = F``. An occluded wrist thus keeps moving with its shoulder rather than flying off
 along its last velocity.
+
+One change to ``A1``: the acceleration decays with a time constant (`accel_time_s`, Singer's
+manoeuvre model, integrated exactly into velocity and position) instead of persisting, because
+a waving hand's acceleration turns within a fifth of a second: kept, it carries a part whose
+detections are rejected far past the point where it turned.
 
 ``Q(dt)`` is the discretised white noise of the highest derivative (jerk for constant
 acceleration, acceleration for constant velocity) with spectral density
@@ -45,6 +50,9 @@ innovation ``y_i = z_i - H s'_i`` and its covariance ``S_i``:
 - when ``drift_frames`` consecutive detections are rejected but agree with each other (each within
   ``drift_radius_px`` per 1/30 s of the previous one), the filter is the one that drifted: the
   part is re-initialised on the detection (DETECTED).
+- a restart may follow a detector stuck on a wrong place for a few frames; so the track from
+  before it is kept, predicted, for `shadow_frames`, and a detection beyond the gate but within
+  that track's brings it back (DETECTED).
 
 Pixels depend on the person's distance and the camera's resolution: a hand moves twice as many
 pixels per second at 1.5 m as at 3 m, or at 640x480 as at 320x240. So the parameters in pixels
@@ -103,7 +111,8 @@ class SlqeConfig:
     The defaults of `coupling`, `process_noise`, `measurement_noise_px`, `gate_chi2` and
     `output` were tuned on real motion (UTKinect subjects s01-s06 at 30 fps, 320x240, detector-
     like corruption: 3 px noise, 10 % outliers 20-60 px away, 5 % dropouts; see
-    `cli._motion_eval.tune_tracking`).
+    `cli._motion_eval.tune_tracking`); `accel_time_s` and `shadow_frames` on the detector's own
+    output on the validation renders (val30, tune30_wide, tune30_arms; models README).
 
     Attributes
     ----------
@@ -131,6 +140,13 @@ class SlqeConfig:
     stop_hypothesis : a detection beyond the gate that is within it of where the part was at
         the previous frame (a part that stopped or turned back, which a constant-acceleration
         prediction overshoots) restarts the part there, DETECTED, instead of being rejected.
+    accel_time_s : time constant of the acceleration, seconds: it decays as
+        ``exp(-dt / accel_time_s)`` (Singer's manoeuvre model: a hand's acceleration turns
+        within a wave); `inf` = the paper's constant acceleration. Order 3 only.
+    shadow_frames : after a part is restarted on a detection (drift or stop hypothesis), its
+        previous track is kept, predicted, for this many frames: a later detection beyond the
+        gate but within that track's brings the track back (the restart followed a wrong
+        detection). 0 disables.
     """
 
     order: int = 3
@@ -148,6 +164,8 @@ class SlqeConfig:
     min_confidence: float = 0.0
     confidence_decay: float = 0.9
     stop_hypothesis: bool = True
+    accel_time_s: float = 0.2
+    shadow_frames: int = 5
 
     def __post_init__(self) -> None:
         if self.order not in (2, 3):
@@ -156,15 +174,16 @@ class SlqeConfig:
         if not 0.0 <= self.coupling < 1.0:
             raise ValueError(f'coupling must be in [0, 1), got {self.coupling}')
         for name in ('process_noise', 'measurement_noise_px', 'gate_chi2', 'drift_radius_px',
-                     'max_dt_s', 'init_velocity_std', 'init_accel_std'):
+                     'max_dt_s', 'init_velocity_std', 'init_accel_std', 'accel_time_s'):
             value = getattr(self, name)
             if not value > 0:
                 raise ValueError(f'{name} must be positive, got {value}')
         if self.output not in ('filtered', 'detection'):
             raise ValueError(f"output must be 'filtered' or 'detection', got {self.output!r}")
-        if self.drift_frames < 0 or self.max_missed_frames < 0:
-            raise ValueError(f'drift_frames ({self.drift_frames}) and max_missed_frames '
-                             f'({self.max_missed_frames}) must be >= 0')
+        if min(self.drift_frames, self.max_missed_frames, self.shadow_frames) < 0:
+            raise ValueError(f'drift_frames ({self.drift_frames}), max_missed_frames '
+                             f'({self.max_missed_frames}) and shadow_frames '
+                             f'({self.shadow_frames}) must be >= 0')
         if not 0.0 <= self.min_confidence <= 1.0:
             raise ValueError(f'min_confidence must be in [0, 1], got {self.min_confidence}')
         if not 0.0 < self.confidence_decay <= 1.0:
@@ -190,6 +209,9 @@ class TrackState:
     rejected : (P,) int64, consecutive rejected detections that agree with each other.
     last_rejected : (P, 2) float64, the last rejected detection (NaN if none), pixels.
     confidence : (P,) float64, 0..1, confidence of the current estimate.
+    shadow_x, shadow_cov : (P, B) and (P, B, B) float64, each part's track from before its last
+        restart, predicted on (`SlqeConfig.shadow_frames`).
+    shadow_left : (P,) int64, frames that track is still kept (0 = none).
     stamp : time of the last frame, seconds; None before the first frame.
     dt : the time step of the last prediction, seconds.
     """
@@ -201,6 +223,9 @@ class TrackState:
     rejected: NDArray[np.int64]
     last_rejected: NDArray[np.float64]
     confidence: NDArray[np.float64]
+    shadow_x: NDArray[np.float64]
+    shadow_cov: NDArray[np.float64]
+    shadow_left: NDArray[np.int64]
     stamp: float | None = None
     dt: float = NOMINAL_DT_S
 
@@ -249,11 +274,14 @@ def initial_state(n_parts: int, config: SlqeConfig) -> TrackState:
     """A state with no part tracked yet."""
     if n_parts <= 0:
         raise ValueError(f'n_parts must be positive, got {n_parts}')
-    n = n_parts * config.block
+    b = config.block
+    n = n_parts * b
     return TrackState(
         x=np.zeros(n), cov=np.zeros((n, n)), active=np.zeros(n_parts, bool),
         missed=np.zeros(n_parts, np.int64), rejected=np.zeros(n_parts, np.int64),
-        last_rejected=np.full((n_parts, 2), np.nan), confidence=np.zeros(n_parts), stamp=None)
+        last_rejected=np.full((n_parts, 2), np.nan), confidence=np.zeros(n_parts),
+        shadow_x=np.zeros((n_parts, b)), shadow_cov=np.zeros((n_parts, b, b)),
+        shadow_left=np.zeros(n_parts, np.int64), stamp=None)
 
 
 def _kron_i2(m: NDArray[np.float64]) -> NDArray[np.float64]:
@@ -265,12 +293,21 @@ def _kron_i2(m: NDArray[np.float64]) -> NDArray[np.float64]:
     return out
 
 
-def axis_transition(dt: float, order: int) -> NDArray[np.float64]:
-    """F(dt): one axis's (order x order) kinematic transition, ``F_ij = dt^(j-i) / (j-i)!``."""
+def axis_transition(dt: float, order: int, accel_time_s: float = math.inf
+                    ) -> NDArray[np.float64]:
+    """F(dt): one axis's (order x order) kinematic transition, ``F_ij = dt^(j-i) / (j-i)!``;
+    with a finite `accel_time_s` (order 3) the acceleration decays as ``exp(-dt / tau)``
+    (Singer's model, integrated exactly into velocity and position)."""
     f = np.zeros((order, order))
     for i in range(order):
         for j in range(i, order):
             f[i, j] = dt ** (j - i) / math.factorial(j - i)
+    if order == 3 and math.isfinite(accel_time_s):
+        tau = accel_time_s
+        lost = -math.expm1(-dt / tau)  # 1 - exp(-dt / tau), exact for small steps too
+        f[0, 2] = tau * tau * (dt / tau - lost)
+        f[1, 2] = tau * lost
+        f[2, 2] = 1.0 - lost
     return f
 
 
@@ -312,7 +349,7 @@ def transition_matrix(dt: float, config: SlqeConfig, tree: PartTree,
     """
     n_parts = len(tree)
     order, b = config.order, config.block
-    f = axis_transition(dt, order)
+    f = axis_transition(dt, order, config.accel_time_s)
     k = coupling_at(dt, config.coupling)
     own = _kron_i2(f)
     d_own = np.ones(order)
@@ -390,7 +427,18 @@ def predict(state: TrackState, dt: float, config: SlqeConfig, tree: PartTree,
     x[inactive] = 0.0
     cov[inactive, :] = 0.0
     cov[:, inactive] = 0.0
-    return replace(state, x=x, cov=0.5 * (cov + cov.T), dt=dt)
+    shadow_x, shadow_cov = state.shadow_x, state.shadow_cov
+    kept = np.flatnonzero(state.shadow_left > 0)
+    if len(kept):
+        # a kept track moves on by its own kinematics (its parent's pull was in the old state)
+        b = config.block
+        f = _kron_i2(axis_transition(dt, config.order, config.accel_time_s))
+        q_own = (px_gain * px_gain) * q[:b, :b]
+        shadow_x, shadow_cov = shadow_x.copy(), shadow_cov.copy()
+        shadow_x[kept] = shadow_x[kept] @ f.T
+        shadow_cov[kept] = f @ shadow_cov[kept] @ f.T + q_own
+    return replace(state, x=x, cov=0.5 * (cov + cov.T), shadow_x=shadow_x,
+                   shadow_cov=shadow_cov, dt=dt)
 
 
 def _check_measurement(uv: NDArray, confidence: NDArray | None, n_parts: int
@@ -471,6 +519,8 @@ def update(state: TrackState, uv: NDArray[np.floating], confidence: NDArray[np.f
     active = state.active.copy()
     missed, rejected = state.missed.copy(), state.rejected.copy()
     last_rejected, out_conf = state.last_rejected.copy(), state.confidence.copy()
+    shadow_x, shadow_cov = state.shadow_x.copy(), state.shadow_cov.copy()
+    shadow_left = np.maximum(state.shadow_left - 1, 0)
     source = np.full(n_parts, Source.MISSING, np.uint8)
     source[active] = Source.TRACKED
     nis = np.full(n_parts, np.nan)
@@ -498,6 +548,20 @@ def update(state: TrackState, uv: NDArray[np.floating], confidence: NDArray[np.f
             if _mahalanobis2((z[i] - before.x[p0])[None], s0[None])[0] <= config.gate_chi2:
                 restart.append(int(i))
                 continue
+        if state.shadow_left[i] > 0:
+            s1 = shadow_cov[i, :2, :2] + r_var[i] * np.eye(2)
+            if _mahalanobis2((z[i] - shadow_x[i, :2])[None], s1[None])[0] <= config.gate_chi2:
+                # the last restart followed a wrong detection: back to the track kept
+                sl = slice(i * b, (i + 1) * b)
+                x[sl] = shadow_x[i]
+                cov[sl, :] = 0.0
+                cov[:, sl] = 0.0
+                cov[sl, sl] = shadow_cov[i]
+                shadow_left[i] = 0
+                accepted.append(int(i))
+                rejected[i] = 0
+                last_rejected[i] = np.nan
+                continue
         consistent = np.all(np.isfinite(last_rejected[i])) and \
             float(np.hypot(*(z[i] - last_rejected[i]))) <= drift_radius
         rejected[i] = rejected[i] + 1 if consistent else 1
@@ -522,7 +586,13 @@ def update(state: TrackState, uv: NDArray[np.floating], confidence: NDArray[np.f
         missed[accepted] = 0
         out_conf[accepted] = conf[accepted]
 
-    # New parts and drifted parts start on their detection, parents first.
+    # New parts and drifted parts start on their detection, parents first; a restarted part's
+    # track is kept a while in case the detection followed was the wrong one
+    if config.shadow_frames and restart:
+        for i in restart:
+            sl = slice(i * b, (i + 1) * b)
+            shadow_x[i], shadow_cov[i] = x[sl], cov[sl, sl]
+            shadow_left[i] = config.shadow_frames
     for i in sorted(set(np.flatnonzero(valid & ~state.active)) | set(restart)):
         _init_part(x, cov, i, z[i], tree.parents[i], active, config, r_var[i], px_gain)
         active[i] = True
@@ -547,8 +617,10 @@ def update(state: TrackState, uv: NDArray[np.floating], confidence: NDArray[np.f
         rejected[lost] = 0
         last_rejected[lost] = np.nan
         out_conf[lost] = 0.0
+        shadow_left[lost] = 0
     new = replace(state, x=x, cov=cov, active=active, missed=missed, rejected=rejected,
-                  last_rejected=last_rejected, confidence=out_conf)
+                  last_rejected=last_rejected, confidence=out_conf, shadow_x=shadow_x,
+                  shadow_cov=shadow_cov, shadow_left=shadow_left)
     return new, UpdateInfo(source=source, nis=nis)
 
 
