@@ -727,8 +727,8 @@ class CvConfig:
     drift_radius_px: float = 15.0
 
     def to_slqe(self) -> SlqeConfig:
-        """The same filter as an `SlqeConfig` (order 2, no coupling)."""
-        return SlqeConfig(order=2, coupling=0.0, process_noise=self.process_noise,
+        """The same filter as an `SlqeConfig` (order 2, no coupling, no kept tracks)."""
+        return SlqeConfig(order=2, coupling=0.0, shadow_frames=0, process_noise=self.process_noise,
                           measurement_noise_px=self.measurement_noise_px,
                           gate_chi2=self.gate_chi2, max_missed_frames=self.max_missed_frames,
                           max_dt_s=self.max_dt_s, drift_frames=self.drift_frames,
