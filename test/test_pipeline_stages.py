@@ -24,6 +24,7 @@ from pose4d_ros.core.pipeline import (
     warm_up_frame,
 )
 from pose4d_ros.core.skeleton import MIDPOINTS, PARTS_10, PARTS_14, PARTS_22, SKELETON_14
+from pose4d_ros.core.slqe import SlqeConfig
 from pose4d_ros.models import model_path
 
 
@@ -157,7 +158,9 @@ def test_a_part_coasting_off_the_image_is_lost():
     for k in range(12):  # the ankle runs down the image at 3 m/s
         stage.step(_parts(offset=np.where(np.arange(10)[:, None] == i, [0, 0.1 * k, 0], 0)),
                    5.0 + k / 30, INTR)
-    outs = [stage.step(_parts(drop=('left_ankle',)), 5.4 + k / 30, INTR) for k in range(30)]
+    # undetected for longer than the filter coasts (`SlqeConfig.max_missed_frames`)
+    n = SlqeConfig().max_missed_frames + 2
+    outs = [stage.step(_parts(drop=('left_ankle',)), 5.4 + k / 30, INTR) for k in range(n)]
     v = [o.uv[i, 1] for o in outs if o.source[i] == cj.TRACKED]
     assert v and max(v) <= 2 * INTR.height  # predicted on or near the image, then lost
     assert outs[-1].source[i] == cj.MISSING and np.isnan(outs[-1].uv[i]).all()
