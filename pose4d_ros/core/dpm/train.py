@@ -49,7 +49,7 @@ from __future__ import annotations
 
 import json
 import time
-from collections.abc import Iterable, Sequence
+from collections.abc import Iterable, Iterator, Sequence
 from dataclasses import asdict, dataclass, field, replace
 
 import numpy as np
@@ -245,6 +245,17 @@ def choose_depth_lookup(right: NDArray[np.bool_], rays: NDArray[np.float64],
     return best, best_offset
 
 
+def _labelled(samples: Sequence, names: Sequence[str], progress: Progress | None, what: str
+              ) -> Iterator[tuple[object, NDArray, NDArray, NDArray]]:
+    """(sample, uv, xyz, visible) of each sample with at least two of `names` labelled, behind
+    a progress bar named `what` when `progress` is given (the calibration's loops)."""
+    it: Iterable = samples if progress is None else progress(samples, what, len(samples))
+    for s in it:
+        uv, xyz, vis = s.truth.labelled(names)
+        if vis.sum() >= 2:
+            yield s, uv, xyz, vis
+
+
 def right_parts(found: NDArray[np.floating], uv: NDArray[np.floating],
                 vis: NDArray[np.bool_], alpha: float) -> NDArray[np.bool_]:
     """Which of the labelled parts (`vis`) at `uv` the detected ones at `found` place within
@@ -268,13 +279,7 @@ def choose_scale_prior(model: PartModel, samples: Sequence, *, alpha: float = 0.
     """
     det = Detector(replace(model, scale_prior=0.0))
     right = np.zeros(len(SCALE_PRIORS))
-    it: Iterable = samples
-    if progress is not None:
-        it = progress(it, 'scale prior', len(samples))
-    for s in it:
-        uv, _, vis = s.truth.labelled(model.part_names)
-        if vis.sum() < 2:
-            continue
+    for s, uv, _, vis in _labelled(samples, model.part_names, progress, 'scale prior'):
         plan = det.plan(s.color.shape[:2], None)
         if plan is None:
             continue
@@ -308,13 +313,7 @@ def calibrate(model: PartModel, samples: Sequence, *, use_depth: bool,
     det = Detector(model)
     xs, ys = [], []
     seen: list[list] = [[] for _ in model.part_names]  # (right, ray, truth, depths) per part
-    it: Iterable = samples
-    if progress is not None:
-        it = progress(it, 'calibration', len(samples))
-    for s in it:
-        uv, xyz, vis = s.truth.labelled(model.part_names)
-        if vis.sum() < 2:
-            continue
+    for s, uv, xyz, vis in _labelled(samples, model.part_names, progress, 'calibration'):
         mask = None
         if use_depth and s.depth_m is not None:
             mask = s.mask
