@@ -179,6 +179,34 @@ def test_occluder_in_front_is_cut_off() -> None:
     assert iou(r.mask, truth) > 0.8
 
 
+def test_a_person_too_near_to_be_seen_whole() -> None:
+    # a 1.4 m person 1 m from the camera: head to thighs, 0.72 m of body down to the image's
+    # bottom edge, under the 0.8 m a whole person must have
+    depth, masks, _ = render_boxes(box_person(z=1.0, stature=1.4))
+    truth = union(masks)
+    assert truth[-1].any()  # cut by the bottom edge
+    r = segment(depth, K)
+    assert r.found
+    assert iou(r.mask, truth) > 0.95
+    whole_only = dataclasses.replace(ForegroundConfig(), person_min_cut_height_m=0.8)
+    assert not segment(depth, K, config=whole_only).found
+
+
+def test_a_whole_person_comes_before_a_region_cut_by_the_bottom_edge() -> None:
+    # an open shelf 1 m from the camera, cut by the bottom edge, passes for a person too near
+    # to be seen whole when it is alone in view; a whole person in view is taken instead
+    shelf = [(-0.95, -0.85, CAM_HEIGHT - 1.3, CAM_HEIGHT, 0.95, 1.1),
+             (-0.95, -0.35, CAM_HEIGHT - 1.3, CAM_HEIGHT - 1.2, 0.95, 1.1),
+             (-0.45, -0.35, CAM_HEIGHT - 1.3, CAM_HEIGHT, 0.95, 1.1)]
+    depth, masks, _ = render_boxes(shelf)
+    alone = segment(depth, K)
+    assert alone.found and iou(alone.mask, union(masks)) > 0.8
+    depth, masks, _ = render_boxes(shelf + box_person(x=0.5, z=2.8))
+    r = segment(depth, K)
+    assert r.found
+    assert iou(r.mask, union(masks[3:])) > 0.9
+
+
 def test_previous_result_keeps_the_same_person() -> None:
     # two people of similar size: without history the larger wins, with the previous box on
     # the other one, that one is kept (the temporal bonus outweighs a small size difference)
@@ -292,6 +320,7 @@ def test_apply_mask_checks_shapes() -> None:
     ('connectivity', 6),
     ('tree_step', 5),
     ('person_min_height_m', 3.0),
+    ('person_min_cut_height_m', 2.5),
     ('person_max_width_m', -0.5),
     ('person_max_fill', 1.5),
     ('floor_rows_fraction', 0.0),

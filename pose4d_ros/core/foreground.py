@@ -39,7 +39,11 @@ Steps of `segment` (one depth frame, float32 metres, NaN = no reading):
    ``n_px z^2 / (fx fy)``, fill of its box, depth extent, and, with a floor, the height above
    the floor of its top rows (head or hands) and bottom rows (feet or the occluder's top).
    The best-scoring part wins; with `previous`, a part overlapping the previous box gets
-   `previous_bonus`.
+   `previous_bonus`. A person nearer than the camera sees whole (1.2 m away, head to thighs)
+   is cut by the image's bottom edge and shorter than a whole person may be: when no part
+   passes the rules, parts cut by that edge get smaller lower bounds on height and surface
+   and no rule on their bottom rows (`person_min_cut_height_m`); the best few such regions
+   are examined besides the best few others, never in their place.
 5. Completion. No-reading pixels that a small closing of the mask adds (Kinect loses the
    readings in a ragged band along depth edges) join the mask; optionally, holes of no-reading
    pixels are filled.
@@ -112,6 +116,10 @@ class ForegroundConfig:
         resolution.
     person_min_height_m, person_max_height_m : height of a person region, metres (box height
         times median depth over fy).
+    person_min_cut_height_m : smallest height of a region cut by the image's bottom edge (a
+        person nearer than the camera sees whole: head and shoulders down to the edge),
+        metres; its smallest surface is `person_min_area_m2` in the same proportion, and its
+        bottom rows are the edge, not its feet, so the bottom rule does not apply to it.
     person_min_width_m, person_max_width_m : width, metres (box width times depth over fx).
     person_min_area_m2, person_max_area_m2 : surface of a person region seen from the
         camera, square metres (pixels times depth squared over fx fy).
@@ -165,6 +173,7 @@ class ForegroundConfig:
     tree_step: int = 2
     person_min_height_m: float = 0.8
     person_max_height_m: float = 2.3
+    person_min_cut_height_m: float = 0.4
     person_min_width_m: float = 0.15
     person_max_width_m: float = 2.0
     person_min_area_m2: float = 0.1
@@ -218,6 +227,7 @@ class ForegroundConfig:
         if self.connectivity not in (4, 8):
             raise ValueError(f'connectivity must be 4 or 8, got {self.connectivity}')
         for lo, hi in (('person_min_height_m', 'person_max_height_m'),
+                       ('person_min_cut_height_m', 'person_max_height_m'),
                        ('person_min_area_m2', 'person_max_area_m2'),
                        ('person_min_top_m', 'person_max_top_m'),
                        ('person_min_width_m', 'person_max_width_m'),
@@ -254,6 +264,11 @@ class ForegroundConfig:
         for name in ('stability_weight', 'previous_bonus', 'border_penalty'):
             if not getattr(self, name) >= 0:
                 raise ValueError(f'{name} must be >= 0, got {getattr(self, name)}')
+
+    @property
+    def min_cut_area_m2(self) -> float:
+        """Smallest surface of a region cut by the image's bottom edge, square metres."""
+        return self.person_min_area_m2 * self.person_min_cut_height_m / self.person_min_height_m
 
     @property
     def metres_per_level(self) -> float:
@@ -710,6 +725,8 @@ def segment(depth_m: NDArray[np.floating], intrinsics: Intrinsics, *,
     prev_box = previous.box if previous is not None and previous.found else None
     scores = [part_score(pt, config, prev_box) for pt in parts]
     ok = [k for k, pt in enumerate(parts) if person_rules(pt, config)]
+    if not ok:  # a person too near to be seen whole, only when no whole one is in view
+        ok = [k for k, pt in enumerate(parts) if person_rules(pt, config, near=True)]
     if not ok:
         return _not_found((h, w), REASON_NO_PERSON, floor)
     best = parts[max(ok, key=lambda k: scores[k])]
@@ -809,7 +826,8 @@ class Part:
     box : (x0, y0, x1, y1) of the part, x1/y1 exclusive. lo, hi : its 8-bit level range.
     n : pixels; z : median depth, m; height_m, width_m : box size at depth z; area_m2 :
     surface seen from the camera; fill : n over box area; variation : the region's MSER
-    variation; side : touches the left or right image border; top_m, bottom_m : height
+    variation; side : touches the left or right image border; cut : touches the bottom one
+    (a person too near to be seen whole); top_m, bottom_m : height
     above the floor of its top and bottom rows (NaN without a floor); extent_m : depth
     between its 5th and 95th percentiles.
     """
@@ -827,6 +845,7 @@ class Part:
     fill: float
     variation: float
     side: bool
+    cut: bool
     top_m: float
     bottom_m: float
     extent_m: float
@@ -874,8 +893,12 @@ def _examine(depth: NDArray[np.float32], intrinsics: Intrinsics, config: Foregro
     width_m = (x1[cand] - x0[cand]) * st * z / intrinsics.fx
     area_m2 = area_px[cand] * z * z / (intrinsics.fx * intrinsics.fy)
     slack = config.merge_slack
-    ok = ((height_m >= config.person_min_height_m) & (width_m >= config.person_min_width_m)
-          & (area_m2 >= config.person_min_area_m2)
+    # a region cut by the bottom edge may be a person too near to be seen whole, whose
+    # lower bounds are smaller; such regions come after every other (see `segment`)
+    whole = (height_m >= config.person_min_height_m) & (area_m2 >= config.person_min_area_m2)
+    near = ((y1[cand] == gs.shape[0]) & (height_m >= config.person_min_cut_height_m)
+            & (area_m2 >= config.min_cut_area_m2))
+    ok = ((whole | near) & (width_m >= config.person_min_width_m)
           & (height_m <= slack * config.person_max_height_m)
           & (width_m <= slack * config.person_max_width_m)
           & (area_m2 <= slack * config.person_max_area_m2))
@@ -883,25 +906,17 @@ def _examine(depth: NDArray[np.float32], intrinsics: Intrinsics, config: Foregro
     # regions (a room's worth of furniture) must not take all the places
     strict = ((height_m <= config.person_max_height_m) & (width_m <= config.person_max_width_m)
               & (area_m2 <= config.person_max_area_m2))[ok]
+    only_near = ~whole[ok]
     cand = cand[ok]
     if cand.size == 0:
         return floor, [], REASON_NO_PERSON
     side = (x0[cand] == 0) | (x1[cand] == gs.shape[1])
     score = (np.log(area_px[cand]) - config.stability_weight * var[cand]
              - config.border_penalty * side + 1000.0 * strict)
-    order = cand[np.argsort(-score, kind='stable')[:8 * config.max_candidates]]
-    picked: list[int] = []
-    boxes = list(zip(x0[order].tolist(), y0[order].tolist(), x1[order].tolist(),
-                     y1[order].tolist(), strict=True))
-    sizes = size[order].tolist()
-    for k in range(len(order)):
-        # nested regions of one chain are often the same pixels at several levels
-        if any(_overlap(boxes[k], boxes[j]) > 0.9
-               and min(sizes[k], sizes[j]) > 0.9 * max(sizes[k], sizes[j]) for j in picked):
-            continue
-        picked.append(k)
-        if len(picked) == config.max_candidates:
-            break
+    rank = np.argsort(-score, kind='stable')
+    # the best few regions that may hold a whole person, and the best few near ones
+    order = np.concatenate([_distinct(cand[rank[only_near[rank] == near]], x0, y0, x1, y1, size,
+                                      config.max_candidates) for near in (False, True)])
 
     # Stage 2, on the full-resolution pixels of the best few regions: split each at empty
     # depth gaps (an occluder in front, furniture behind); every part is a candidate.
@@ -909,8 +924,7 @@ def _examine(depth: NDArray[np.float32], intrinsics: Intrinsics, config: Foregro
     gap_levels = config.occluder_gap_m / config.metres_per_level
     extent_levels = config.person_max_extent_m / config.metres_per_level
     ws = gs.shape[1]
-    for k in picked:
-        i = int(order[k])
+    for i in order.tolist():
         sy, sx = divmod(int(seed[i]), ws)
         crop, bx = _region(g, int(level[i]), (sy * st, sx * st), config.connectivity)
         gl = g[bx[1]:bx[3], bx[0]:bx[2]]
@@ -928,15 +942,31 @@ def _examine(depth: NDArray[np.float32], intrinsics: Intrinsics, config: Foregro
                 whole = a <= present[0] and b >= present[-1]
                 part = crop if whole else crop & (gl >= a) & (gl <= b)
                 pt = _describe(part, hist[a:b + 1], a, b, bx, float(var[i]), hl, intrinsics,
-                               w, config)
+                               (w, h), config)
                 if pt is not None:
                     parts.append(pt)
     return floor, parts, REASON_NO_PERSON
 
 
+def _distinct(order: NDArray[np.int64], x0: NDArray, y0: NDArray, x1: NDArray, y1: NDArray,
+              size: NDArray, n: int) -> NDArray[np.int64]:
+    """The first `n` regions of `order` (best first) that are not nested copies of one picked
+    before: the regions of one chain are often the same pixels at several levels."""
+    picked: list[int] = []
+    for i in order[:8 * n].tolist():
+        if any(_overlap((x0[i], y0[i], x1[i], y1[i]), (x0[j], y0[j], x1[j], y1[j])) > 0.9
+               and min(size[i], size[j]) > 0.9 * max(size[i], size[j]) for j in picked):
+            continue
+        picked.append(i)
+        if len(picked) == n:
+            break
+    return np.array(picked, np.int64)
+
+
 def _describe(part: NDArray[np.bool_], hist: NDArray[np.int64], lo: int, hi: int,
               origin: tuple[int, int, int, int], var: float, above: NDArray[np.float32] | None,
-              intrinsics: Intrinsics, width: int, config: ForegroundConfig) -> Part | None:
+              intrinsics: Intrinsics, size: tuple[int, int], config: ForegroundConfig
+              ) -> Part | None:
     """Measure one depth part; None when it is too small to be anything."""
     n = int(hist.sum())
     if n < config.mser_min_area_px:
@@ -949,41 +979,49 @@ def _describe(part: NDArray[np.bool_], hist: NDArray[np.int64], lo: int, hi: int
     r0, r1, c0, c1 = int(rows[0]), int(rows[-1]) + 1, int(cols[0]), int(cols[-1]) + 1
     bh, bw = r1 - r0, c1 - c0
     box = (origin[0] + c0, origin[1] + r0, origin[0] + c1, origin[1] + r1)
+    cut = box[3] == size[1]
     height_m, width_m = bh * z / intrinsics.fy, bw * z / intrinsics.fx
     area, fill = n * z * z / (intrinsics.fx * intrinsics.fy), n / (bh * bw)
     extent = _extent_levels(hist) * config.metres_per_level
     top = bottom = math.nan
     # the heights above the floor decide only among parts of a person's size
-    if above is not None and size_rules(height_m, width_m, area, fill, extent, config):
+    if above is not None and size_rules(height_m, width_m, area, fill, extent, cut, config):
         k = config.edge_rows
         t = above[r0:r0 + k][part[r0:r0 + k]]
         b = above[max(r1 - k, 0):r1][part[max(r1 - k, 0):r1]]
         top, bottom = median(t[np.isfinite(t)]), median(b[np.isfinite(b)])
     return Part(crop=part, origin=(origin[0], origin[1]), box=box, lo=lo, hi=hi, n=n, z=z,
                 height_m=height_m, width_m=width_m, area_m2=area, fill=fill, variation=var,
-                side=box[0] == 0 or box[2] == width, top_m=top, bottom_m=bottom,
+                side=box[0] == 0 or box[2] == size[0], cut=cut, top_m=top, bottom_m=bottom,
                 extent_m=extent)
 
 
 def size_rules(height_m: float, width_m: float, area_m2: float, fill: float, extent_m: float,
-               config: ForegroundConfig) -> bool:
-    """Whether a part has a person's height, width, surface, fill and depth extent."""
+               cut: bool, config: ForegroundConfig) -> bool:
+    """Whether a part has a person's height, width, surface, fill and depth extent (`cut`:
+    the smaller height and surface of a person cut by the image's bottom edge)."""
     c = config
-    return (c.person_min_height_m <= height_m <= c.person_max_height_m
+    min_height = c.person_min_cut_height_m if cut else c.person_min_height_m
+    min_area = c.min_cut_area_m2 if cut else c.person_min_area_m2
+    return (min_height <= height_m <= c.person_max_height_m
             and c.person_min_width_m <= width_m <= c.person_max_width_m
-            and c.person_min_area_m2 <= area_m2 <= c.person_max_area_m2
+            and min_area <= area_m2 <= c.person_max_area_m2
             and fill <= c.person_max_fill and extent_m <= c.person_max_extent_m)
 
 
-def person_rules(part: Part, config: ForegroundConfig) -> bool:
+def person_rules(part: Part, config: ForegroundConfig, near: bool = False) -> bool:
     """Whether a part passes the person-size rules of `config` (tops and bottoms only when
-    the floor is known)."""
+    the floor is known); `near`: the rules of a person cut by the image's bottom edge
+    (`ForegroundConfig.person_min_cut_height_m`), which only such a part can pass."""
     c = config
-    if not size_rules(part.height_m, part.width_m, part.area_m2, part.fill, part.extent_m, c):
+    if near and not part.cut:
+        return False
+    if not size_rules(part.height_m, part.width_m, part.area_m2, part.fill, part.extent_m,
+                      near, c):
         return False
     if math.isfinite(part.top_m) and not c.person_min_top_m <= part.top_m <= c.person_max_top_m:
         return False
-    if math.isfinite(part.bottom_m) and part.bottom_m > c.person_max_bottom_m:
+    if not near and math.isfinite(part.bottom_m) and part.bottom_m > c.person_max_bottom_m:
         return False
     return True
 
