@@ -895,10 +895,11 @@ def _examine(depth: NDArray[np.float32], intrinsics: Intrinsics, config: Foregro
     slack = config.merge_slack
     # a region cut by the bottom edge may be a person too near to be seen whole, whose
     # lower bounds are smaller; such regions come after every other (see `segment`)
-    whole = (height_m >= config.person_min_height_m) & (area_m2 >= config.person_min_area_m2)
+    whole_size = ((height_m >= config.person_min_height_m)
+                  & (area_m2 >= config.person_min_area_m2))
     near = ((y1[cand] == gs.shape[0]) & (height_m >= config.person_min_cut_height_m)
             & (area_m2 >= config.min_cut_area_m2))
-    ok = ((whole | near) & (width_m >= config.person_min_width_m)
+    ok = ((whole_size | near) & (width_m >= config.person_min_width_m)
           & (height_m <= slack * config.person_max_height_m)
           & (width_m <= slack * config.person_max_width_m)
           & (area_m2 <= slack * config.person_max_area_m2))
@@ -906,7 +907,7 @@ def _examine(depth: NDArray[np.float32], intrinsics: Intrinsics, config: Foregro
     # regions (a room's worth of furniture) must not take all the places
     strict = ((height_m <= config.person_max_height_m) & (width_m <= config.person_max_width_m)
               & (area_m2 <= config.person_max_area_m2))[ok]
-    only_near = ~whole[ok]
+    only_near = ~whole_size[ok]
     cand = cand[ok]
     if cand.size == 0:
         return floor, [], REASON_NO_PERSON
