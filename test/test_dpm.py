@@ -626,6 +626,57 @@ def test_jittered_positive_moves_the_crop_origin_not_the_labels() -> None:
         TrainConfig(search_percent=50.0)
 
 
+def test_bone_scale_sees_through_a_torso_seen_end_on() -> None:
+    from pose4d_ros.core.dpm.samples import bone_ratios, bone_scale, joint_scale, person_scale
+    from pose4d_ros.core.joints import JointSet
+    from pose4d_ros.datasets.frame import Frame
+
+    tree = PARTS_14
+    rng = np.random.default_rng(8)
+    # upright people of torso 40-60 px, bones in fixed proportions with a little noise
+    frac = {'head': 0.5, 'shoulder': 0.3, 'elbow': 0.55, 'wrist': 0.5, 'hip': 1.0, 'knee': 0.75,
+            'ankle': 0.75}
+    frames = []
+    for _ in range(40):
+        torso = rng.uniform(40, 60)
+        uv = np.zeros((len(tree), 2))
+        for p, c in tree.edges():
+            if tree.names[c].endswith('hip'):   # both torso sides exactly `torso` long
+                uv[c] = uv[p] + (0.0, torso)
+                continue
+            d = frac[tree.names[c].removeprefix('left_').removeprefix('right_')]
+            a = rng.uniform(0, 2 * np.pi)
+            uv[c] = uv[p] + torso * d * rng.uniform(0.97, 1.03) * np.array([np.cos(a), np.sin(a)])
+        frames.append((uv, np.ones(len(tree), bool)))
+    ratios = bone_ratios(frames, tree)
+    want = [frac[tree.names[c].removeprefix('left_').removeprefix('right_')]
+            for _, c in tree.edges()]
+    assert_allclose(ratios, want, rtol=0.03)
+    # the same person bent towards the camera: the torso a quarter as long, the limbs not
+    uv, lab = frames[0]
+    torso = np.hypot(*(uv[tree.index('left_hip')] - uv[tree.index('left_shoulder')]))
+    bent = uv.copy()
+    for side in ('left_', 'right_'):
+        h, s = tree.index(side + 'hip'), tree.index(side + 'shoulder')
+        shift = (uv[h] - uv[s]) * 0.75
+        for name in ('hip', 'knee', 'ankle'):
+            bent[tree.index(side + name)] = uv[tree.index(side + name)] - shift
+    assert joint_scale(bent, tree.names) == pytest.approx(torso / 4)
+    assert bone_scale(bent, lab, tree, ratios) == pytest.approx(torso, rel=0.05)
+    # a frame without depth takes it when the config has ratios; too few bones: NaN
+    cfg = TrainConfig(parts='14', channels='rgb', bone_ratios=ratios)
+    f = Frame(0, np.zeros((300, 300, 3), np.uint8), None, None,
+              JointSet(tree.names, bent + 150, confidence=np.ones(len(tree), np.float32)))
+    assert person_scale(f, tree.names, cfg) == pytest.approx(torso, rel=0.05)
+    few = np.zeros(len(tree), bool)
+    few[[tree.index('neck'), tree.index('head'), tree.index('left_shoulder')]] = True
+    assert np.isnan(bone_scale(bent, few, tree, ratios))
+    with pytest.raises(ValueError, match='bone_ratios'):
+        TrainConfig(parts='14', bone_ratios=ratios[:-1])
+    with pytest.raises(ValueError, match='left_ankle'):
+        bone_ratios([(uv, np.array([n != 'left_ankle' for n in tree.names]))], tree)
+
+
 def test_background_rooms_come_first_and_lose_depth_for_rgb() -> None:
     from pose4d_ros.cli.train import build_negatives
 

@@ -32,6 +32,7 @@ from pose4d_ros.core.dpm.samples import (
     Negative,
     TrainConfig,
     background_crops,
+    bone_ratios,
     part_joints,
     person_scale,
 )
@@ -107,6 +108,10 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument('--search-percent', type=float, default=TrainConfig.search_percent,
                    help='the search without depth covers the training people\'s person scales '
                         'from this percentile to 100 minus it (also with --calibrate)')
+    p.add_argument('--scale-from', choices=('torso', 'bones'), default='torso',
+                   help='person scale of a frame without depth: the longer shoulder-to-hip '
+                        'side, or every labelled bone against its typical fraction of it '
+                        '(learned from SOURCE and kept in the model)')
     p.add_argument('--calibrate', type=Path, metavar='MODEL.npz',
                    help="no training: fit MODEL's part confidences and depth offsets again on "
                         'SOURCE (as the last step of training does) and write it to --out')
@@ -254,6 +259,12 @@ def run(args: argparse.Namespace) -> int:
         raise ValueError(f'{", ".join(args.sources)}: no depth images; use --channels rgb')
     if cfg.masked_input:
         samples = with_foreground_masks(samples)
+    if args.scale_from == 'bones':
+        cfg = replace(cfg, bone_ratios=bone_ratios(
+            (part_joints(s, cfg.tree.names) for s in samples), cfg.tree))
+        log('bone ratios to the torso side: ' + ', '.join(
+            f'{cfg.tree.names[c]} {r:.2f}' for (_, c), r in zip(cfg.tree.edges(),
+                                                               cfg.bone_ratios, strict=True)))
     extra = (load_frames(args.background, stride=args.stride, labelled=False)
              if args.background else None)
     negatives = (build_negatives(samples, cfg, args.max_negative_images, args.seed, extra)

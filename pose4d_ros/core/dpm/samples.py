@@ -4,6 +4,7 @@ positives cut at the canonical scale (and mirrored), background crops (`train`, 
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass
 
@@ -63,6 +64,12 @@ class TrainConfig:
     calibration_samples : frames used to fit the confidence calibration.
     search_percent : the search without depth covers the training people's person scales from
         this percentile to 100 - it (`PartModel.search_range_px`, widened by a margin).
+    bone_ratios : how a frame without depth gets its person scale from its joints. None: the
+        longer shoulder-to-hip side (`joint_scale`); else each bone of the part tree
+        (`PartTree.edges` order) as a typical fraction of that torso side (`bone_ratios`, set by
+        `pose4d train --scale-from bones`), the scale being the upper quartile of the labelled
+        bones' lengths over their fractions (`bone_scale`, as Yang & Ramanan size their parts):
+        a torso seen end-on or a bent-over body no longer makes a small person.
     levels_per_octave : pyramid density when mining background images.
     seed : everything random is drawn from it.
     """
@@ -98,6 +105,7 @@ class TrainConfig:
     calibration_samples: int = 300
     search_percent: float = 5.0
     levels_per_octave: int = 5
+    bone_ratios: tuple[float, ...] | None = None
     seed: int = 0
 
     def __post_init__(self) -> None:
@@ -122,6 +130,11 @@ class TrainConfig:
             raise ValueError(f'search_percent must be in [0, 50), got {self.search_percent}')
         if self.mining_rounds < 0:
             raise ValueError(f'mining_rounds must be >= 0, got {self.mining_rounds}')
+        r = self.bone_ratios
+        if r is not None and (len(r) != len(self.tree.edges())
+                              or not all(math.isfinite(x) and x > 0 for x in r)):
+            raise ValueError(f'bone_ratios must be {len(self.tree.edges())} positive numbers '
+                             f'(one per bone of the {self.parts}-part tree), got {r}')
 
     @property
     def tree(self) -> PartTree:
@@ -177,11 +190,56 @@ def person_depth(depth_m: NDArray, mask: NDArray[np.bool_] | None, uv: NDArray) 
     return float(np.median(vals)) if vals.size else float('nan')
 
 
+# fewest labelled bones `bone_scale` takes a scale from
+MIN_BONES = 3
+
+
+def bone_lengths(uv: NDArray, labelled: NDArray[np.bool_], tree: PartTree) -> NDArray[np.float64]:
+    """(E,) pixel length of each bone (parent, child) of `tree.edges()`; NaN where an end is
+    unlabelled or the two ends coincide."""
+    out = np.full(len(tree.edges()), np.nan)
+    for k, (p, c) in enumerate(tree.edges()):
+        if labelled[p] and labelled[c]:
+            d = float(np.hypot(*(np.asarray(uv[c], float) - uv[p])))
+            out[k] = d if d >= 1.0 else np.nan
+    return out
+
+
+def bone_ratios(joints: Iterable[tuple[NDArray, NDArray[np.bool_]]], tree: PartTree
+                ) -> tuple[float, ...]:
+    """Each bone's typical length as a fraction of the torso side (`joint_scale`): the
+    geometric median, over the frames' `(uv, labelled)` part joints where both are labelled,
+    of bone / torso (Yang & Ramanan's `point2box`). A torso side's own ratio is 1."""
+    logs: list[list[float]] = [[] for _ in tree.edges()]
+    for uv, lab in joints:
+        torso = joint_scale(np.where(lab[:, None], uv, np.nan), tree.names)
+        if not torso >= 1.0:
+            continue
+        for k, d in enumerate(bone_lengths(uv, lab, tree)):
+            if np.isfinite(d):
+                logs[k].append(math.log(d / torso))
+    if not all(logs):
+        missing = [tree.names[c] for (_, c), x in zip(tree.edges(), logs, strict=True) if not x]
+        raise ValueError(f'no frame labels both ends of the bones to {", ".join(missing)} '
+                         'with a torso side: bone ratios need them')
+    return tuple(round(math.exp(float(np.median(x))), 4) for x in logs)
+
+
+def bone_scale(uv: NDArray, labelled: NDArray[np.bool_], tree: PartTree,
+               ratios: Sequence[float]) -> float:
+    """Person scale from 2-D joints (torso-side units): the upper quartile over the labelled
+    bones of length / `ratios` (foreshortening only shortens a bone, so the longer ones tell
+    the size best). NaN with fewer than `MIN_BONES` bones labelled."""
+    d = bone_lengths(uv, labelled, tree) / np.asarray(ratios, float)
+    d = d[np.isfinite(d)]
+    return float(np.quantile(d, 0.75)) if len(d) >= MIN_BONES else float('nan')
+
+
 def person_scale(sample, names: Sequence[str], cfg: TrainConfig, uv: NDArray | None = None
                  ) -> float:
     """The person scale in image pixels: fx * scale_length_m / z from depth when the sample
     has it (as the detector predicts it at run time from the foreground mask's median depth),
-    else from the joints (`joint_scale`)."""
+    else from the joints (`bone_scale` with `cfg.bone_ratios`, else `joint_scale`)."""
     if uv is None:
         uv, _ = part_joints(sample, names)
     if sample.depth_m is not None:
@@ -190,6 +248,9 @@ def person_scale(sample, names: Sequence[str], cfg: TrainConfig, uv: NDArray | N
             h, w = sample.depth_m.shape
             k: Intrinsics = sample.intrinsics or cad60_intrinsics(w, h)
             return k.fx * cfg.scale_length_m / z
+    if cfg.bone_ratios is not None:
+        puv, lab = part_joints(sample, cfg.tree.names)
+        return bone_scale(puv, lab, cfg.tree, cfg.bone_ratios)
     return joint_scale(sample.truth.uv, list(sample.truth.names))
 
 
