@@ -120,3 +120,27 @@ def test_ik_node(ros, info_pub, tmp_path, use_depth):
     assert markers[-1].markers[0].header == headers[-1]
     assert len(markers[-2].markers[0].points) == 14
     assert len(markers[-1].markers[0].points) == 12
+
+
+def test_a_signal_racing_the_executor_is_a_clean_exit():
+    """A SIGINT that shuts the context down while the executor builds its next wait set makes
+    rclpy raise RCLError ('the given context is not valid'), not ExternalShutdownException
+    (ros2/rclpy#398): after a shutdown `run` exits 0; the same error on a live context is a
+    real failure and propagates."""
+    import rclpy
+    from rclpy.impl.implementation_singleton import rclpy_implementation as _rclpy
+    from rclpy.node import Node
+
+    from pose4d_ros.nodes.common import run
+
+    def after_shutdown(node):
+        rclpy.try_shutdown()    # what the signal handler does
+        raise _rclpy.RCLError('failed to initialize wait set: the given context is not valid')
+
+    def while_alive(node):
+        raise _rclpy.RCLError('failed to initialize wait set: something else')
+
+    assert run(lambda: Node('racing'), [], after_shutdown) == 0
+    with pytest.raises(RuntimeError, match='something else'):
+        run(lambda: Node('racing'), [], while_alive)
+    assert not rclpy.ok()

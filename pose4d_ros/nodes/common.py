@@ -67,6 +67,12 @@ def run(factory: Callable[[], Node], args: list[str] | None = None,
         body(node)
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
+    except RuntimeError:
+        # a signal shuts the context down while the executor builds its next wait set: rclpy
+        # raises RCLError ('the given context is not valid') instead of
+        # ExternalShutdownException (ros2/rclpy#398); after a shutdown that is a clean exit
+        if rclpy.ok():
+            raise
     except ParameterError as exc:
         rclpy.logging.get_logger('pose4d').fatal(str(exc))
         code = 2
