@@ -4,8 +4,8 @@
         [--model lspet_rgb_14] [--json out/lspet_diagnose.json]
 
 For every photograph whose 14 joints are all labelled:
-- the labelled person's scale (as the model's training measured it: `core.dpm.samples.bone_scale`
-  with the model's bone ratios, else `joint_scale`) and the model's level at that scale;
+- the labelled person's scale (`core.dpm.samples.person_scale` with the model's training
+  settings, as training measured it) and the model's level at that scale;
 - the score of the labelled pose on that level: each part's filter at the labelled cell, its
   spring from its parent's labelled cell and the best types (an exact max over the types on the
   tree);
@@ -21,7 +21,6 @@ Prints the shares and medians; `--json` writes every photo's numbers.
 from __future__ import annotations
 
 import argparse
-import json
 import sys
 from pathlib import Path
 
@@ -29,9 +28,8 @@ import numpy as np
 
 from pose4d_ros.core.dpm.infer import Detector, SearchPlan, model_arrays, score_level
 from pose4d_ros.core.dpm.model import PartModel, load_model
-from pose4d_ros.core.dpm.samples import bone_scale, joint_scale
+from pose4d_ros.core.dpm.samples import TrainConfig, person_scale
 from pose4d_ros.core.files import write_json
-from pose4d_ros.core.skeleton import tree_for
 from pose4d_ros.datasets.lspet import read_frames
 from pose4d_ros.models import model_path
 
@@ -67,15 +65,13 @@ def diagnose(root: str, first: int, last: int, model: PartModel) -> list[dict]:
     det = Detector(model)
     arrays = model_arrays(model)
     fh, fw = model.filter_shape
-    ratios = json.loads(model.metadata.get('train_config', '{}')).get('bone_ratios')
-    tree = tree_for(model.part_names)
+    trained = TrainConfig.of_model(model.metadata)
     out = []
     for frame in read_frames(root, first, last):
         truth, _, vis = frame.truth.labelled(model.part_names)
         if not vis.all():
             continue
-        s = (bone_scale(truth, vis, tree, ratios) if ratios
-             else joint_scale(truth, list(model.part_names)))
+        s = person_scale(frame, model.part_names, trained, truth)
         if not (np.isfinite(s) and s > 2):
             continue
         h, w = frame.color.shape[:2]

@@ -310,18 +310,16 @@ def recalibrate(args: argparse.Namespace, samples: list[Frame], t0: float) -> in
     subset of `TrainConfig.calibration_samples` frames, masked as the model was trained),
     recorded in the model's metadata."""
     model = load_model(model_path(str(args.calibrate)))
-    cfg = json.loads(model.metadata.get('train_config', '{}'))
-    if cfg.get('masked_input'):
+    trained = TrainConfig.of_model(model.metadata)
+    if trained.masked_input:
         samples = with_foreground_masks(samples)
     # the search without depth covers the middle of the people's scales, as `train` sets it
-    trained = TrainConfig(**{k: tuple(v) if isinstance(v, list) else v for k, v in cfg.items()
-                             if k in TrainConfig.__dataclass_fields__})
     scales = np.array([positive_scale(s, model.part_names, trained) for s in samples])
     scales = scales[scales > 2]
     if len(scales):
         model = replace(model, search_range_px=scale_span(scales, args.search_percent))
     usable = [s for s in samples if part_joints(s, model.part_names)[1].sum() >= 2]
-    n = int(cfg.get('calibration_samples', TrainConfig.calibration_samples))
+    n = trained.calibration_samples
     if len(usable) > n:
         rng = np.random.default_rng(args.seed)
         usable = [usable[i] for i in np.sort(rng.choice(len(usable), n, replace=False))]

@@ -24,6 +24,7 @@ import rclpy
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from rclpy.clock import Clock, ClockType
 from rclpy.executors import ExternalShutdownException
+from rclpy.impl.implementation_singleton import rclpy_implementation as _rclpy
 from rclpy.node import Node
 from rclpy.signals import SignalHandlerOptions
 from sensor_msgs.msg import CameraInfo
@@ -67,7 +68,7 @@ def run(factory: Callable[[], Node], args: list[str] | None = None,
         body(node)
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
-    except RuntimeError:
+    except _rclpy.RCLError:
         # a signal shuts the context down while the executor builds its next wait set: rclpy
         # raises RCLError ('the given context is not valid') instead of
         # ExternalShutdownException (ros2/rclpy#398); after a shutdown that is a clean exit

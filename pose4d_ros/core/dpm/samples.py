@@ -4,8 +4,9 @@ positives cut at the canonical scale (and mirrored), background crops (`train`, 
 
 from __future__ import annotations
 
+import json
 import math
-from collections.abc import Callable, Iterable, Sequence
+from collections.abc import Callable, Iterable, Mapping, Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -139,6 +140,14 @@ class TrainConfig:
     @property
     def tree(self) -> PartTree:
         return PART_TREES[self.parts]
+
+    @classmethod
+    def of_model(cls, metadata: Mapping[str, str]) -> TrainConfig:
+        """The settings a model was trained with, from its metadata's `train_config` (fields
+        this version does not know are left out; a model without it: the defaults)."""
+        saved = json.loads(metadata.get('train_config', '{}'))
+        return cls(**{k: tuple(v) if isinstance(v, list) else v for k, v in saved.items()
+                      if k in cls.__dataclass_fields__})
 
 
 _LEFT_RIGHT = (('left_', 'right_'), ('right_', 'left_'))
