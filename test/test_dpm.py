@@ -559,15 +559,10 @@ def test_kmeans_is_deterministic_and_finds_separated_clusters() -> None:
 def test_labelled_pose_score_is_the_tree_dp_at_fixed_cells() -> None:
     """tools/lspet_diagnose's score of a given pose: at the DP's best pose it equals the best
     score, anywhere else it is no higher (the DP is the max over all poses)."""
-    import importlib.util
-
     from pose4d_ros.core.dpm.infer import backtrack, best_roots, model_arrays, score_level
     from pose4d_ros.core.hog import feature_pyramid
 
-    path = Path(__file__).resolve().parents[1] / 'tools' / 'lspet_diagnose.py'
-    spec = importlib.util.spec_from_file_location('lspet_diagnose', path)
-    tool = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(tool)
+    tool = _diagnose_tool()
     m = tenpart_model('rgb')
     rng = np.random.default_rng(3)
     img = rng.integers(0, 255, (90, 70, 3), dtype=np.uint8)
@@ -582,6 +577,39 @@ def test_labelled_pose_score_is_the_tree_dp_at_fixed_cells() -> None:
     for _ in range(20):
         cells = np.stack([rng.integers(0, ny, 10), rng.integers(0, nx, 10)], 1)
         assert tool.labelled_score(resp, cells, m) <= res.root.max() + 1e-4
+
+
+def _diagnose_tool():
+    import importlib.util
+
+    path = Path(__file__).resolve().parents[1] / 'tools' / 'lspet_diagnose.py'
+    spec = importlib.util.spec_from_file_location('lspet_diagnose', path)
+    tool = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(tool)
+    return tool
+
+
+def test_diagnose_summary_splits_by_placement_and_tilt() -> None:
+    """tools/lspet_diagnose: left and right swapped by name, the middle parts kept; the summary
+    averages the found pose's PCK@0.2 over the photographs it lies on the person in and by
+    torso tilt."""
+    tool = _diagnose_tool()
+    names = PARTS_14.names
+    swap = tool.mirrored(names)
+    assert names[swap[names.index('left_wrist')]] == 'right_wrist'
+    assert swap[names.index('neck')] == names.index('neck')
+    assert [swap[i] for i in swap] == list(range(len(names)))
+    row = dict(labelled_score=-1.0, same_scale_score=2.0, found_score=3.0, found_scale_ratio=1.0,
+               found_pck=10.0, same_scale_pck=20.0, found_swapped_pck20=0.0)
+    rows = [dict(row, found_pck20=60.0, found_centre_off=0.1, torso_tilt_deg=10.0,
+                 best_of_10_pck20=80.0),
+            dict(row, found_pck20=20.0, found_centre_off=0.6, torso_tilt_deg=170.0,
+                 best_of_10_pck20=40.0, found_swapped_pck20=50.0)]
+    text = tool.summary(rows)
+    assert 'PCK@0.2: found 40.0, the best of the 10 best poses 60.0' in text
+    assert 'where that fits better 55.0' in text
+    assert '50.0 % (PCK@0.2 60.0; elsewhere 20.0)' in text
+    assert '0-30 degrees 60.0 (1), 90-180 degrees 20.0 (1)' in text
 
 
 def test_partial_labels_need_latent_positives() -> None:
