@@ -143,10 +143,11 @@ def summary(rows: list[dict]) -> str:
              f'PCK@0.1: found {np.mean(col("found_pck")):.1f}, best at the labelled scale '
              f'{np.mean(col("same_scale_pck")):.1f}']
     p20, off = col('found_pck20'), col('found_centre_off')
+    either = np.maximum(p20, col('found_swapped_pck20'))
     on = off <= 0.25
     lines += [f'PCK@0.2: found {np.mean(p20):.1f}, the best of the {TOP_K} best poses '
               f'{np.mean(col(f"best_of_{TOP_K}_pck20")):.1f}, found with left and right '
-              f'swapped where that fits better {np.mean(np.maximum(p20, col("found_swapped_pck20"))):.1f}',
+              f'swapped where that fits better {np.mean(either):.1f}',
               f'found pose centred on the labelled person (within 0.25 of its size): '
               f'{100 * np.mean(on):.1f} % (PCK@0.2 {np.mean(p20[on]) if on.any() else np.nan:.1f}'
               f'; elsewhere {np.mean(p20[~on]) if (~on).any() else np.nan:.1f})']
