@@ -590,12 +590,14 @@ def _diagnose_tool():
 
 
 def test_diagnose_summary_splits_by_placement_and_tilt() -> None:
-    """tools/lspet_diagnose: left and right swapped by name, the middle parts kept; the summary
-    averages the found pose's PCK@0.2 over the photographs it lies on the person in and by
-    torso tilt."""
+    """Left and right swapped by name, the middle parts kept (`mirror_index`, which the tool
+    and mirrored positives use); tools/lspet_diagnose's summary averages the found pose's
+    PCK@0.2 over the photographs it lies on the person in and by torso tilt."""
+    from pose4d_ros.core.dpm.samples import mirror_index
+
     tool = _diagnose_tool()
     names = PARTS_14.names
-    swap = tool.mirrored(names)
+    swap = mirror_index(names)
     assert names[swap[names.index('left_wrist')]] == 'right_wrist'
     assert swap[names.index('neck')] == names.index('neck')
     assert [swap[i] for i in swap] == list(range(len(names)))

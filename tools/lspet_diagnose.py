@@ -34,7 +34,7 @@ import numpy as np
 
 from pose4d_ros.core.dpm.infer import Detector, SearchPlan, model_arrays, score_level
 from pose4d_ros.core.dpm.model import PartModel, load_model
-from pose4d_ros.core.dpm.samples import TrainConfig, mirror_name, person_scale
+from pose4d_ros.core.dpm.samples import TrainConfig, mirror_index, person_scale
 from pose4d_ros.core.files import write_json
 from pose4d_ros.datasets.lspet import read_frames
 from pose4d_ros.models import model_path
@@ -63,16 +63,15 @@ def labelled_score(resp: np.ndarray, cells: np.ndarray, model: PartModel) -> flo
 
 
 def pck(uv: np.ndarray, truth: np.ndarray, alpha: float = 0.1) -> float:
-    size = float(np.max(np.ptp(truth, axis=0)))
-    return 100.0 * float(np.mean(np.hypot(*(uv - truth).T) <= alpha * size))
+    return 100.0 * float(np.mean(np.hypot(*(uv - truth).T) <= alpha * box_size(truth)))
+
+
+def box_size(truth: np.ndarray) -> float:
+    """max(h, w) of the labelled joints' box (PCK's reference length)."""
+    return float(np.max(np.ptp(truth, axis=0)))
 
 
 TOP_K = 10
-
-
-def mirrored(names: tuple[str, ...]) -> list[int]:
-    """Index of each part's left/right counterpart (itself for the middle parts)."""
-    return [names.index(mirror_name(n)) for n in names]
 
 
 def diagnose(root: str, first: int, last: int, model: PartModel) -> list[dict]:
@@ -80,7 +79,7 @@ def diagnose(root: str, first: int, last: int, model: PartModel) -> list[dict]:
     arrays = model_arrays(model)
     fh, fw = model.filter_shape
     trained = TrainConfig.of_model(model.metadata)
-    swap = mirrored(model.part_names)
+    swap = mirror_index(model.part_names)
     neck = model.part_names.index('neck')
     hips = [model.part_names.index('left_hip'), model.part_names.index('right_hip')]
     out = []
@@ -105,8 +104,7 @@ def diagnose(root: str, first: int, last: int, model: PartModel) -> list[dict]:
         same = det.poses_from_levels([level])[0]
         cands = det.detect(frame.color, None, top_k=TOP_K)
         found = cands[0]
-        size = float(np.max(np.ptp(truth, axis=0)))
-        off = float(np.hypot(*(found.uv.mean(0) - truth.mean(0)))) / size
+        off = float(np.hypot(*(found.uv.mean(0) - truth.mean(0)))) / box_size(truth)
         down = truth[hips].mean(0) - truth[neck]
         out.append({'key': Path(frame.key).name, 'person_scale_px': round(s, 1),
                     'labelled_score': round(gt, 3),

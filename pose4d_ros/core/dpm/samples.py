@@ -161,6 +161,12 @@ def mirror_name(name: str) -> str:
     return name
 
 
+def mirror_index(names: Sequence[str]) -> list[int]:
+    """Index in `names` of each name's left/right counterpart (itself for the middle parts)."""
+    names = list(names)
+    return [names.index(mirror_name(n)) for n in names]
+
+
 def part_joints(frame, names: Sequence[str]) -> tuple[NDArray[np.float64], NDArray[np.bool_]]:
     """(P, 2) pixels and (P,) labelled flags of the model's parts in a frame's ground truth
     (`JointSet.labelled`: 'left_wrist' is CAD-60's 'left_hand')."""
@@ -316,7 +322,7 @@ def _flip(color: NDArray, depth_m: NDArray | None, mask: NDArray | None, uv: NDA
     col = np.ascontiguousarray(color[:, ::-1])
     dep = None if depth_m is None else np.ascontiguousarray(depth_m[:, ::-1])
     msk = None if mask is None else np.ascontiguousarray(mask[:, ::-1])
-    idx = [list(names).index(mirror_name(n)) for n in names]
+    idx = mirror_index(names)
     fuv = uv[idx].copy()
     fuv[:, 0] = w - 1 - fuv[:, 0]
     return col, dep, msk, fuv
