@@ -119,11 +119,12 @@ $(PEER_VENV)/.stamp: requirements/peer.txt
 # UTKinect motion (subject 8, waving), made by the project's own tools from ../shared/data.
 UTKINECT ?= ../shared/data/utkinect
 sample-bag: setup
-	rm -rf build/sample_cad60 bags/sample.new
+	rm -rf build/sample_cad60 build/sample_bag
 	$(BIN)/pose4d synth --utkinect $(UTKINECT) --out build/sample_cad60 --seed 7 \
 		--takes s08_e01 --start 86 --frames 45 --occluders 0 --quiet
-	$(BIN)/pose4d cad60-to-bag build/sample_cad60 bags/sample.new
-	rm -rf bags/sample && mv bags/sample.new bags/sample
+	mkdir -p build/sample_bag
+	$(BIN)/pose4d cad60-to-bag build/sample_cad60 build/sample_bag/sample
+	rm -rf bags/sample && mv build/sample_bag/sample bags/sample
 
 clean:
 	rm -rf build out .pytest_cache .ruff_cache *.egg-info

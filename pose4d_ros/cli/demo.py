@@ -190,6 +190,7 @@ def run_graph(bag_path: Path, out: Path, *, rate: float = 1.0, model: str = 'rgb
     from sensor_msgs.msg import CameraInfo
 
     from pose4d_ros.nodes import qos
+    from pose4d_ros.nodes.common import executor
     from pose4d_ros.nodes.convert import stamp_to_ns
 
     frames = bag.topics(bag_path)[cad60_bag.COLOR_TOPIC].count
@@ -214,6 +215,7 @@ def run_graph(bag_path: Path, out: Path, *, rate: float = 1.0, model: str = 'rgb
         CameraInfo, 'camera/color/camera_info',
         lambda m: entered.setdefault(stamp_to_ns(m.header.stamp), time.monotonic()),
         QoSProfile(depth=300, reliability=ReliabilityPolicy.BEST_EFFORT))
+    ex = executor(node)
     stages = ('pipeline',) if pipeline else STAGES
     connections = PIPELINE_CONNECTIONS if pipeline else CONNECTIONS
     try:
@@ -231,7 +233,7 @@ def run_graph(bag_path: Path, out: Path, *, rate: float = 1.0, model: str = 'rgb
             if time.monotonic() > deadline:
                 raise OSError(f'the graph did not connect within {timeout} s: too few '
                               f'subscribers on {", ".join(lacking)}')
-            rclpy.spin_once(node, timeout_sec=0.1)
+            ex.spin_once(timeout_sec=0.1)
         cpu_before = graph.cpu_seconds()
         t_play = time.monotonic()
         # the replay plays once it has matched every subscriber seen here (this one too)
@@ -246,14 +248,14 @@ def run_graph(bag_path: Path, out: Path, *, rate: float = 1.0, model: str = 'rgb
         while replay.poll() is None:
             graph.check_alive()
             replay_cpu = graph.cpu_seconds().get('replay', replay_cpu)
-            rclpy.spin_once(node, timeout_sec=0.05)
+            ex.spin_once(timeout_sec=0.05)
         if replay.returncode != 0:
             raise OSError(f'replay failed ({replay.returncode}):\n{graph.tail("replay")}')
         # drain: until every frame is out, or nothing has come for 3 s
         while len(left) < frames:
             if time.monotonic() - max(max(left.values(), default=t_play), t_play) > 3.0:
                 break
-            rclpy.spin_once(node, timeout_sec=0.05)
+            ex.spin_once(timeout_sec=0.05)
         cpu = {exe: t - cpu_before.get(exe, 0.0) for exe, t in graph.cpu_seconds().items()}
         cpu['replay'] = replay_cpu
     finally:

@@ -15,6 +15,7 @@ such frames out of its latency figures.
 
 from __future__ import annotations
 
+import os
 import threading
 from collections import deque
 from collections.abc import Callable
@@ -23,7 +24,8 @@ import numpy as np
 import rclpy
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from rclpy.clock import Clock, ClockType
-from rclpy.executors import ExternalShutdownException
+from rclpy.executors import Executor, ExternalShutdownException, SingleThreadedExecutor
+from rclpy.experimental import EventsExecutor
 from rclpy.impl.implementation_singleton import rclpy_implementation as _rclpy
 from rclpy.node import Node
 from rclpy.signals import SignalHandlerOptions
@@ -47,8 +49,36 @@ class InputFailure(Exception):
     and exits with status 1."""
 
 
+# POSE4D_EXECUTOR=single: rclpy's SingleThreadedExecutor instead of its events executor
+EXECUTOR_ENV = 'POSE4D_EXECUTOR'
+
+
+def executor(node: Node) -> Executor:
+    """The executor a node spins on: rclpy's events executor (its C++ event queue: per message
+    a fraction of the CPU that `SingleThreadedExecutor`'s Python wait set costs, measured in the
+    README), or with POSE4D_EXECUTOR=single the `SingleThreadedExecutor`."""
+    choice = os.environ.get(EXECUTOR_ENV, 'events')
+    if choice not in ('events', 'single'):
+        raise ParameterError(f'{EXECUTOR_ENV}={choice!r}: use events or single')
+    ex = (EventsExecutor(context=node.context) if choice == 'events'
+          else SingleThreadedExecutor(context=node.context))
+    ex.add_node(node)
+    return ex
+
+
+def spin(node: Node) -> None:
+    """Serve the node's callbacks until the context shuts down (Ctrl-C, SIGTERM)."""
+    ex = executor(node)
+    try:
+        # the events executor's spin() does not return on shutdown (rclpy 7.1.6): poll
+        while rclpy.ok(context=node.context):
+            ex.spin_once(timeout_sec=0.2)
+    finally:
+        ex.shutdown()
+
+
 def run(factory: Callable[[], Node], args: list[str] | None = None,
-        body: Callable[[Node], None] = rclpy.spin, *, signal_handlers: bool = True) -> int:
+        body: Callable[[Node], None] = spin, *, signal_handlers: bool = True) -> int:
     """Jazzy's main(): init, spin (or `body`), clean shutdown on Ctrl-C/SIGTERM.
 
     `signal_handlers=False`: rclpy does not shut the context down on SIGINT/SIGTERM; `body`

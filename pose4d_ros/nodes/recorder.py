@@ -29,13 +29,13 @@ from typing import Any
 
 import rclpy
 from rclpy.clock import Clock, ClockType
-from rclpy.executors import SingleThreadedExecutor
+from rclpy.executors import Executor
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, ReliabilityPolicy
 
 from pose4d_ros.datasets import bag
 from pose4d_ros.nodes import qos
-from pose4d_ros.nodes.common import run
+from pose4d_ros.nodes.common import executor, run
 from pose4d_ros.nodes.convert import message_type
 from pose4d_ros.nodes.params import NodeParams, Param, ParameterError
 
@@ -132,7 +132,7 @@ class RecorderNode(Node):
             self.writer.write(topic, now, data)
         return write
 
-    def drain(self, executor: SingleThreadedExecutor, *, quiet_s: float = 0.3,
+    def drain(self, executor: Executor, *, quiet_s: float = 0.3,
               limit_s: float = 3.0) -> None:
         """Take messages still on their way until none came for `quiet_s` (at most
         `limit_s`)."""
@@ -161,11 +161,10 @@ _stop = threading.Event()
 
 def record(node: RecorderNode) -> None:
     """Spin until SIGINT or SIGTERM, then drain what publishers sent before it."""
-    executor = SingleThreadedExecutor(context=node.context)
-    executor.add_node(node)
+    ex = executor(node)
     while not _stop.is_set():
-        executor.spin_once(timeout_sec=0.1)
-    node.drain(executor)
+        ex.spin_once(timeout_sec=0.1)
+    node.drain(ex)
 
 
 def main(args: list[str] | None = None) -> int:

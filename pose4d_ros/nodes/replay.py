@@ -28,7 +28,7 @@ from rosgraph_msgs.msg import Clock
 
 from pose4d_ros.datasets import bag
 from pose4d_ros.nodes import qos
-from pose4d_ros.nodes.common import InputFailure, run
+from pose4d_ros.nodes.common import InputFailure, executor, run
 from pose4d_ros.nodes.convert import message_type, ns_to_stamp
 from pose4d_ros.nodes.params import NodeParams, Param, ParameterError
 
@@ -113,6 +113,7 @@ class ReplayNode(Node):
                        qos.from_bag(info.qos[0]) if info.qos else qos.OUTPUT_QOS)
             self.publishers_[name] = self.create_publisher(
                 message_type(info.msgtype), name.lstrip('/'), profile)
+        self.executor_ = executor(self)  # serves the parameter services while playing
         self.clock_pub = (self.create_publisher(Clock, '/clock', 10)
                           if p['replay.publish_clock'] else None)
         self.sent: dict[str, int] = dict.fromkeys(self.selected, 0)
@@ -132,7 +133,7 @@ class ReplayNode(Node):
             remaining = deadline - time.monotonic()
             if remaining <= 0:
                 return
-            rclpy.spin_once(self, timeout_sec=min(remaining, 0.05))
+            self.executor_.spin_once(timeout_sec=min(remaining, 0.05))
 
     def wait_for_subscribers(self) -> bool:
         counts = subscriber_counts(self.cfg['replay.wait_for_subscribers'])
