@@ -31,10 +31,10 @@ MSG_SOURCES := pose4d_msgs/CMakeLists.txt pose4d_msgs/package.xml pose4d_msgs/cm
 	$(wildcard pose4d_msgs/msg/*.msg)
 TF2_SOURCES := $(wildcard ros_wheels/tf2_msgs/*.* ros_wheels/tf2_msgs/msg/*.msg) pose4d_msgs/cmake/wheel_include_dirs.cmake
 
-.PHONY: fuzz soak help setup test lint demo bench peer sample-bag clean
+.PHONY: fuzz soak help setup test lint demo bench peer train-env sample-bag clean
 
 help:
-	@echo 'make demo | make test | make setup | make lint | make bench | make fuzz | make soak | make peer | make sample-bag | make clean'
+	@echo 'make demo | make test | make setup | make lint | make bench | make fuzz | make soak | make peer | make train-env | make sample-bag | make clean'
 
 setup: $(VENV)/.stamp-pkg
 
@@ -115,6 +115,21 @@ $(PEER_VENV)/.stamp: requirements/peer.txt
 		2>$(PEER_VENV)/check.log || { cat $(PEER_VENV)/check.log; exit 1; }
 	touch $@
 
+# Training the photograph network (`pose4d train-convnet`) needs PyTorch, whose setuptools clashes
+# with the ROS wheels' pin: a venv of its own with our Python dependencies, PyTorch's CPU build and
+# pose4d_ros (no ROS). Inference (`pose4d eval`, `core.convnet`) is numpy and never needs it.
+TRAIN_VENV := $(CURDIR)/.venv-train
+train-env: $(TRAIN_VENV)/.stamp
+
+$(TRAIN_VENV)/.stamp: requirements/base.txt requirements/convnet.txt setup.py setup.cfg
+	test -x $(TRAIN_VENV)/bin/python || $(PYTHON) -m venv $(TRAIN_VENV)
+	$(TRAIN_VENV)/bin/python -m pip install --quiet -r requirements/convnet.txt \
+		$$(grep -v -e '^setuptools' -e '^#' requirements/base.txt)
+	$(TRAIN_VENV)/bin/python -m pip install --quiet --no-deps .
+	rm -rf build/lib build/bdist.* *.egg-info
+	$(TRAIN_VENV)/bin/pose4d train-convnet --help >/dev/null
+	touch $@
+
 # The bundled sample bag: 45 frames (1.5 s at 30 fps) of a synthetic RGB-D person (no occluder) posed by held-out
 # UTKinect motion (subject 8, waving), made by the project's own tools from ../shared/data.
 UTKINECT ?= ../shared/data/utkinect
@@ -130,4 +145,4 @@ clean:
 	rm -rf build out .pytest_cache .ruff_cache *.egg-info
 
 distclean: clean
-	rm -rf $(VENV) $(PEER_VENV)
+	rm -rf $(VENV) $(PEER_VENV) $(TRAIN_VENV)

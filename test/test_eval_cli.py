@@ -170,6 +170,12 @@ def test_eval_on_an_lspet_layout_scores_elbows_and_knees(tmp_path: Path) -> None
     table = json.loads(out.read_text())
     assert table['frames'] == 3 and list(table['rows']) == ['rgb']
     assert list(table['rows']['rgb']['pck']) == GROUPS_14 + ['average7']
+    # by default the shipped photograph network (core.convnet) gives the row, drawn too
+    assert pose4d_main(['eval', str(root), '--range', '2-4', '--json', str(out),
+                        '--draw', str(tmp_path / 'draw')]) == 0
+    row = json.loads(out.read_text())['rows']['rgb']
+    assert list(row['pck']) == GROUPS_14 + ['average7'] and row['cpu_ms']['p50'] > 0
+    assert len(list((tmp_path / 'draw' / 'rgb').glob('*.jpg'))) == 3
 
 
 @pytest.mark.parametrize(('argv', 'message'), [

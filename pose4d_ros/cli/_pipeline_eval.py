@@ -3,7 +3,8 @@
 A part model's rows come from one pass of `core.pipeline.FramePipeline` (the stages the ROS graph
 runs) over the frames: an RGB-D model gives `rgbd` (the detector's parts), `rgbd_kf` (after the
 SLQE tracker) and `rgbd_kf_ik` (the 14-joint skeleton, elbows and knees by IK); an RGB model
-gets no depth (no foreground: the whole colour image, Yang & Ramanan) and gives `rgb`. Frames
+gets no depth (no foreground: the whole colour image, Yang & Ramanan) and gives `rgb`, as does
+the photograph network (`core.convnet`, `convnet_rows`). Frames
 that are no sequence (LSPET photos, an evenly spread subset) are each on their own: the pipeline
 forgets the previous frame, and only the detector's row is given. `peer_rows` runs the peer
 (MediaPipe, `pose4d_ros.peer`) over the same frames; `score_rows` scores every row the same way.
@@ -16,12 +17,15 @@ tracker, `_kf_ik` all four stages; the peer's is the CPU time of its worker proc
 
 from __future__ import annotations
 
+import time
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
 
 from pose4d_ros.cli._dpm import ms_stats
+from pose4d_ros.core import joints as cj
+from pose4d_ros.core.convnet import ConvNet
 from pose4d_ros.core.dpm.infer import SearchConfig
 from pose4d_ros.core.dpm.model import PartModel
 from pose4d_ros.core.dpm.scale import ScaleConfig
@@ -73,6 +77,21 @@ def pipeline_rows(frames: Iterable[Frame], model: PartModel, *, name: str | None
         for s, pred in zip(suffixes, (out.parts, out.tracked, out.skeleton), strict=False):
             rows[s].add(pred, sum(out.cpu_s[stage] for stage in ROW_STAGES[s]))
     return {(name or model.channels) + s: row for s, row in rows.items()}
+
+
+def convnet_rows(frames: Iterable[Frame], net: ConvNet, *, name: str | None = None
+                 ) -> dict[str, Row]:
+    """The row of a photograph network (`core.convnet`) over the frames, each on its own
+    ({`name` (default: its channels): row}); its CPU time is the network's."""
+    row = Row()
+    for f in frames:
+        t0 = time.process_time()
+        uv, prob = net.detect(f.color)
+        cpu_s = time.process_time() - t0
+        row.add(JointSet(net.joint_names, uv, confidence=prob.astype(np.float32),
+                         source=np.full(len(uv), cj.DETECTED, np.uint8),
+                         score=float(prob.mean())), cpu_s)
+    return {name or net.channels: row}
 
 
 def peer_rows(frames: Iterable[Frame], peer: MediaPipePeer, *, sequence: bool = True

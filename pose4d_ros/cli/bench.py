@@ -89,7 +89,9 @@ def run(args: argparse.Namespace) -> int:
 
     threads = set_blas_threads(args.blas_threads)
     kind = source_kind(args.source)
-    model = load_model(model_path(args.model or default_models(kind)[0]))
+    # the stages time a part model; the photograph network's CPU per photo is `eval`'s cpu_ms
+    model = load_model(model_path(args.model or ('lspet_rgb_14' if kind == 'lspet'
+                                                 else default_models(kind)[0])))
     peer = MediaPipePeer() if args.peer else None  # without its venv, stop before any work
     try:
         frames = load_frames([args.source], frame_range=args.frame_range,

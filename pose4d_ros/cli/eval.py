@@ -21,8 +21,11 @@ cad60-to-bag`) or an LSPET root (with --range). Every row runs the live pipeline
   video mode, a new video where the tracker starts a new track (each photo or subset frame on
   its own).
 
+- `rgb` on LSPET: the photograph network (`core.convnet`, `lspet_convnet`): each joint's heat
+  map over the photograph, no part model (`--model lspet_rgb_14` gives the HOG mixture of parts).
+
 Default models: the shipped `rgbd_14` (what the nodes run) and `rgb_10` for a CAD-60 set,
-`lspet_rgb_14` for LSPET; `--model` (repeatable) replaces them (`--model rgbd_10` gives the
+`lspet_convnet` for LSPET; `--model` (repeatable) replaces them (`--model rgbd_10` gives the
 paper's 10-part rows), each model giving the rows of its channels. Every row
 records its CPU time per frame (`cpu_ms`: p50, p95; see `_pipeline_eval`). `--draw DIR`
 writes every frame with each row's skeleton and the ground truth, and each row's worst and best
@@ -39,8 +42,16 @@ import numpy as np
 
 from pose4d_ros.cli import _draw, _plot
 from pose4d_ros.cli._dpm import factor_list, load_frames, log
-from pose4d_ros.cli._pipeline_eval import Row, curve_rows, peer_rows, pipeline_rows, score_rows
+from pose4d_ros.cli._pipeline_eval import (
+    Row,
+    convnet_rows,
+    curve_rows,
+    peer_rows,
+    pipeline_rows,
+    score_rows,
+)
 from pose4d_ros.cli._progress import progress
+from pose4d_ros.core.convnet import ConvNet, is_convnet, load_convnet
 from pose4d_ros.core.dpm.infer import SearchConfig
 from pose4d_ros.core.dpm.model import PartModel, load_model
 from pose4d_ros.core.dpm.scale import ScaleConfig
@@ -89,7 +100,13 @@ def _clean(table: dict[str, dict[str, float]]) -> dict[str, dict[str, float | No
 
 
 def default_models(kind: str) -> list[str]:
-    return ['lspet_rgb_14'] if kind == 'lspet' else ['rgbd_14', 'rgb_10']
+    return ['lspet_convnet'] if kind == 'lspet' else ['rgbd_14', 'rgb_10']
+
+
+def load_any(name: str) -> PartModel | ConvNet:
+    """A part model or a photograph network (`core.convnet`), by shipped name or path."""
+    path = model_path(name)
+    return load_convnet(path) if is_convnet(path) else load_model(path)
 
 
 def add_parser(subparsers: argparse._SubParsersAction) -> None:
@@ -101,7 +118,7 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument('--json', required=True, type=Path, help='write the table here (JSON)')
     p.add_argument('--model', action='append', default=None,
                    help='model (.npz or shipped name); repeat for several rows; default: '
-                        'rgbd_14 + rgb_10 (CAD-60), lspet_rgb_14 (LSPET)')
+                        'rgbd_14 + rgb_10 (CAD-60), lspet_convnet (LSPET)')
     p.add_argument('--range', dest='frame_range', metavar='A-B',
                    help='LSPET image numbers (inclusive), e.g. 2501-3000')
     p.add_argument('--stride', type=int, default=1, help='every n-th frame of a CAD-60 video')
@@ -129,7 +146,7 @@ def run(args: argparse.Namespace) -> int:
 
     set_blas_threads(args.blas_threads)
     kind = source_kind(args.source)
-    models = [load_model(model_path(m)) for m in (args.model or default_models(kind))]
+    models = [load_any(m) for m in (args.model or default_models(kind))]
     # the peer first: without its venv, stop before any work
     peer = MediaPipePeer() if args.peer else None
     if args.plot is not None and args.plot.suffix.lower() != '.png':
@@ -154,7 +171,7 @@ def run(args: argparse.Namespace) -> int:
     return 0
 
 
-def table_rows(args: argparse.Namespace, kind: str, models: list[PartModel],
+def table_rows(args: argparse.Namespace, kind: str, models: list[PartModel | ConvNet],
                peer: MediaPipePeer | None) -> tuple[dict[str, dict], int, dict[str, dict]]:
     """Every model's rows and the peer's ({row name: table}), the number of frames, and the
     rows' accuracy curves (`_pipeline_eval.curve_rows` at `_plot.ALPHAS`)."""
@@ -168,6 +185,9 @@ def table_rows(args: argparse.Namespace, kind: str, models: list[PartModel],
         name = m.channels
         while name in rows:
             name += "'"
+        if isinstance(m, ConvNet):
+            rows.update(convnet_rows(progress(frames, name), m, name=name))
+            continue
         rows.update(pipeline_rows(progress(frames, name), m, name=name, sequence=sequence,
                                   search=SearchConfig(n_levels=args.levels),
                                   scale=ScaleConfig(factors=args.person_scales)))

@@ -2,8 +2,9 @@
 
     pose4d train-convnet LSPET --range 1-2500 --minutes 26 --out lspet_convnet.npz
 
-Needs PyTorch (training only; `pip install -r requirements/convnet.txt`, the CPU build that
-lies on this machine's disk): the network is trained for a fixed time budget on the CPU
+Needs PyTorch, for training only: `make train-env` makes `.venv-train` (our Python
+dependencies, PyTorch's CPU build from `requirements/convnet.txt`, pose4d_ros, no ROS), whose
+`pose4d train-convnet` this is. The network is trained for a fixed time budget on the CPU
 (AdamW, cosine learning rate, batches of 32), each photograph turned (within 40 degrees, 1 in 5
 any way up), scaled (0.78-1.28), shifted (a tenth of its size), mirrored with left and right
 swapped, and its colours jittered; a joint's loss is the cross-entropy of its softmax over the
@@ -38,7 +39,7 @@ from pose4d_ros.core.dpm.samples import mirror_index
 from pose4d_ros.datasets import lspet
 from pose4d_ros.datasets.sources import source_kind
 
-INSTALL = 'pip install -r requirements/convnet.txt (PyTorch, CPU build)'
+INSTALL = '`make train-env`, then .venv-train/bin/pose4d train-convnet ...'
 
 
 def add_parser(subparsers: argparse._SubParsersAction) -> None:

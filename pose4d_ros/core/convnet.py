@@ -3,7 +3,7 @@
 The HOG mixture of parts (`core.dpm`) places about a third of LSPET's joints within PCK@0.2 on
 real photographs, and about 40 % on the photographs it was trained on: HOG templates cannot
 hold real appearance (the models' README). This model learns the appearance instead: a
-fully convolutional network (a residual encoder to 1/32 of the input, decoded with skip
+fully convolutional network (a residual encoder to 1/16 of the input, decoded with skip
 connections to 1/4) gives, for each joint, a score for every cell of a 4-pixel grid over the
 photograph, trained with a softmax over the cells against a Gaussian around the labelled joint
 (as the keypoint heads of Mask R-CNN, He et al. 2017). A joint is put at its map's best cell

@@ -1,0 +1,171 @@
+"""The photograph joint network (core.convnet): its numpy layers, transforms, targets, decoding,
+file format, the PyTorch twin it is trained as (when PyTorch is installed) and the shipped
+model on real LSPET photographs (when ../shared/data is here)."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+from numpy.testing import assert_allclose
+
+from pose4d_ros.core import convnet as cn
+from pose4d_ros.core.convnet import ConvNet
+from pose4d_ros.core.metrics import reference_size
+from pose4d_ros.models import model_path
+
+NAMES = ('right_ankle', 'right_knee', 'right_hip', 'left_hip', 'left_knee', 'left_ankle',
+         'right_wrist', 'right_elbow', 'right_shoulder', 'left_shoulder', 'left_elbow',
+         'left_wrist', 'neck', 'head')
+MIRROR = (5, 4, 3, 2, 1, 0, 11, 10, 9, 8, 7, 6, 12, 13)
+
+
+def random_net(width: int = 4, input_px: int = 64, seed: int = 0) -> ConvNet:
+    """A network of the shipped shape with random weights."""
+    rng = np.random.default_rng(seed)
+    shapes = {'stem': (3, 3, width)}
+    for stage, cin, cout, blocks in (('s2', width, 2 * width, 2), ('s3', 2 * width, 4 * width, 2),
+                                     ('s4', 4 * width, 6 * width, 3)):
+        for i in range(blocks):
+            shapes[f'{stage}.{i}.c1'] = (3, cin if i == 0 else cout, cout)
+            shapes[f'{stage}.{i}.c2'] = (3, cout, cout)
+            if i == 0:
+                shapes[f'{stage}.{i}.skip'] = (1, cin, cout)
+    shapes.update({'l3': (1, 4 * width, 6 * width), 'u3.c1': (3, 6 * width, 4 * width),
+                   'u3.c2': (3, 4 * width, 4 * width), 'u3.skip': (1, 6 * width, 4 * width),
+                   'l2': (1, 2 * width, 4 * width), 'u2.c1': (3, 4 * width, 2 * width),
+                   'u2.c2': (3, 2 * width, 2 * width), 'u2.skip': (1, 4 * width, 2 * width),
+                   'head': (1, 2 * width, 14)})
+    weights = {n: ((rng.normal(0, (2 / (k * k * i)) ** 0.5, (k, k, i, o))).astype(np.float32),
+                   rng.normal(0, 0.1, o).astype(np.float32))
+               for n, (k, i, o) in shapes.items()}
+    return ConvNet(NAMES, MIRROR, input_px, weights, {'seed': seed})
+
+
+@pytest.mark.parametrize('stride', [1, 2])
+@pytest.mark.parametrize('k', [1, 3])
+def test_convolution_is_the_direct_sum(stride: int, k: int) -> None:
+    rng = np.random.default_rng(0)
+    x = rng.normal(size=(9, 8, 3)).astype(np.float32)
+    w = rng.normal(size=(k, k, 3, 5)).astype(np.float32)
+    b = rng.normal(size=5).astype(np.float32)
+    p = k // 2
+    xp = np.pad(x, ((p, p), (p, p), (0, 0)))
+    rows, cols = range(0, 9, stride), range(0, 8, stride)
+    direct = np.array([[np.einsum('ijc,ijco->o', xp[r:r + k, c:c + k], w) + b for c in cols]
+                       for r in rows])
+    assert_allclose(cn._conv(x, w, b, stride), direct, rtol=1e-4, atol=1e-5)
+
+
+def test_crop_transform_centres_scales_turns_and_mirrors() -> None:
+    m = cn.crop_transform((200, 100), 128)
+    assert_allclose(m @ [50, 100, 1], [64, 64])  # centre to centre
+    assert_allclose(m @ [50, 0, 1], [64, 0])  # the longer side fills the input
+    turned = cn.crop_transform((200, 100), 128, rotation_deg=90)
+    assert_allclose(turned @ [50, 0, 1], [0, 64], atol=1e-9)  # up turns to the left
+    mirrored = cn.crop_transform((200, 100), 128, mirror=True)
+    assert_allclose(mirrored @ [0, 100, 1], [128 - (m @ [0, 100, 1])[0], 64])
+    with pytest.raises(ValueError, match='image 0x100'):
+        cn.crop_transform((0, 100), 128)
+
+
+def test_targets_peak_at_the_joint_and_weigh_only_labelled_joints_on_the_grid() -> None:
+    uv = np.array([[30.0, 50.0], [np.nan, np.nan], [500.0, 10.0]])
+    t, w = cn.cell_targets(uv, np.array([True, False, True]), 32)
+    assert t.shape == (3, 32, 32) and t.dtype == np.float32
+    assert_allclose(t.sum(axis=(1, 2)), 1.0, rtol=1e-5)
+    y, x = np.unravel_index(t[0].argmax(), (32, 32))
+    assert (x, y) == (7, 12)  # (30 + 0.5) / 4 - 0.5 = 7.1, (50 + 0.5) / 4 - 0.5 = 12.1
+    assert_allclose(w, [1, 0, 0])  # unlabelled; off the grid
+
+
+def test_decode_returns_the_peak_in_photograph_pixels() -> None:
+    m = cn.crop_transform((300, 150), 128)  # photograph pixels x 128 / 300
+    logp = np.full((2, 32, 32), -50.0)
+    logp[0, 10, 20] = 0.0
+    logp[1, 5, 6], logp[1, 5, 7] = -0.1, -2.0  # the right neighbour pulls a quarter cell
+    uv, prob = cn.decode(logp, m)
+    inverse = np.linalg.inv(np.vstack([m, [0, 0, 1]]))[:2]
+    assert_allclose(uv[0], inverse @ [20 * 4 + 1.5, 10 * 4 + 1.5, 1])
+    assert_allclose(uv[1], inverse @ [6.25 * 4 + 1.5, 5 * 4 + 1.5, 1])
+    assert_allclose(prob, [1.0, np.exp(-0.1)])
+
+
+def test_detect_sees_the_mirror_image_with_left_and_right_swapped() -> None:
+    net = random_net()
+    rng = np.random.default_rng(1)
+    photo = rng.integers(0, 256, (64, 50, 3), dtype=np.uint8)  # input pixel = photo pixel
+    logp, _ = net.heat_maps(photo)
+    logp_mirrored, _ = net.heat_maps(np.ascontiguousarray(photo[:, ::-1]))
+    # the photograph is centred in the square input: the mirrored photograph's map of a joint
+    # is the map of its counterpart, mirrored
+    assert_allclose(logp_mirrored, logp[list(MIRROR), :, ::-1], atol=1e-4)
+    assert_allclose(np.exp(logp).sum(axis=(1, 2)), 1.0, rtol=1e-4)
+    uv, prob = net.detect(photo)
+    assert uv.shape == (14, 2) and prob.shape == (14,) and np.isfinite(uv).all()
+    with pytest.raises(ValueError, match=r'uint8, got \(64, 50\)'):
+        net.detect(photo[..., 0])
+
+
+def test_file_round_trip_and_errors_name_the_file(tmp_path: Path) -> None:
+    net = random_net()
+    path = tmp_path / 'net.npz'
+    cn.save_convnet(net, path)
+    assert cn.is_convnet(path) and not cn.is_convnet(model_path('rgb_10'))
+    back = cn.load_convnet(path)
+    assert back.joint_names == NAMES and back.mirror == MIRROR and back.metadata == {'seed': 0}
+    x = cn.normalise(np.random.default_rng(2).integers(0, 256, (64, 64, 3)))
+    # float16 weights: within a small fraction of the scores' spread
+    scores = net.forward(x)
+    assert np.abs(back.forward(x) - scores).max() < 0.01 * scores.std()
+    with pytest.raises(ValueError, match='rgb_10.npz: not a network model'):
+        cn.load_convnet(model_path('rgb_10'))
+    broken = tmp_path / 'broken.npz'
+    with np.load(path) as data:
+        arrays = {k: data[k] for k in data.files if k != 'head.w'}
+    np.savez(broken, **arrays)
+    with pytest.raises(ValueError, match=r"broken.npz: no weights for layer 'head'"):
+        cn.load_convnet(broken)
+    with pytest.raises(ValueError, match='no permutation'):
+        ConvNet(NAMES, (0,) * 14, 64, net.weights)
+    header = json.loads(str(np.load(path)['header']))
+    assert header['format'] == cn.FORMAT
+
+
+def test_the_pytorch_twin_computes_what_numpy_does() -> None:
+    torch = pytest.importorskip('torch', reason='PyTorch trains the network only (make '
+                                'train-env); the suite runs without it')
+    from pose4d_ros.cli.train_convnet import _network, export_weights
+
+    torch.manual_seed(0)
+    net = _network(torch, 4, 14)
+    for m in net.modules():
+        if isinstance(m, torch.nn.BatchNorm2d):  # statistics other than the identity
+            m.running_mean.uniform_(-0.5, 0.5)
+            m.running_var.uniform_(0.5, 2.0)
+            m.weight.data.uniform_(0.5, 1.5)
+            m.bias.data.uniform_(-0.2, 0.2)
+    net.eval()
+    x = cn.normalise(np.random.default_rng(0).integers(0, 256, (64, 64, 3)))
+    with torch.no_grad():
+        expected = net(torch.from_numpy(x.transpose(2, 0, 1)[None].copy()))[0].numpy()
+    ours = ConvNet(NAMES, MIRROR, 64, export_weights(net)).forward(x)
+    assert_allclose(ours, expected, atol=1e-4)
+
+
+def test_the_shipped_model_finds_people_in_held_out_photographs(shared_data: Path) -> None:
+    from pose4d_ros.datasets import lspet
+
+    root = shared_data / 'lspet'
+    net = cn.load_convnet(model_path('lspet_convnet'))
+    assert net.metadata['data'] == 'LSPET 1-2500' and net.metadata['train_minutes'] <= 30
+    frames = list(lspet.read_frames(root, 2501, 2540))
+    truth = np.array([f.truth.uv for f in frames])
+    visible = np.array([f.truth.confidence > 0 for f in frames])
+    pred = np.array([net.detect(f.color)[0] for f in frames])
+    size = reference_size(truth, visible)
+    hit = (np.linalg.norm(pred - truth, axis=2) <= 0.2 * size[:, None]) & visible
+    # 40 held-out photographs: the HOG mixture of parts places about a third within 0.2
+    assert hit.sum() / visible.sum() > 0.5
