@@ -2,13 +2,15 @@
 
 numba caches compiled kernels next to the installed modules (`cache=True`); a fresh install has
 none, and the first node to run a kernel would spend seconds compiling it. `make setup` runs
-this after each install. Uses the shipped default model when there is one.
+this after each install. Warms every shipped part model (the photograph network, `core.convnet`,
+is numpy and has no kernels to compile).
 """
 
 import sys
 import time
 
 from pose4d_ros.core.camera import cad60_intrinsics
+from pose4d_ros.core.convnet import is_convnet
 from pose4d_ros.core.dpm.model import load_model
 from pose4d_ros.core.pipeline import DetectorStage, ForegroundStage, FramePipeline
 from pose4d_ros.models import model_path, shipped_models
@@ -18,9 +20,10 @@ def main() -> int:
     t0 = time.monotonic()
     intr = cad60_intrinsics()
     ForegroundStage().warm_up(intr)
-    for name in shipped_models():
+    part_models = [n for n in shipped_models() if not is_convnet(model_path(n))]
+    for name in part_models:
         FramePipeline(DetectorStage(load_model(model_path(name)))).warm_up(intr)
-    print(f'compiled the kernels (foreground, {len(shipped_models())} shipped model(s)) in '
+    print(f'compiled the kernels (foreground, {len(part_models)} shipped part model(s)) in '
           f'{time.monotonic() - t0:.1f} s')
     return 0
 
