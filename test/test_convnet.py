@@ -97,8 +97,8 @@ def test_detect_sees_the_mirror_image_with_left_and_right_swapped() -> None:
     net = random_net()
     rng = np.random.default_rng(1)
     photo = rng.integers(0, 256, (64, 50, 3), dtype=np.uint8)  # input pixel = photo pixel
-    logp, _ = net.heat_maps(photo)
-    logp_mirrored, _ = net.heat_maps(np.ascontiguousarray(photo[:, ::-1]))
+    logp, _ = net.heat_maps(photo, (1.0,))
+    logp_mirrored, _ = net.heat_maps(np.ascontiguousarray(photo[:, ::-1]), (1.0,))
     # the photograph is centred in the square input: the mirrored photograph's map of a joint
     # is the map of its counterpart, mirrored
     assert_allclose(logp_mirrored, logp[list(MIRROR), :, ::-1], atol=1e-4)
@@ -169,3 +169,26 @@ def test_the_shipped_model_finds_people_in_held_out_photographs(shared_data: Pat
     hit = (np.linalg.norm(pred - truth, axis=2) <= 0.2 * size[:, None]) & visible
     # 40 held-out photographs: the HOG mixture of parts places about a third within 0.2
     assert hit.sum() / visible.sum() > 0.5
+
+
+@pytest.mark.parametrize('k', [0.8, 1.25])
+def test_a_map_read_at_another_scale_lands_on_the_same_photograph_pixel(k: float) -> None:
+    shape = (300, 200)
+    m1, mk = cn.crop_transform(shape, 128), cn.crop_transform(shape, 128, scale=k)
+    photo_px = np.array([120.0, 160.0, 1.0])
+    cell_k = ((mk @ photo_px) + 0.5) / 4 - 0.5
+    cell_1 = ((m1 @ photo_px) + 0.5) / 4 - 0.5
+    assert_allclose(cn._cell_map(m1, mk) @ np.r_[cell_1, 1.0], cell_k, atol=1e-9)
+
+
+def test_more_scales_keep_the_maps_distributions() -> None:
+    net = random_net()
+    photo = np.random.default_rng(3).integers(0, 256, (80, 60, 3), dtype=np.uint8)
+    one, m = net.heat_maps(photo, (1.0,))
+    assert_allclose(net.heat_maps(photo)[0], net.heat_maps(photo, cn.PHOTO_SCALES)[0])
+    logp, m2 = net.heat_maps(photo, (0.85, 1.0, 1.2))
+    assert_allclose(m2, m) and logp.shape == one.shape
+    assert_allclose(np.exp(logp).sum(axis=(1, 2)), 1.0, rtol=1e-4)
+    assert np.abs(logp - one).max() > 1e-3  # the other scales count
+    with pytest.raises(ValueError, match=r'include 1.*got \(1.2,\)'):
+        net.detect(photo, (1.2,))

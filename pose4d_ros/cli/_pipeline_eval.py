@@ -25,7 +25,7 @@ import numpy as np
 
 from pose4d_ros.cli._dpm import ms_stats
 from pose4d_ros.core import joints as cj
-from pose4d_ros.core.convnet import ConvNet
+from pose4d_ros.core.convnet import PHOTO_SCALES, ConvNet
 from pose4d_ros.core.dpm.infer import SearchConfig
 from pose4d_ros.core.dpm.model import PartModel
 from pose4d_ros.core.dpm.scale import ScaleConfig
@@ -79,14 +79,14 @@ def pipeline_rows(frames: Iterable[Frame], model: PartModel, *, name: str | None
     return {(name or model.channels) + s: row for s, row in rows.items()}
 
 
-def convnet_rows(frames: Iterable[Frame], net: ConvNet, *, name: str | None = None
-                 ) -> dict[str, Row]:
-    """The row of a photograph network (`core.convnet`) over the frames, each on its own
-    ({`name` (default: its channels): row}); its CPU time is the network's."""
+def convnet_rows(frames: Iterable[Frame], net: ConvNet, *, name: str | None = None,
+                 scales: Sequence[float] = PHOTO_SCALES) -> dict[str, Row]:
+    """The row of a photograph network (`core.convnet`) over the frames, each on its own, read
+    at `scales` ({`name` (default: its channels): row}); its CPU time is the network's."""
     row = Row()
     for f in frames:
         t0 = time.process_time()
-        uv, prob = net.detect(f.color)
+        uv, prob = net.detect(f.color, scales)
         cpu_s = time.process_time() - t0
         row.add(JointSet(net.joint_names, uv, confidence=prob.astype(np.float32),
                          source=np.full(len(uv), cj.DETECTED, np.uint8),

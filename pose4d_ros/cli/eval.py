@@ -22,7 +22,8 @@ cad60-to-bag`) or an LSPET root (with --range). Every row runs the live pipeline
   its own).
 
 - `rgb` on LSPET: the photograph network (`core.convnet`, `lspet_convnet`): each joint's heat
-  map over the photograph, no part model (`--model lspet_rgb_14` gives the HOG mixture of parts).
+  map over the photograph, read at `--photo-scales`, no part model (`--model lspet_rgb_14` gives
+  the HOG mixture of parts).
 
 Default models: the shipped `rgbd_14` (what the nodes run) and `rgb_10` for a CAD-60 set,
 `lspet_convnet` for LSPET; `--model` (repeatable) replaces them (`--model rgbd_10` gives the
@@ -51,7 +52,7 @@ from pose4d_ros.cli._pipeline_eval import (
     score_rows,
 )
 from pose4d_ros.cli._progress import progress
-from pose4d_ros.core.convnet import ConvNet, is_convnet, load_convnet
+from pose4d_ros.core.convnet import PHOTO_SCALES, ConvNet, is_convnet, load_convnet
 from pose4d_ros.core.dpm.infer import SearchConfig
 from pose4d_ros.core.dpm.model import PartModel, load_model
 from pose4d_ros.core.dpm.scale import ScaleConfig
@@ -128,6 +129,9 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument('--person-scales', type=factor_list, default=ScaleConfig.factors,
                    metavar='F,F,...', help="factors on the depth-predicted person scale, one "
                    'chosen per track (core.dpm.scale); 1 = the predicted scale only')
+    p.add_argument('--photo-scales', type=factor_list, default=PHOTO_SCALES, metavar='F,F,...',
+                   help="the photograph network's reading scales (core.convnet: maps read at "
+                        'each, averaged)')
     p.add_argument('--blas-threads', type=int, default=1)
     p.add_argument('--peer', choices=PEERS,
                    help='one more row: the peer on the same frames (needs `make peer`)')
@@ -186,7 +190,8 @@ def table_rows(args: argparse.Namespace, kind: str, models: list[PartModel | Con
         while name in rows:
             name += "'"
         if isinstance(m, ConvNet):
-            rows.update(convnet_rows(progress(frames, name), m, name=name))
+            rows.update(convnet_rows(progress(frames, name), m, name=name,
+                                     scales=args.photo_scales))
             continue
         rows.update(pipeline_rows(progress(frames, name), m, name=name, sequence=sequence,
                                   search=SearchConfig(n_levels=args.levels),

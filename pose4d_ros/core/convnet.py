@@ -38,6 +38,8 @@ from pose4d_ros.core.files import write_atomic
 FORMAT = 'pose4d-convnet-1'
 STRIDE = 4  # input pixels per heat-map cell
 PAD_VALUE = 114  # grey outside the photograph
+# The photograph's scales read by `ConvNet.detect` by default (`heat_maps`)
+PHOTO_SCALES: tuple[float, ...] = (1.0, 1.3)
 
 
 def layer_names() -> list[str]:
@@ -164,27 +166,55 @@ class ConvNet:
         y = self._block(_up2(y) + _conv(a, *w['l2'], 1), 'u2', 1)
         return _conv(y, *w['head'], 1).transpose(2, 0, 1)
 
-    def heat_maps(self, color: NDArray[np.uint8]) -> tuple[NDArray[np.float32],
-                                                           NDArray[np.float64]]:
+    def heat_maps(self, color: NDArray[np.uint8], scales: Sequence[float] = PHOTO_SCALES
+                  ) -> tuple[NDArray[np.float32], NDArray[np.float64]]:
         """Log-probabilities (J, S/4, S/4) of each joint over the cells of `color` ((H, W, 3)
         uint8 RGB), the photograph and its mirror image averaged, and the (2, 3) transform
-        from photograph to input pixels."""
+        from photograph to input pixels. `scales`: the photograph is also read enlarged (or
+        shrunk) by each factor (1 among them), and each map, brought back onto the grid of
+        scale 1, averaged in where it sees the photograph."""
         color = np.asarray(color)
         if color.ndim != 3 or color.shape[2] != 3 or color.dtype != np.uint8:
             raise ValueError(f'ConvNet: colour must be (H, W, 3) uint8, got {color.shape} '
                              f'{color.dtype}')
+        if 1.0 not in scales or not all(0.25 <= k <= 4.0 for k in scales):
+            raise ValueError(f'ConvNet: scales must include 1 and lie within 0.25..4, got '
+                             f'{tuple(scales)}')
         m = crop_transform(color.shape, self.input_px)
-        x = normalise(warp(color, m, self.input_px))
-        s = self.forward(x) + self.forward(x[:, ::-1])[list(self.mirror), :, ::-1]
-        s = s * 0.5
+        cells = self.input_px // STRIDE
+        total, weight = 0.0, 0.0
+        for k in scales:
+            mk = crop_transform(color.shape, self.input_px, scale=k)
+            x = normalise(warp(color, mk, self.input_px))
+            s = 0.5 * (self.forward(x) + self.forward(x[:, ::-1])[list(self.mirror), :, ::-1])
+            w = np.ones((cells, cells), np.float32)
+            if k != 1.0:
+                a = _cell_map(m, mk)
+                s = np.stack([cv2.warpAffine(c, a, (cells, cells), flags=cv2.INTER_LINEAR
+                                             | cv2.WARP_INVERSE_MAP,
+                                             borderMode=cv2.BORDER_REPLICATE) for c in s])
+                w = cv2.warpAffine(w, a, (cells, cells), flags=cv2.INTER_LINEAR
+                                   | cv2.WARP_INVERSE_MAP, borderMode=cv2.BORDER_CONSTANT)
+            total = total + s * w
+            weight = weight + w
+        s = total / np.maximum(weight, 1e-6)
         s = s - s.max(axis=(1, 2), keepdims=True)
         return s - np.log(np.exp(s).sum(axis=(1, 2), keepdims=True)), m
 
-    def detect(self, color: NDArray[np.uint8]) -> tuple[NDArray[np.float64],
-                                                        NDArray[np.float64]]:
+    def detect(self, color: NDArray[np.uint8], scales: Sequence[float] = PHOTO_SCALES
+               ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
         """(J, 2) photograph pixels of each joint and (J,) its probability at that cell."""
-        logp, m = self.heat_maps(color)
+        logp, m = self.heat_maps(color, scales)
         return decode(logp, m)
+
+
+def _cell_map(m1: NDArray[np.float64], mk: NDArray[np.float64]) -> NDArray[np.float64]:
+    """(2, 3) affine from the cells of input transform `m1` to those of `mk` (the same
+    photograph through two transforms)."""
+    c = np.array([[STRIDE, 0.0, STRIDE / 2 - 0.5], [0.0, STRIDE, STRIDE / 2 - 0.5], [0, 0, 1]])
+    full = np.linalg.inv(c) @ np.vstack([mk, [0, 0, 1]]) @ np.linalg.inv(
+        np.vstack([m1, [0, 0, 1]])) @ c
+    return full[:2]
 
 
 def decode(logp: NDArray[np.floating], transform: NDArray[np.float64]
