@@ -19,6 +19,7 @@ from pose4d_ros.core.pipeline import (
     IkStage,
     TrackerStage,
     limb_bones,
+    medoid_parts,
     person_scale_px,
     reorder,
     warm_up_frame,
@@ -298,6 +299,39 @@ def test_the_detector_stage_guides_a_frame_by_the_previous_one_only_when_recent(
     seen.clear()
     stage.step(color, depth, INTR, mask=mask, stamp_s=2.0 + step)
     assert seen[0] is None
+
+
+def test_medoid_parts_takes_each_part_where_the_poses_agree() -> None:
+    a = np.array([[10.0, 10.0], [50.0, 50.0]])
+    b = a + [[1.0, 0.0], [0.0, 1.0]]
+    c = a + [[0.0, 2.0], [40.0, 0.0]]  # its second part elsewhere
+    assert_allclose(medoid_parts([c, a, b]), [[10.0, 10.0], [50.0, 50.0]])
+    assert_allclose(medoid_parts([b, c]), b)  # two poses: the first on a tie
+
+
+@pytest.mark.parametrize('odd', [0, 1, 2, 3])
+def test_while_the_scale_is_undecided_a_part_one_factor_puts_elsewhere_is_not_taken(odd) -> None:
+    """In a track's first frames every person-scale factor is searched; one factor's pose
+    putting a part far from where the others agree does not decide that part."""
+    stage = DetectorStage(load_model(model_path('rgbd_10')))
+    detect = stage.detector.detect
+    calls = []
+
+    def spy(*args, **kwargs):
+        poses = detect(*args, **kwargs)
+        calls.append(kwargs['scale'])
+        if poses and len(calls) - 1 == odd:
+            uv = poses[0].uv.copy()
+            uv[3] += 60.0
+            poses = [replace(poses[0], uv=uv), *poses[1:]]
+        return poses
+
+    stage.detector.detect = spy
+    color, depth, mask = warm_up_frame(INTR)
+    out = stage.step(color, depth, INTR, mask=mask, stamp_s=0.0)
+    assert len(calls) == len(stage.person_scale.config.factors) > 2
+    truth = [detect(color, depth, mask=mask, intrinsics=INTR, scale=f)[0].uv[3] for f in calls]
+    assert np.linalg.norm(out.uv[3] - (truth[odd] + 60.0)) > 20.0
 
 
 def test_a_part_placed_beyond_the_image_edge_is_put_on_the_edge() -> None:

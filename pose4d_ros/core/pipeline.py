@@ -242,8 +242,9 @@ class DetectorStage:
 
         `stamp_s` (the frame's time, seconds) tells the person's scale when a new track starts
         (`core.dpm.scale.PersonScale`: the person unseen for a while); without it, only
-        `reset` does. With it, the previous frame's parts, if at most `PRIOR_MAX_GAP_S` old,
-        guide this frame's arms (`SearchConfig.arm_prior`).
+        `reset` does. While the scale is undecided (every factor searched), each part is the
+        medoid of the factors' poses (`medoid_parts`). With it, the previous frame's parts,
+        if at most `PRIOR_MAX_GAP_S` old, guide this frame's arms (`SearchConfig.arm_prior`).
         `last_flags` tells why a result is doubtful ('no_person', 'low_score', 'no_depth').
         ValueError when `intrinsics` are for another image size.
         """
@@ -263,6 +264,11 @@ class DetectorStage:
             chosen = self.person_scale.update(
                 {f: poses[0].score if poses else math.nan for f, poses in found.items()})
             pose = found[chosen][0]
+            poses = [v[0] for v in found.values() if v and np.isfinite(v[0].uv).all()]
+            if len(poses) >= 3:
+                # the person's scale still undecided (a track's first frames): each part where
+                # the poses found at the factors agree most, not where the leading one put it
+                pose = replace(pose, uv=medoid_parts([p.uv for p in poses]))
         else:
             pose = found[1.0][0]
         self.last_flags = pose.flags
@@ -283,6 +289,15 @@ class DetectorStage:
             xyz = backproject(uv, z, intrinsics)
         return JointSet(self.names, uv, xyz, confidence=np.where(src == cj.DETECTED, conf, 0),
                         source=src, score=float(pose.score))
+
+
+def medoid_parts(uvs: list[NDArray[np.float64]]) -> NDArray[np.float64]:
+    """(P, 2): each part's position, among those of the poses `uvs` (each (P, 2) pixels), with
+    the least summed distance to the others' (the medoid: a part one pose puts elsewhere
+    while the others agree is not taken)."""
+    p = np.stack(uvs)
+    d = np.linalg.norm(p[:, None] - p[None], axis=3).sum(axis=1)
+    return p[np.argmin(d, axis=0), np.arange(p.shape[1])]
 
 
 # Metres of body per person scale: the tracker's pixel parameters are stated for a person of
