@@ -186,6 +186,8 @@ def test_eval_on_an_lspet_layout_scores_elbows_and_knees(tmp_path: Path) -> None
     (['bench', '{set}', '--json', '{tmp}/b.json', '--frames', '0'], '--frames'),
     (['eval', '{set}', '--json', '{tmp}/t.json', '--person-scales', '1.2,1'],
      'factors must be ascending'),
+    (['eval', '{set}', '--json', '{tmp}/t.json', '--photo-scales', '1.3'],
+     '--photo-scales (1.3,): must include 1'),
 ])
 def test_errors_name_the_file_and_exit_2(tiny_set: Path, tmp_path: Path, capsys, argv,
                                          message: str) -> None:

@@ -151,6 +151,9 @@ def run(args: argparse.Namespace) -> int:
     set_blas_threads(args.blas_threads)
     kind = source_kind(args.source)
     models = [load_any(m) for m in (args.model or default_models(kind))]
+    if 1.0 not in args.photo_scales or not all(0.25 <= k <= 4 for k in args.photo_scales):
+        raise ValueError(f'--photo-scales {args.photo_scales}: must include 1 and lie within '
+                         f'0.25..4')
     # the peer first: without its venv, stop before any work
     peer = MediaPipePeer() if args.peer else None
     if args.plot is not None and args.plot.suffix.lower() != '.png':
