@@ -52,7 +52,13 @@ from pose4d_ros.cli._pipeline_eval import (
     score_rows,
 )
 from pose4d_ros.cli._progress import progress
-from pose4d_ros.core.convnet import PHOTO_SCALES, ConvNet, is_convnet, load_convnet
+from pose4d_ros.core.convnet import (
+    PHOTO_SCALES,
+    ConvNet,
+    is_convnet,
+    load_convnet,
+    valid_scales,
+)
 from pose4d_ros.core.dpm.infer import SearchConfig
 from pose4d_ros.core.dpm.model import PartModel, load_model
 from pose4d_ros.core.dpm.scale import ScaleConfig
@@ -151,7 +157,7 @@ def run(args: argparse.Namespace) -> int:
     set_blas_threads(args.blas_threads)
     kind = source_kind(args.source)
     models = [load_any(m) for m in (args.model or default_models(kind))]
-    if 1.0 not in args.photo_scales or not all(0.25 <= k <= 4 for k in args.photo_scales):
+    if not valid_scales(args.photo_scales):
         raise ValueError(f'--photo-scales {args.photo_scales}: must include 1 and lie within '
                          f'0.25..4')
     # the peer first: without its venv, stop before any work

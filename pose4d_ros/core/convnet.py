@@ -19,10 +19,7 @@ batch normalisation folded into the weights), so the nodes and `pose4d eval` nee
 
 from __future__ import annotations
 
-import io
 import json
-import zipfile
-import zlib
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -33,7 +30,7 @@ import numpy as np
 from numpy.lib.stride_tricks import sliding_window_view
 from numpy.typing import NDArray
 
-from pose4d_ros.core.files import write_atomic
+from pose4d_ros.core.files import NPZ_ERRORS, read_npz, write_npz
 
 FORMAT = 'pose4d-convnet-1'
 STRIDE = 4  # input pixels per heat-map cell
@@ -177,7 +174,7 @@ class ConvNet:
         if color.ndim != 3 or color.shape[2] != 3 or color.dtype != np.uint8:
             raise ValueError(f'ConvNet: colour must be (H, W, 3) uint8, got {color.shape} '
                              f'{color.dtype}')
-        if 1.0 not in scales or not all(0.25 <= k <= 4.0 for k in scales):
+        if not valid_scales(scales):
             raise ValueError(f'ConvNet: scales must include 1 and lie within 0.25..4, got '
                              f'{tuple(scales)}')
         m = crop_transform(color.shape, self.input_px)
@@ -206,6 +203,12 @@ class ConvNet:
         """(J, 2) photograph pixels of each joint and (J,) its probability at that cell."""
         logp, m = self.heat_maps(color, scales)
         return decode(logp, m)
+
+
+def valid_scales(scales: Sequence[float]) -> bool:
+    """Whether `scales` can be `ConvNet.heat_maps`' reading scales: 1 among them (its grid is
+    the one the others are brought onto), each within 0.25..4."""
+    return 1.0 in scales and all(0.25 <= k <= 4.0 for k in scales)
 
 
 def _cell_map(m1: NDArray[np.float64], mk: NDArray[np.float64]) -> NDArray[np.float64]:
@@ -245,9 +248,7 @@ def save_convnet(net: ConvNet, path: str | Path) -> None:
     for name, (w, b) in net.weights.items():
         arrays[name + '.w'] = w.astype(np.float16)
         arrays[name + '.b'] = b.astype(np.float32)
-    buffer = io.BytesIO()
-    np.savez_compressed(buffer, header=np.array(json.dumps(header)), **arrays)
-    write_atomic(path, buffer.getvalue())
+    write_npz(path, header, arrays)
 
 
 def is_convnet(path: str | Path) -> bool:
@@ -256,21 +257,18 @@ def is_convnet(path: str | Path) -> bool:
         with np.load(path, allow_pickle=False) as data:
             return 'header' in data.files and \
                 json.loads(str(data['header'])).get('format') == FORMAT
-    except (OSError, ValueError, EOFError, KeyError, zipfile.BadZipFile, zlib.error):
+    except NPZ_ERRORS:
         return False
 
 
 def load_convnet(path: str | Path) -> ConvNet:
     """Read a network written by `save_convnet`; ValueError naming the file when it is not one."""
     path = Path(path)
-    if not path.is_file():
-        raise OSError(f'{path}: no such model file')
+    arrays = read_npz(path, 'network model')
     try:
-        with np.load(path, allow_pickle=False) as data:
-            header = json.loads(str(data['header']))
-            arrays = {k: data[k] for k in data.files if k != 'header'}
-    except (OSError, ValueError, EOFError, KeyError, zipfile.BadZipFile, zlib.error) as exc:
-        raise ValueError(f'{path}: not a network model ({type(exc).__name__}: {exc})') from exc
+        header = json.loads(str(arrays.pop('header')))
+    except (KeyError, ValueError) as exc:
+        raise ValueError(f'{path}: not a network model (no header: {exc})') from exc
     if header.get('format') != FORMAT:
         raise ValueError(f'{path}: not a network model (format {header.get("format")!r}, '
                          f'expected {FORMAT!r})')

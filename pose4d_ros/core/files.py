@@ -1,13 +1,22 @@
-"""Files written whole or not at all: to a temporary name beside the target, then renamed."""
+"""Files written whole or not at all: to a temporary name beside the target, then renamed;
+and the model files' .npz archives (a JSON header and named arrays), read with one clear error."""
 
 from __future__ import annotations
 
+import io
 import json
 import os
 import tempfile
-from collections.abc import Callable
+import zipfile
+import zlib
+from collections.abc import Callable, Mapping
 from pathlib import Path
 from typing import Any
+
+import numpy as np
+
+# What numpy raises on a damaged or foreign .npz (a zip error, a bad member, a short file)
+NPZ_ERRORS = (OSError, ValueError, EOFError, KeyError, zipfile.BadZipFile, zlib.error)
 
 _UMASK = os.umask(0o022)  # read once, at import (setting it is process-wide)
 os.umask(_UMASK)
@@ -33,3 +42,25 @@ def write_json(path: str | Path, obj: Any, *, indent: int = 2,
                default: Callable[[Any], Any] | None = None) -> None:
     """`obj` as JSON (with a final newline), written atomically (`write_atomic`)."""
     write_atomic(path, (json.dumps(obj, indent=indent, default=default) + '\n').encode())
+
+
+def write_npz(path: str | Path, header: Mapping[str, Any], arrays: Mapping[str, Any]) -> None:
+    """`header` (as JSON, the array 'header') and `arrays` as one compressed .npz, written
+    atomically (`write_atomic`)."""
+    buffer = io.BytesIO()
+    np.savez_compressed(buffer, header=np.array(json.dumps(header)), **arrays)
+    write_atomic(path, buffer.getvalue())
+
+
+def read_npz(path: str | Path, what: str) -> dict[str, np.ndarray]:
+    """Every array of the .npz at `path`; OSError when there is no such file, ValueError naming
+    the file and `what` it should be when it is damaged or no .npz."""
+    path = Path(path)
+    if not path.is_file():
+        raise OSError(f'{path}: no such model file')
+    try:
+        with np.load(path, allow_pickle=False) as data:
+            return {k: data[k] for k in data.files}
+    except NPZ_ERRORS as exc:
+        raise ValueError(f'{path}: not a {what}: damaged or not a NumPy .npz archive '
+                         f'({type(exc).__name__}: {exc})') from exc

@@ -24,10 +24,7 @@ on the joints (see `core.dpm.samples.person_scale`).
 
 from __future__ import annotations
 
-import io
 import json
-import zipfile
-import zlib
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -35,7 +32,7 @@ from pathlib import Path
 import numpy as np
 from numpy.typing import NDArray
 
-from pose4d_ros.core.files import write_atomic
+from pose4d_ros.core.files import read_npz, write_npz
 from pose4d_ros.core.hog import N_FEATURES
 from pose4d_ros.core.refine import PartRefiner
 
@@ -220,22 +217,13 @@ def save_model(model: PartModel, path: str | Path) -> None:
             arrays[name] = getattr(model, name)
     if model.refiner is not None:
         arrays.update({_REFINER + k: v for k, v in model.refiner.arrays().items()})
-    buffer = io.BytesIO()
-    np.savez_compressed(buffer, header=np.array(json.dumps(header)), **arrays)
-    write_atomic(path, buffer.getvalue())
+    write_npz(path, header, arrays)
 
 
 def load_model(path: str | Path) -> PartModel:
     """Read a model written by `save_model`; ValueError naming the file when it is not one."""
     path = Path(path)
-    if not path.is_file():
-        raise OSError(f'{path}: no such model file')
-    try:
-        with np.load(path, allow_pickle=False) as data:
-            contents = {k: data[k] for k in data.files}
-    except (OSError, ValueError, EOFError, KeyError, zipfile.BadZipFile, zlib.error) as exc:
-        raise ValueError(f'{path}: not a part model: damaged or not a NumPy .npz archive '
-                         f'({type(exc).__name__}: {exc})') from exc
+    contents = read_npz(path, 'part model')
     missing = [k for k in ('header', *_ARRAYS) if k not in contents]
     if missing:
         raise ValueError(f'{path}: not a part model, missing {missing}')
