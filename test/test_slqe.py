@@ -284,7 +284,9 @@ def test_a_restart_on_wrong_detections_is_undone(shadow: int) -> None:
     t, truth = linear_tracks(rng, 60)
     noisy = truth + rng.normal(0, 1.0, truth.shape)
     noisy[30:33, 3] += [40.0, 0.0]
-    tracker = SlqeTracker(SlqeConfig(shadow_frames=shadow), PARTS_10)
+    # (the limb rule off: it would take the wrong place a frame sooner, the shoulder-wrist
+    # distance of these random parts being kept within its tolerance)
+    tracker = SlqeTracker(SlqeConfig(shadow_frames=shadow, limb_tolerance=0.0), PARTS_10)
     pos, src = run(tracker, t, noisy)
     assert (src[30:32, 3] == Source.TRACKED).all() and src[32, 3] == Source.DETECTED
     assert err(pos[32, 3], truth[32, 3]) > 30.0  # followed the wrong place
@@ -293,6 +295,51 @@ def test_a_restart_on_wrong_detections_is_undone(shadow: int) -> None:
         assert err(pos[33:, 3], truth[33:, 3]).max() < 8.0
     else:
         assert src[33, 3] == Source.TRACKED and err(pos[33, 3], truth[33, 3]) > 20.0
+
+
+ARM = PartTree(('neck', 'right_elbow', 'right_wrist'), (-1, 0, 1))
+
+
+def swung_wrist(start: int, n: int = 40, step_rad: float = 0.55) -> np.ndarray:
+    """(n, 3, 2) pixels: neck and elbow at rest, the wrist 30 px from the elbow, at rest until
+    frame `start`, then whipped round the elbow at `step_rad` a frame (16 px a frame)."""
+    angle = step_rad * np.clip(np.arange(n) - start + 1, 0, None)
+    uv = np.empty((n, 3, 2))
+    uv[:, 0] = [160.0, 60.0]
+    uv[:, 1] = [160.0, 120.0]
+    uv[:, 2] = uv[:, 1] + 30.0 * np.stack([np.cos(angle), np.sin(angle)], axis=1)
+    return uv
+
+
+@pytest.mark.parametrize('tolerance', [0.35, 0.0])
+def test_a_hand_whipped_round_its_elbow_is_followed(tolerance: float) -> None:
+    """A wrist at rest starts turning round its elbow at 16 px a frame: the prediction loses it
+    and the consecutive detections, 16 px apart, never agree as a drift; with the limb rule the
+    second rejected detection, still 30 px from the accepted elbow's, restarts the wrist."""
+    t = np.arange(40) / FPS
+    truth = swung_wrist(20)
+    tracker = SlqeTracker(SlqeConfig(limb_tolerance=tolerance), ARM)
+    pos, src = run(tracker, t, truth + np.random.default_rng(3).normal(0, 0.5, truth.shape))
+    assert (src[:, :2] == Source.DETECTED).all()
+    assert src[20, 2] == Source.TRACKED  # the first frame of the swing is an outlier to it
+    if tolerance:
+        assert src[21, 2] == Source.DETECTED
+        assert err(pos[21:25, 2], truth[21:25, 2]).max() < 12.0
+    else:
+        assert (src[21:25, 2] == Source.TRACKED).all()
+        assert err(pos[24, 2], truth[24, 2]) > 30.0
+
+
+def test_the_limb_rule_takes_no_detection_off_the_limb() -> None:
+    """Two detections in a row 40 px off the wrist, 60 px from the elbow (the limb is 30 px
+    long), stay outliers."""
+    t = np.arange(30) / FPS
+    truth = swung_wrist(100, 30)
+    noisy = truth + np.random.default_rng(4).normal(0, 0.5, truth.shape)
+    noisy[20:22, 2] += [30.0, 0.0]
+    pos, src = run(SlqeTracker(SlqeConfig(), ARM), t, noisy)
+    assert (src[20:22, 2] == Source.TRACKED).all()
+    assert err(pos[20:, 2], truth[20:, 2]).max() < 5.0
 
 
 def test_reset_and_time_going_back() -> None:
@@ -349,7 +396,8 @@ def test_bad_input_is_refused(uv, conf, stamp) -> None:
 @pytest.mark.parametrize('kwargs', [
     {'order': 4}, {'coupling': 1.0}, {'coupling': -0.1}, {'process_noise': 0.0},
     {'gate_chi2': -1.0}, {'output': 'best'}, {'confidence_decay': 0.0},
-    {'accel_time_s': 0.0}, {'shadow_frames': -1},
+    {'accel_time_s': 0.0}, {'shadow_frames': -1}, {'limb_tolerance': 1.0},
+    {'limb_tolerance': -0.1},
 ])
 def test_bad_config_is_refused(kwargs) -> None:
     with pytest.raises(ValueError):

@@ -47,6 +47,11 @@ innovation ``y_i = z_i - H s'_i`` and its covariance ``S_i``:
   unless it is within the gate of where the part was at the previous frame: a hand that stops or
   turns back, which the prediction overshoots, is restarted on its detection
   (`stop_hypothesis`).
+- a limb that turns fast about its joint (a hand whipped round the elbow) outruns the
+  prediction for frames on end, while the detections of it stay where the limb is: so an arm's
+  detection rejected a second frame running is restarted on (DETECTED) when its parent's
+  detection is accepted and the limb between them keeps its length, within `limb_tolerance`
+  of the tracked one (`limb_tolerance`).
 - when ``drift_frames`` consecutive detections are rejected but agree with each other (each within
   ``drift_radius_px`` per 1/30 s of the previous one), the filter is the one that drifted: the
   part is re-initialised on the detection (DETECTED).
@@ -143,7 +148,14 @@ class SlqeConfig:
     accel_time_s : time constant of the acceleration, seconds: it decays as
         ``exp(-dt / accel_time_s)`` (Singer's manoeuvre model: a hand's acceleration turns
         within a wave); `inf` = the paper's constant acceleration. Order 3 only.
-    shadow_frames : after a part is restarted on a detection (drift or stop hypothesis), its
+    limb_tolerance : a detection of a part in `limb_parts` rejected for a second frame running,
+        whose parent's detection is accepted, restarts the part on it when its distance from
+        that detection is within this fraction of the parts' distance at the previous frame
+        (the limb kept its length: the part turned fast about its parent, which the prediction
+        lost); 0 disables.
+    limb_parts : the parts `limb_tolerance` applies to: the arms, whose hands make the fastest
+        turns (on the legs too, it cost the held-out renders' knees).
+    shadow_frames : after a part is restarted on a detection (drift, stop or limb hypothesis), its
         previous track is kept, predicted, for this many frames: a later detection beyond the
         gate but within that track's brings the track back (the restart followed a wrong
         detection). 0 disables.
@@ -166,6 +178,8 @@ class SlqeConfig:
     stop_hypothesis: bool = True
     accel_time_s: float = 0.2
     shadow_frames: int = 5
+    limb_tolerance: float = 0.35
+    limb_parts: tuple[str, ...] = ('left_elbow', 'left_wrist', 'right_elbow', 'right_wrist')
 
     def __post_init__(self) -> None:
         if self.order not in (2, 3):
@@ -184,6 +198,8 @@ class SlqeConfig:
             raise ValueError(f'drift_frames ({self.drift_frames}), max_missed_frames '
                              f'({self.max_missed_frames}) and shadow_frames '
                              f'({self.shadow_frames}) must be >= 0')
+        if not 0.0 <= self.limb_tolerance < 1.0:
+            raise ValueError(f'limb_tolerance must be in [0, 1), got {self.limb_tolerance}')
         if not 0.0 <= self.min_confidence <= 1.0:
             raise ValueError(f'min_confidence must be in [0, 1], got {self.min_confidence}')
         if not 0.0 < self.confidence_decay <= 1.0:
@@ -484,6 +500,16 @@ def _mahalanobis2(y: NDArray[np.float64], s: NDArray[np.float64]) -> NDArray[np.
     return np.where(det > 0, d2, math.inf)
 
 
+def _keeps_length(z: NDArray[np.float64], before: TrackState, i: int, parent: int, b: int,
+                  tolerance: float) -> bool:
+    """Whether detections `z` of part i and its parent are as far apart as the two parts
+    were at the previous frame (`before`), within `tolerance` of that distance."""
+    if not (before.active[i] and before.active[parent]):
+        return False
+    was = math.dist(before.x[i * b:i * b + 2], before.x[parent * b:parent * b + 2])
+    return abs(math.dist(z[i], z[parent]) - was) <= tolerance * was
+
+
 def update(state: TrackState, uv: NDArray[np.floating], confidence: NDArray[np.floating] | None,
            config: SlqeConfig, tree: PartTree, px_gain: float = 1.0,
            before: TrackState | None = None) -> tuple[TrackState, UpdateInfo]:
@@ -536,6 +562,8 @@ def update(state: TrackState, uv: NDArray[np.floating], confidence: NDArray[np.f
         s_all = cov[pos[:, :, None], pos[:, None, :]] + r_var[gated, None, None] * np.eye(2)
         d2_all = _mahalanobis2(y_all, s_all)
         nis[gated] = d2_all
+    limb = ({i for i, name in enumerate(tree.names) if name in config.limb_parts}
+            if config.limb_tolerance > 0 and before is not None else set())
     for i, d2 in zip(gated, d2_all if len(gated) else [], strict=True):
         if d2 <= config.gate_chi2:
             accepted.append(int(i))
@@ -548,6 +576,10 @@ def update(state: TrackState, uv: NDArray[np.floating], confidence: NDArray[np.f
             if _mahalanobis2((z[i] - before.x[p0])[None], s0[None])[0] <= config.gate_chi2:
                 restart.append(int(i))
                 continue
+        if i in limb and state.rejected[i] > 0 and tree.parents[i] in accepted and \
+                _keeps_length(z, before, i, tree.parents[i], b, config.limb_tolerance):
+            restart.append(int(i))
+            continue
         if state.shadow_left[i] > 0:
             s1 = shadow_cov[i, :2, :2] + r_var[i] * np.eye(2)
             if _mahalanobis2((z[i] - shadow_x[i, :2])[None], s1[None])[0] <= config.gate_chi2:
