@@ -331,7 +331,7 @@ def test_a_hand_whipped_round_its_elbow_is_followed(tolerance: float) -> None:
 
 
 def test_the_limb_rule_takes_no_detection_off_the_limb() -> None:
-    """Two detections in a row 40 px off the wrist, 60 px from the elbow (the limb is 30 px
+    """Two detections in a row 30 px off the wrist, 60 px from the elbow (the limb is 30 px
     long), stay outliers."""
     t = np.arange(30) / FPS
     truth = swung_wrist(100, 30)

@@ -49,9 +49,9 @@ innovation ``y_i = z_i - H s'_i`` and its covariance ``S_i``:
   (`stop_hypothesis`).
 - a limb that turns fast about its joint (a hand whipped round the elbow) outruns the
   prediction for frames on end, while the detections of it stay where the limb is: so an arm's
-  detection rejected a second frame running is restarted on (DETECTED) when its parent's
-  detection is accepted and the limb between them keeps its length, within `limb_tolerance`
-  of the tracked one (`limb_tolerance`).
+  detection beyond the gate, its previous one rejected too, is restarted on (DETECTED) when its
+  parent's detection is accepted and the limb between them keeps its length, within
+  `limb_tolerance` of the tracked one.
 - when ``drift_frames`` consecutive detections are rejected but agree with each other (each within
   ``drift_radius_px`` per 1/30 s of the previous one), the filter is the one that drifted: the
   part is re-initialised on the detection (DETECTED).
@@ -149,11 +149,11 @@ class SlqeConfig:
     accel_time_s : time constant of the acceleration, seconds: it decays as
         ``exp(-dt / accel_time_s)`` (Singer's manoeuvre model: a hand's acceleration turns
         within a wave); `inf` = the paper's constant acceleration. Order 3 only.
-    limb_tolerance : a detection of a part in `limb_parts` rejected for a second frame running,
-        whose parent's detection is accepted, restarts the part on it when its distance from
-        that detection is within this fraction of the parts' distance at the previous frame
-        (the limb kept its length: the part turned fast about its parent, which the prediction
-        lost); 0 disables.
+    limb_tolerance : a detection of a part in `limb_parts` beyond the gate, its previous one
+        rejected too, whose parent's detection is accepted, restarts the part on it when its
+        distance from that detection is within this fraction of the parts' distance at the
+        previous frame (the limb kept its length: the part turned fast about its parent, which
+        the prediction lost); 0 disables.
     limb_parts : the parts `limb_tolerance` applies to: the arms, whose hands make the fastest
         turns (on the legs too, it cost the held-out renders' knees).
     shadow_frames : after a part is restarted on a detection (drift, stop or limb hypothesis), its
