@@ -175,6 +175,37 @@ def joint_cases(JointArray, Joint, valid, rng: np.random.Generator) -> dict[str,
     }
 
 
+def raw_cases(topics: list[str], rng: np.random.Generator) -> dict[str, Callable]:
+    """Serialized bytes that are not (or not quite) a message of the topic's type, published as
+    they are (`Publisher.publish(bytes)`), as a broken driver, bridge or replay can send them:
+    each maker takes the valid messages of a frame and returns {topic key: bytes}."""
+    from rclpy.serialization import serialize_message
+
+    def on_one(make):
+        def fn(valid: dict[str, object]) -> dict[str, bytes]:
+            key = str(rng.choice(topics))
+            return {key: make(serialize_message(valid[key]))}
+        return fn
+
+    def noise(n: int) -> bytes:
+        return rng.integers(0, 256, n, dtype=np.uint8).tobytes()
+
+    def flipped(cdr: bytes) -> bytes:
+        data = bytearray(cdr)
+        for i in rng.integers(4, len(data), 8):
+            data[i] ^= int(rng.integers(1, 256))
+        return bytes(data)
+
+    return {
+        'raw_empty': on_one(lambda cdr: b''),
+        'raw_header_only': on_one(lambda cdr: cdr[:4]),
+        'raw_random': on_one(lambda cdr: noise(int(rng.integers(1, 2000)))),
+        'raw_truncated': on_one(lambda cdr: cdr[:int(rng.integers(4, len(cdr)))]),
+        'raw_oversized': on_one(lambda cdr: cdr + noise(int(rng.integers(1, 65536)))),
+        'raw_flipped': on_one(flipped),
+    }
+
+
 def stamp_cases(valid_k: int) -> dict[str, Callable[[], object]]:
     """Headers that lie: backwards, repeated, far future, odd frame ids."""
     from pose4d_ros.nodes.convert import ns_to_stamp
@@ -267,6 +298,8 @@ class Target:
         if 'parts' in self.topics:
             for case, make in joint_cases(JointArray, Joint, proto['parts'], rng).items():
                 self.cases[case] = lambda hd, make=make: {'parts': make(hd)}
+        for case, make in raw_cases(sorted(self.topics), rng).items():
+            self.cases[case] = lambda hd, make=make: make(self.valid(hd))
 
     def publish(self, msgs: dict[str, object]) -> None:
         for key, msg in msgs.items():
@@ -288,6 +321,16 @@ def _sane(joint: object) -> bool:
     return (0 <= joint.u < INTR.width and 0 <= joint.v < INTR.height
             and 0 <= joint.confidence <= 1
             and (np.isnan(xyz).all() or bool(np.isfinite(xyz).all() and abs(xyz[2]) < 20)))
+
+
+def _counts(diagnostics: list) -> dict[str, dict[str, int]]:
+    """Each stage's last frames, dropped and bad_inputs counts on /diagnostics."""
+    last: dict[str, dict[str, int]] = {}
+    for array_msg in diagnostics:
+        for status in array_msg.status:
+            last[status.name] = {kv.key: int(kv.value) for kv in status.values
+                                 if kv.key in ('frames', 'dropped', 'bad_inputs')}
+    return last
 
 
 def rss_mb(pid: int) -> float:
@@ -349,6 +392,8 @@ def fuzz_node(name: str, n: int, log_dir: Path, *, seed: int = 0,
         if not check():
             result['liveness_failures'] += 1
         result['rss_mb_start'] = rss_mb(node.proc.pid)
+        ros.spin_for(1.5)  # the node's /diagnostics after the warm-up: the counts to subtract
+        before = _counts(diagnostics)
         while result['sent'] < n:
             for _ in range(min(BATCH, n - result['sent'])):
                 # a whole frame of the node's inputs, one of them (or the header) malformed, at
@@ -389,13 +434,12 @@ def fuzz_node(name: str, n: int, log_dir: Path, *, seed: int = 0,
         result['rss_mb_end'] = rss_mb(node.proc.pid)
         result.setdefault('rss_mb_mid', result['rss_mb_end'])
         ros.spin_for(1.5)  # the node's last /diagnostics
-        last = {}
-        for array_msg in diagnostics:
-            for status in array_msg.status:
-                last[status.name] = {kv.key: kv.value for kv in status.values}
-        result['diagnostics'] = {name: {k: v for k, v in values.items()
-                                        if k in ('frames', 'dropped', 'bad_inputs')}
-                                 for name, values in last.items()}
+        result['diagnostics'] = _counts(diagnostics)
+        # what the node counted during the fuzz alone (not the warm-up's malformed frames); a
+        # restarted node counts from 0, so this is exact only without crashes and hangs
+        result['fuzz_counts'] = {
+            stage: {k: v - before.get(stage, {}).get(k, 0) for k, v in counts.items()}
+            for stage, counts in result['diagnostics'].items()}
         result['kinds'] = dict(sorted(kinds.items()))
         code = node.stop()
         node = None

@@ -28,7 +28,9 @@ from rclpy.executors import Executor, ExternalShutdownException, SingleThreadedE
 from rclpy.experimental import EventsExecutor
 from rclpy.impl.implementation_singleton import rclpy_implementation as _rclpy
 from rclpy.node import Node
+from rclpy.serialization import deserialize_message
 from rclpy.signals import SignalHandlerOptions
+from rclpy.subscription import Subscription
 from sensor_msgs.msg import CameraInfo
 from std_msgs.msg import Header
 
@@ -220,6 +222,32 @@ class StageMonitor:
 
 
 
+def subscribe(node: Node, msg_type: type, topic: str, callback: Callable[[object], None],
+              profile: object, monitor: StageMonitor) -> Subscription:
+    """A subscription that counts the messages which do not deserialize as `msg_type`.
+
+    It takes the serialized bytes (`raw=True`) and deserializes them here: rclpy's typed take
+    drops such a message silently (no callback, nothing counted), so a broken driver's bytes
+    would go unseen. Here each is counted as a bad input on `monitor` and warned about
+    (throttled), and the next valid message is served as usual. (A 0-byte message never gets
+    this far: Fast DDS drops it on arrival, which is why stage inputs are best effort,
+    `qos.INPUT_QOS`.)
+    """
+    name = node.resolve_topic_name(topic)
+    kind = f'{msg_type.__module__.split(".")[0]}/{msg_type.__name__}'
+
+    def on_bytes(data: bytes) -> None:
+        try:
+            msg = deserialize_message(data, msg_type)
+        except Exception as exc:  # rclpy's RMWError: the CDR does not hold a msg_type
+            reason = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
+            monitor.bad_input(f'{name}: {len(data)} bytes that are not a {kind} ({reason})')
+            return
+        callback(msg)
+
+    return node.create_subscription(msg_type, topic, on_bytes, profile, raw=True)
+
+
 class FrameQueue:
     """Frames processed in a worker thread, in arrival order, at most `size` waiting (1: the
     newest).
@@ -299,7 +327,7 @@ class PairedInputs:
         self._monitor = monitor
         self._queue = FrameQueue(node, process, monitor)
         for k, (kind, topic, profile) in enumerate(topics):
-            node.create_subscription(kind, topic, lambda m, k=k: self._on(k, m), profile)
+            subscribe(node, kind, topic, lambda m, k=k: self._on(k, m), profile, monitor)
 
     def _on(self, stream: int, msg: object) -> None:
         before = self._sync.dropped[0]
@@ -315,7 +343,7 @@ class LatestIntrinsics:
                  topic: str = 'camera/color/camera_info') -> None:
         self.intrinsics: Intrinsics | None = None
         self._monitor = monitor
-        node.create_subscription(CameraInfo, topic, self._on, qos.SENSOR_QOS)
+        subscribe(node, CameraInfo, topic, self._on, qos.SENSOR_QOS, monitor)
 
     def _on(self, msg: CameraInfo) -> None:
         try:

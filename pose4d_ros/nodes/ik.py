@@ -39,7 +39,13 @@ from pose4d_ros.core.joints import JointSet
 from pose4d_ros.core.kinematics import DEFAULT_LIMB_LENGTHS_M
 from pose4d_ros.core.pipeline import IkStage, limb_bones
 from pose4d_ros.nodes import qos
-from pose4d_ros.nodes.common import LatestIntrinsics, PairedInputs, StageMonitor, run
+from pose4d_ros.nodes.common import (
+    LatestIntrinsics,
+    PairedInputs,
+    StageMonitor,
+    run,
+    subscribe,
+)
 from pose4d_ros.nodes.convert import (
     depth_from_msg,
     joints_from_msg,
@@ -139,13 +145,13 @@ class IkNode(Node):
         self.outputs = SkeletonOutputs(self, p)
         if self.stage.use_depth:
             self.inputs = PairedInputs(
-                self, [(JointArray, 'pose4d/parts/tracked', qos.OUTPUT_QOS),
+                self, [(JointArray, 'pose4d/parts/tracked', qos.INPUT_QOS),
                        (Image, 'pose4d/foreground/depth', qos.SENSOR_QOS)],
                 lambda items: self.process(*items), self.monitor,
                 slop_ns=int(p['ik.depth_slop_s'] * 1e9))
         else:
-            self.create_subscription(JointArray, 'pose4d/parts/tracked',
-                                     lambda m: self.process(m, None), qos.OUTPUT_QOS)
+            subscribe(self, JointArray, 'pose4d/parts/tracked',
+                      lambda m: self.process(m, None), qos.INPUT_QOS, self.monitor)
         self.get_logger().info(
             f'completing {self.resolve_topic_name("pose4d/parts/tracked")} -> '
             f'{self.resolve_topic_name("pose4d/skeleton")} (depth: {self.stage.use_depth}, '

@@ -2,6 +2,14 @@
 
 - Camera inputs: the sensor-data profile (best effort, keep last 5). A best-effort subscription
   matches both reliable and best-effort publishers, so any driver (or the bag replay) connects.
+- Stage inputs from other stages (the parts a detector or tracker sends): best effort, keep
+  last 10. A best-effort subscription matches our reliable outputs too, and no sample can stall
+  it: a reliable reader waits for every sample of a writer in order, and a sample the middleware
+  cannot take (Fast DDS drops a 0-byte serialized message on arrival) is asked for again and
+  again, so the reader never delivers another message of that writer (measured: a tracker
+  whose reliable input got one 0-byte `JointArray` answered none of the valid ones after it,
+  whatever the executor, raw or typed; `test/test_wedge.py`). Between processes of one machine
+  (shared memory) a best-effort reader loses nothing its queue holds.
 - Our outputs: reliable, keep last 10.
 - /tf: reliable, keep last 100 (tf2_ros's broadcaster profile).
 - Bags: the QoS a topic was recorded with is offered again on replay.
@@ -20,6 +28,8 @@ from rclpy.qos import (
 )
 
 SENSOR_QOS: QoSProfile = qos_profile_sensor_data
+INPUT_QOS = QoSProfile(depth=10, reliability=ReliabilityPolicy.BEST_EFFORT,
+                       durability=DurabilityPolicy.VOLATILE, history=HistoryPolicy.KEEP_LAST)
 OUTPUT_QOS = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE,
                         durability=DurabilityPolicy.VOLATILE, history=HistoryPolicy.KEEP_LAST)
 TF_QOS = QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE,

@@ -22,7 +22,7 @@ from rclpy.node import Node
 from pose4d_ros.core.pipeline import TrackerStage
 from pose4d_ros.core.slqe import CvConfig, SlqeConfig
 from pose4d_ros.nodes import qos
-from pose4d_ros.nodes.common import LatestIntrinsics, StageMonitor, run
+from pose4d_ros.nodes.common import LatestIntrinsics, StageMonitor, run, subscribe
 from pose4d_ros.nodes.convert import (
     joints_from_msg,
     joints_to_cdr,
@@ -85,7 +85,7 @@ class TrackerNode(Node):
         self.monitor = StageMonitor(self, 'tracker')
         self.camera = LatestIntrinsics(self, self.monitor)
         self.pub = self.create_publisher(JointArray, 'pose4d/parts/tracked', qos.OUTPUT_QOS)
-        self.create_subscription(JointArray, 'pose4d/parts', self.on_parts, qos.OUTPUT_QOS)
+        subscribe(self, JointArray, 'pose4d/parts', self.on_parts, qos.INPUT_QOS, self.monitor)
         self.get_logger().info(
             f'tracking {self.resolve_topic_name("pose4d/parts")} -> '
             f'{self.resolve_topic_name("pose4d/parts/tracked")} with {self.stage.kind}')
