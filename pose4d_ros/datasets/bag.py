@@ -38,6 +38,8 @@ from rosbags.rosbag2.storage_mcap import decompress, get_qos
 from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 from rosbags.typesys.store import Typestore
 
+from pose4d_ros.datasets import bag_damage
+
 MSG_PACKAGE = 'pose4d_msgs'
 MSG_NAMES = ('Joint', 'JointArray')
 
@@ -217,8 +219,8 @@ def _open_reader(path: str | Path) -> Reader:
     try:
         reader = Reader(path)
         reader.open()
-    except Exception as exc:  # rosbags raises its own ReaderError family
-        raise ValueError(f'{path}: cannot read bag: {exc}') from exc
+    except Exception as exc:  # rosbags, mcap, sqlite3: their own words for a damaged file
+        raise ValueError(f'cannot read bag: {bag_damage.describe(path)}') from exc
     return reader
 
 
@@ -264,8 +266,8 @@ def read_messages(path: str | Path, topics: Iterable[str] | None = None,
             except StopIteration:
                 break
             except Exception as exc:  # rosbags, mcap, zstandard, sqlite3: a damaged file
-                raise ValueError(f'{path}: damaged bag after {n} messages: '
-                                 f'{type(exc).__name__}: {exc}') from exc
+                raise ValueError(f'damaged bag after {n} messages: '
+                                 f'{bag_damage.describe(Path(path))}') from exc
             n += 1
             yield BagMessage(connection.topic, connection.msgtype, timestamp, bytes(data),
                              Path(path))
@@ -279,8 +281,11 @@ def deserialize(message: BagMessage) -> Any:
     try:
         return typestore().deserialize_cdr(message.data, message.msgtype)
     except Exception as exc:  # rosbags raises whatever its decoder meets in damaged bytes
+        known = message.msgtype in typestore().types
         raise ValueError(f'{message.bag or "bag"}: {message.topic} at {message.timestamp_ns} ns '
-                         f'is not a valid {message.msgtype}: {type(exc).__name__}: {exc}'
+                         f'is not a valid {message.msgtype}: ' + (
+                             f'its {len(message.data)} bytes do not decode as one (damaged)'
+                             if known else 'a message type this reader does not know')
                          ) from exc
 
 
