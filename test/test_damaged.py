@@ -216,7 +216,23 @@ def test_replay_node_stops_on_damage_with_one_fatal_line(tmp_path):
     assert run.returncode == 1, run.stdout + run.stderr
     text = run.stdout + run.stderr
     assert 'Traceback' not in text
-    assert f'{broken}: damaged bag' in text or f'{broken}:' in text, text
+    assert f'{storage_file(broken)}: damaged chunk at offset' in text, text
+    # the two damages a user met first: cut to the MCAP magic, the header's length flipped
+    for damage, words in ((magic_only, 'truncated after 8 bytes'),
+                          (flip_header, 'damaged header at offset 8')):
+        bad = shutil.copytree(damaged, tmp_path / damage.__name__)
+        damage(bad)
+        node = subprocess.run([str(executable('replay')), '--ros-args', '-p',
+                               f'replay.bag:={bad}'], capture_output=True, text=True, timeout=60)
+        text = node.stdout + node.stderr
+        fatal = [line for line in text.splitlines() if 'FATAL' in line]
+        assert node.returncode == 2 and len(fatal) == 1, text
+        assert f'{storage_file(bad)}: {words}' in fatal[0] and 'Traceback' not in text, text
+        out = tmp_path / 'res' / 'table.json'
+        run = _pose4d('eval', str(bad), '--json', str(out))
+        errors = [line for line in run.stderr.splitlines() if 'error' in line]
+        assert run.returncode == 2 and len(errors) == 1, run.stderr
+        assert f'{storage_file(bad)}: {words}' in errors[0] and not out.exists(), run.stderr
 
 
 def _flip_breaks(intact: Path, tmp_path: Path, seed: int) -> bool:
