@@ -456,6 +456,11 @@ class IkStage:
     def lengths(self) -> dict[str, tuple[float, float]]:
         return self.learner.as_dict() if self.learn else dict(self.learner.defaults)
 
+    def reset(self) -> None:
+        """Forget the learned bone lengths (the next frame starts a new person)."""
+        self.learner = LimbLengths(self.defaults)
+        self.track_id = None
+
     def warm_up(self, intrinsics: Intrinsics) -> None:
         """Run once on the person of `warm_up_frame` so the kernels are compiled; what it
         learned is forgotten."""
@@ -473,8 +478,7 @@ class IkStage:
         self.step(JointSet(tuple(names), project(points, intrinsics), points, source=source,
                            confidence=np.ones(len(names), np.float32)),
                   depth, intrinsics, mask=mask)
-        self.learner = LimbLengths(self.defaults)
-        self.track_id = None
+        self.reset()
 
     def step(self, tracked: JointSet, depth_m: NDArray[np.floating] | None,
              intrinsics: Intrinsics | None, *, mask: NDArray[np.bool_] | None = None
@@ -572,6 +576,7 @@ class FramePipeline:
         self.foreground.reset()
         self.detector.reset()
         self.tracker.reset()
+        self.ik.reset()
 
     def step(self, color: NDArray[np.uint8], depth_m: NDArray[np.floating] | None,
              intrinsics: Intrinsics | None, stamp_s: float) -> FrameResult:

@@ -95,3 +95,28 @@ class StampSync:
                 items.append(q.popleft()[1])
             out.append((stamp, tuple(items)))
         return out
+
+
+class StampJumps:
+    """Tells when a stream's stamps jump: back in time (a looping replay, a restarted driver or
+    bag) or forward by more than `max_gap_s` (a paused replay, a camera that was away).
+
+    What a stage remembers of earlier frames (a track, a person's scale, learned bone lengths, a
+    held mask) belongs to the time before the jump: the stage starts anew on such a frame.
+    """
+
+    def __init__(self, max_gap_s: float = 1.0) -> None:
+        if not max_gap_s > 0:
+            raise ValueError(f'max_gap_s must be > 0, got {max_gap_s}')
+        self.max_gap_ns = int(max_gap_s * 1e9)
+        self.last_ns: int | None = None
+        self.count = 0
+
+    def jump_s(self, stamp_ns: int) -> float | None:
+        """The jump from the previous stamp to `stamp_ns`, seconds (negative: back), or None
+        when there is none (the first stamp, a repeated one, a step within the gap)."""
+        last, self.last_ns = self.last_ns, stamp_ns
+        if last is None or 0 <= stamp_ns - last <= self.max_gap_ns:
+            return None
+        self.count += 1
+        return (stamp_ns - last) * 1e-9

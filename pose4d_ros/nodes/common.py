@@ -36,7 +36,7 @@ from std_msgs.msg import Header
 
 from pose4d_ros.core.camera import Intrinsics
 from pose4d_ros.core.dpm.threads import set_blas_threads
-from pose4d_ros.core.sync import StampSync
+from pose4d_ros.core.sync import StampJumps, StampSync
 from pose4d_ros.nodes import qos
 from pose4d_ros.nodes.convert import intrinsics_from_msg, stamp_to_ns
 from pose4d_ros.nodes.params import ParameterError
@@ -44,6 +44,8 @@ from pose4d_ros.nodes.params import ParameterError
 DIAGNOSTICS_TOPIC = '/diagnostics'
 # A stamp farther than this from the node's clock was taken on another clock, seconds
 CLOCK_MISMATCH_S = 10.0
+# Stamps that go back, or forward by more than this, seconds: the stage starts anew
+TIME_JUMP_S = 1.0
 
 
 class InputFailure(Exception):
@@ -128,7 +130,10 @@ class StageMonitor:
     """Counts and times one stage's frames and publishes them as diagnostics.
 
     `frame(stamp_ns, processing_s)` after each processed frame; `dropped(n)` for frames skipped
-    on purpose; `bad_input(text)` for refused input (logged, throttled, counted). Diagnostics
+    on purpose; `bad_input(text)` for refused input (logged, throttled, counted);
+    `time_jumped(stamp_ns)` before a frame is processed: whether its stamp jumped back or more
+    than `TIME_JUMP_S` forward (logged, counted as `time_jumps`), when the stage starts anew.
+    Diagnostics
     are published on the wall clock (a paused sim clock does not silence them). Safe to call
     from a `FrameQueue`'s worker thread while the executor publishes.
     """
@@ -140,6 +145,7 @@ class StageMonitor:
         self.frames = 0
         self.dropped_frames = 0
         self.bad_inputs = 0
+        self._jumps = StampJumps(TIME_JUMP_S)
         self._proc: deque[float] = deque(maxlen=window)
         self._latency: deque[float] = deque(maxlen=window)
         self._times: deque[float] = deque(maxlen=window)
@@ -180,6 +186,16 @@ class StageMonitor:
                 'use_sim_time? then set use_sim_time:=true here and replay.publish_clock:=true);'
                 ' latency is not measured on such frames')
 
+    def time_jumped(self, stamp_ns: int) -> bool:
+        jump = self._jumps.jump_s(stamp_ns)
+        if jump is None:
+            return False
+        self._node.get_logger().info(
+            f'input stamps jumped {"back" if jump < 0 else "forward"} {abs(jump):.3f} s (a '
+            'looping or restarted replay, a paused camera?): starting anew',
+            throttle_duration_sec=5.0)
+        return True
+
     def dropped(self, n: int = 1) -> None:
         self.dropped_frames += n
 
@@ -196,7 +212,8 @@ class StageMonitor:
         if len(times) >= 2 and times[-1] > times[0]:
             rate = (len(times) - 1) / (times[-1] - times[0])
         values = {'frames': self.frames, 'dropped': self.dropped_frames,
-                  'bad_inputs': self.bad_inputs, 'rate_hz': round(rate, 2)}
+                  'bad_inputs': self.bad_inputs, 'time_jumps': self._jumps.count,
+                  'rate_hz': round(rate, 2)}
         for key, data in (('processing_ms', proc), ('latency_ms', latency),
                           ('time_step_ms', steps)):
             if data:

@@ -139,6 +139,8 @@ class DetectorNode(Node):
         color_msg, depth_msg, mask_msg = items
         t0 = time.perf_counter()
         stamp = stamp_to_ns(color_msg.header.stamp)
+        if self.monitor.time_jumped(stamp):
+            self.stage.reset()
         try:
             color = color_from_msg(color_msg)
             depth = depth_from_msg(depth_msg)

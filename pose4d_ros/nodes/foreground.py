@@ -142,6 +142,8 @@ class ForegroundNode(Node):
         color_msg, depth_msg, info_msg = items
         t0 = time.perf_counter()
         stamp = stamp_to_ns(color_msg.header.stamp)
+        if self.monitor.time_jumped(stamp):
+            self.stage.reset()
         try:
             color = color_from_msg(color_msg)
             intrinsics = intrinsics_from_msg(info_msg)

@@ -163,6 +163,8 @@ class IkNode(Node):
             self.outputs.configure(p)
         t0 = time.perf_counter()
         stamp = stamp_to_ns(msg.header.stamp)
+        if self.monitor.time_jumped(stamp):
+            self.stage.reset()
         try:
             depth = depth_from_msg(depth_msg) if depth_msg is not None else None
             skeleton = self.stage.step(joints_from_msg(msg), depth, self.camera.intrinsics)

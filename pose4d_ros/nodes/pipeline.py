@@ -97,6 +97,8 @@ class PipelineNode(Node):
         color_msg, depth_msg, info_msg = items
         t0 = time.perf_counter()
         stamp = stamp_to_ns(color_msg.header.stamp)
+        if self.monitor.time_jumped(stamp):
+            self.pipeline.reset()
         try:
             out = self.pipeline.step(color_from_msg(color_msg), depth_from_msg(depth_msg),
                                      intrinsics_from_msg(info_msg), stamp * 1e-9)

@@ -95,6 +95,8 @@ class TrackerNode(Node):
             self.stage.configure(**tracker_settings(p))
         t0 = time.perf_counter()
         stamp = stamp_to_ns(msg.header.stamp)
+        if self.monitor.time_jumped(stamp):
+            self.stage.reset()
         try:
             parts = joints_from_msg(msg)
             tracked = self.stage.step(parts, stamp * 1e-9, self.camera.intrinsics)
