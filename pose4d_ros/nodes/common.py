@@ -33,8 +33,8 @@ from sensor_msgs.msg import CameraInfo
 from std_msgs.msg import Header
 
 from pose4d_ros.core.camera import Intrinsics
-from pose4d_ros.core.dpm.threads import set_blas_threads
 from pose4d_ros.core.sync import StampSync
+from pose4d_ros.core.threads import set_blas_threads
 from pose4d_ros.nodes import qos
 from pose4d_ros.nodes.convert import intrinsics_from_msg, stamp_to_ns
 from pose4d_ros.nodes.params import ParameterError
