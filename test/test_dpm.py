@@ -28,7 +28,7 @@ from pose4d_ros.core.dpm.samples import TrainConfig
 from pose4d_ros.core.dpm.solver import Examples, dcd, margins, rebuild_w
 from pose4d_ros.core.dpm.train import choose_depth_lookup, kmeans
 from pose4d_ros.core.hog import feature_pyramid
-from pose4d_ros.core.pipeline import lift_parts
+from pose4d_ros.core.lifting import lift_parts
 from pose4d_ros.core.skeleton import PARTS_10, PARTS_14, PARTS_22
 
 # --------------------------------------------------------------------------- distance transforms

@@ -30,7 +30,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # the source tree
 from pose4d_ros.core.camera import backproject  # noqa: E402
 from pose4d_ros.core.dpm.infer import Detector  # noqa: E402
 from pose4d_ros.core.dpm.model import load_model  # noqa: E402
-from pose4d_ros.core.pipeline import lift_parts  # noqa: E402
+from pose4d_ros.core.lifting import lift_parts  # noqa: E402
 from pose4d_ros.core.skeleton import SKELETON_14  # noqa: E402
 from pose4d_ros.core.threads import set_blas_threads  # noqa: E402
 from pose4d_ros.datasets.sources import load_frames  # noqa: E402

@@ -24,8 +24,7 @@ from pose4d_ros.core.draw import draw_skeleton, legend
 from pose4d_ros.core.files import write_atomic
 from pose4d_ros.core.joints import JointSet
 from pose4d_ros.core.metrics import correct
-from pose4d_ros.core.pipeline import limb_bones
-from pose4d_ros.core.skeleton import SKELETON_14
+from pose4d_ros.core.skeleton import SKELETON_14, limb_bones
 from pose4d_ros.datasets.frame import Frame
 from pose4d_ros.evaluation.pipeline import Row, row_arrays
 
