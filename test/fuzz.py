@@ -35,7 +35,7 @@ from helpers import INTR, header_at, parts_msg
 
 from pose4d_ros.core.camera import depth_to_millimetres
 from pose4d_ros.core.files import write_json
-from pose4d_ros.core.pipeline import warm_up_frame
+from pose4d_ros.core.warm_up import warm_up_frame
 
 NODES = ('foreground', 'detector', 'tracker', 'ik', 'pipeline')
 BATCH = 50  # malformed messages between two valid frames

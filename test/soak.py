@@ -30,9 +30,9 @@ import conftest  # noqa: F401  (DDS on this machine, the project's profile, a do
 import numpy as np
 from fuzz import rss_mb
 
-from pose4d_ros.cli.demo import CONNECTIONS, STAGES, _Graph, default_bag
 from pose4d_ros.core.files import write_json
 from pose4d_ros.datasets import bag, cad60_bag
+from pose4d_ros.graph.run import CONNECTIONS, STAGES, Graph, default_bag
 
 SAMPLE_S = 10.0  # RSS sampling period
 WARM_UP_S = 60.0  # the RSS reference is taken after this (or a tenth of a short run)
@@ -49,7 +49,7 @@ def soak(bag_path: Path, seconds: float, work: Path) -> dict[str, object]:
     from pose4d_ros.nodes.convert import stamp_to_ns
 
     recorded = work / 'soak_run'
-    graph = _Graph(work)
+    graph = Graph(work)
     rclpy.init()
     node = rclpy.create_node('pose4d_soak')
     entered: dict[int, float] = {}

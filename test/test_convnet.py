@@ -137,10 +137,10 @@ def test_file_round_trip_and_errors_name_the_file(tmp_path: Path) -> None:
 def test_the_pytorch_twin_computes_what_numpy_does() -> None:
     torch = pytest.importorskip('torch', reason='PyTorch trains the network only (make '
                                 'train-env); the suite runs without it')
-    from pose4d_ros.cli.train_convnet import _network, export_weights
+    from pose4d_ros.training.convnet_torch import export_weights, network
 
     torch.manual_seed(0)
-    net = _network(torch, 4, 14)
+    net = network(torch, 4, 14)
     for m in net.modules():
         if isinstance(m, torch.nn.BatchNorm2d):  # statistics other than the identity
             m.running_mean.uniform_(-0.5, 0.5)

@@ -18,9 +18,9 @@ import numpy as np
 import pytest
 from harness import executable
 
-from pose4d_ros.cli.demo import default_bag
 from pose4d_ros.core.dpm.model import load_model
 from pose4d_ros.datasets import bag
+from pose4d_ros.graph.run import default_bag
 from pose4d_ros.models import model_path
 
 SAMPLE = default_bag()

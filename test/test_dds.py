@@ -15,7 +15,7 @@ import pytest
 from harness import start
 
 from pose4d_ros.core.camera import cad60_intrinsics
-from pose4d_ros.core.pipeline import warm_up_frame
+from pose4d_ros.core.warm_up import warm_up_frame
 
 
 def test_the_project_profile_is_in_use() -> None:

@@ -28,7 +28,7 @@ from pose4d_ros.core.dpm.samples import TrainConfig
 from pose4d_ros.core.dpm.solver import Examples, dcd, margins, rebuild_w
 from pose4d_ros.core.dpm.train import choose_depth_lookup, kmeans
 from pose4d_ros.core.hog import feature_pyramid
-from pose4d_ros.core.pipeline import lift_parts
+from pose4d_ros.core.lifting import lift_parts
 from pose4d_ros.core.skeleton import PARTS_10, PARTS_14, PARTS_22
 
 # --------------------------------------------------------------------------- distance transforms
@@ -708,7 +708,7 @@ def test_bone_scale_sees_through_a_torso_seen_end_on() -> None:
 
 
 def test_background_rooms_come_first_and_lose_depth_for_rgb() -> None:
-    from pose4d_ros.cli.train import build_negatives
+    from pose4d_ros.core.dpm.negatives import build_negatives
 
     cfg = TrainConfig(parts='10', channels='rgb')
     rng = np.random.default_rng(6)

@@ -14,6 +14,7 @@ from helpers import standing_pose
 
 from pose4d_ros.core.camera import cad60_intrinsics, project
 from pose4d_ros.synth import render as synth
+from pose4d_ros.synth import scene as synth_scene
 
 INTR = cad60_intrinsics(640, 480)
 
@@ -48,7 +49,7 @@ COLOUR_FROM_RGB = {'rgb8': None, 'bgr8': cv2.COLOR_RGB2BGR, 'bgra8': cv2.COLOR_R
 def person() -> synth.Rendered:
     rng = np.random.default_rng(5)
     body = synth.random_body(rng)
-    scene = synth.random_scene(rng, INTR, occluder_prob=0.0)
+    scene = synth_scene.random_scene(rng, INTR, occluder_prob=0.0)
     return synth.render(standing_pose(z=2.6, arm=0.4), body, scene, INTR,
                         rng=np.random.default_rng(0))
 

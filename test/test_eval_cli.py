@@ -11,10 +11,11 @@ import pytest
 from helpers import write_utkinect
 from numpy.testing import assert_allclose, assert_array_equal
 
-from pose4d_ros.cli import _draw, _plot
 from pose4d_ros.cli.main import main as pose4d_main
 from pose4d_ros.core.dpm import PartModel, load_model, save_model
 from pose4d_ros.core.skeleton import PARTS_10, PARTS_14
+from pose4d_ros.evaluation import draw as _draw
+from pose4d_ros.evaluation import plot as _plot
 
 GROUPS_14 = ['head', 'shoulder', 'elbow', 'wrist', 'hip', 'knee', 'ankle', 'average']
 GROUPS_10 = ['head', 'shoulder', 'wrist', 'hip', 'ankle', 'average']
@@ -224,8 +225,8 @@ def test_eval_and_bench_with_the_peer_score_it_on_the_same_frames(tiny_set: Path
 
 def test_the_peer_starts_a_new_video_where_the_tracker_starts_a_new_track(tiny_set: Path,
                                                                           fake_peer) -> None:
-    from pose4d_ros.cli._pipeline_eval import peer_rows
     from pose4d_ros.datasets.cad60 import read_frames
+    from pose4d_ros.evaluation.pipeline import peer_rows
     from pose4d_ros.peer import MediaPipePeer
 
     with MediaPipePeer(fake_peer) as peer:
@@ -248,9 +249,9 @@ def test_without_the_peer_venv_eval_says_make_peer_in_one_line(tiny_set: Path, t
 def test_frame_pck_scores_each_frame_by_the_table_rule(tiny_set: Path) -> None:
     """A frame predicted exactly scores 100, one shifted by a box size 0, one with some joints
     moved the share of the rest; frames are independent of each other."""
-    from pose4d_ros.cli._pipeline_eval import Row
     from pose4d_ros.core.joints import JointSet
     from pose4d_ros.datasets.sources import open_source
+    from pose4d_ros.evaluation.pipeline import Row
 
     frames = list(open_source(str(tiny_set)))[:3]
     names = PARTS_14.names

@@ -25,12 +25,12 @@ import time
 import numpy as np
 from harness import start
 
-from pose4d_ros.cli.demo import default_bag
 from pose4d_ros.core import joints as cj
 from pose4d_ros.core.metrics import correct, joint_arrays
 from pose4d_ros.core.skeleton import SKELETON_14
 from pose4d_ros.datasets import bag
 from pose4d_ros.datasets.sources import open_source
+from pose4d_ros.graph.run import default_bag
 
 STAGES = ('foreground', 'detector', 'tracker', 'ik')
 OUTPUT = {'replay': 'camera/color/image_raw', 'foreground': 'pose4d/foreground/mask',

@@ -18,10 +18,11 @@ def frames(request):
 
     from pose4d_ros.datasets import utkinect
     from pose4d_ros.synth import render as synth
+    from pose4d_ros.synth import scene as synth_scene
 
     rng = np.random.default_rng(3)
     body = synth.random_body(rng)
-    scene = synth.random_scene(rng, INTR, occluder_prob=0.0)
+    scene = synth_scene.random_scene(rng, INTR, occluder_prob=0.0)
     takes = utkinect.list_takes(SHARED_DATA / 'utkinect') if SHARED_DATA.is_dir() else []
     if takes:
         _, joints = utkinect.resample(utkinect.read_take(takes[-1]))

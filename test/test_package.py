@@ -125,9 +125,21 @@ def test_boundary_check_catches_a_violation(tmp_path):
 
 
 # What each subpackage may import of ours (besides itself and the top package): core nothing
-# above it, the readers and the renderer no nodes or tools; the tools (cli) anything.
-LAYERS = {'core': set(), 'datasets': {'core'}, 'synth': {'core', 'datasets'}, 'models': set(),
-          'peer': {'core'}, 'nodes': {'core', 'datasets', 'models'}}
+# above it; util (progress, log, machine facts) only core; the readers and the renderer no
+# nodes or tools; training and evaluation the algorithms and the data, never a node or a verb;
+# graph (the node graph in processes) the nodes too; the tools (cli) anything.
+LAYERS = {'core': set(), 'util': {'core'}, 'datasets': {'core', 'util'},
+          'synth': {'core', 'datasets', 'util'}, 'models': set(), 'peer': {'core'},
+          'nodes': {'core', 'datasets', 'models'},
+          'training': {'core', 'datasets', 'models', 'util'},
+          'evaluation': {'core', 'datasets', 'synth', 'peer', 'models', 'util'},
+          'graph': {'core', 'datasets', 'models', 'nodes', 'util'}}
+
+
+def test_every_subpackage_has_its_layer():
+    """A new subpackage says what it may import (`LAYERS`) before it imports anything."""
+    found = {d.name for d in (REPO / PACKAGE).iterdir() if (d / '__init__.py').is_file()}
+    assert found - {'cli'} == set(LAYERS)
 
 
 def _our_imports(root: Path) -> dict[str, set[str]]:
@@ -172,6 +184,34 @@ def test_layering_no_wrong_way_imports_and_no_cycles():
     graph = _our_imports(REPO)
     assert len(graph) > 50 and graph[f'{PACKAGE}.cli.eval']  # the walk found the package
     assert not _layering_faults(graph)
+
+
+def _verb_faults(graph: dict[str, set[str]]) -> list[str]:
+    """A verb module (cli/<verb>.py; not main.py nor a shared _helper.py) importing another."""
+    cli = f'{PACKAGE}.cli.'
+    verbs = {n for n in graph if n.startswith(cli) and not n[len(cli):].startswith('_')
+             and n != f'{cli}main'}
+    return [f'{name} imports {dep}' for name in sorted(verbs)
+            for dep in sorted(graph[name] & verbs)]
+
+
+def test_verbs_share_code_through_packages_not_each_other():
+    """`pose4d VERB` modules stay thin: what two verbs need lives in evaluation/, training/,
+    datasets/, util/ or a shared cli/_helper.py, never in another verb."""
+    graph = _our_imports(REPO)
+    assert f'{PACKAGE}.cli.bench' in graph and f'{PACKAGE}.cli.eval' in graph
+    assert not _verb_faults(graph)
+
+
+def test_verb_check_catches_a_verb_importing_a_verb(tmp_path):
+    cli = tmp_path / PACKAGE / 'cli'
+    cli.mkdir(parents=True)
+    for name, text in (('__init__', ''), ('_shared', ''), ('main', 'from . import a\n'),
+                       ('a', 'from pose4d_ros.cli import _shared\n'),
+                       ('b', 'def f():\n    from pose4d_ros.cli.a import x\n')):
+        (cli / f'{name}.py').write_text(text)
+    (tmp_path / PACKAGE / '__init__.py').write_text('')
+    assert _verb_faults(_our_imports(tmp_path)) == [f'{PACKAGE}.cli.b imports {PACKAGE}.cli.a']
 
 
 def test_test_modules_share_helpers_not_each_other():

@@ -7,8 +7,8 @@ import subprocess
 
 from harness import executable
 
-from pose4d_ros.cli import _progress
-from pose4d_ros.cli._progress import LOG_PERIOD_S, LineProgress, progress
+from pose4d_ros.util import progress as _progress
+from pose4d_ros.util.progress import LOG_PERIOD_S, LineProgress, progress
 
 
 class _Terminal(io.StringIO):
@@ -54,7 +54,7 @@ def test_updated_by_hand_and_closed_once(monkeypatch):
 
 def test_eval_logged_to_a_file_has_no_bar(tmp_path):
     """`pose4d eval` with stderr in a file: plain lines, no carriage-return redraws."""
-    from pose4d_ros.cli.demo import default_bag
+    from pose4d_ros.graph.run import default_bag
 
     log = tmp_path / 'eval.log'
     with log.open('w') as err:

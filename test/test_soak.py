@@ -5,7 +5,7 @@ from __future__ import annotations
 
 from soak import soak
 
-from pose4d_ros.cli.demo import default_bag
+from pose4d_ros.graph.run import default_bag
 
 
 def test_looping_bag_through_the_graph_loses_nothing(tmp_path):

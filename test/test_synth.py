@@ -20,6 +20,7 @@ from pose4d_ros.core.camera import cad60_intrinsics, project
 from pose4d_ros.core.skeleton import CAD60_JOINTS
 from pose4d_ros.datasets import cad60
 from pose4d_ros.synth import render as synth
+from pose4d_ros.synth import scene as synth_scene
 from pose4d_ros.synth import video as synth_video
 from pose4d_ros.synth.kinect import KinectModel, kinect_depth
 from pose4d_ros.synth.raycast import projector_shadow
@@ -28,7 +29,7 @@ UTKINECT = Path(__file__).resolve().parents[2] / 'shared' / 'data' / 'utkinect'
 K = cad60_intrinsics()
 
 
-def in_room(scene: synth.Scene, optical: np.ndarray) -> np.ndarray:
+def in_room(scene: synth_scene.Scene, optical: np.ndarray) -> np.ndarray:
     """Optical-frame points in the scene's room frame (the inverse of `Scene.to_optical`)."""
     return optical @ scene.room_to_cam + scene.cam_pos
 
@@ -78,7 +79,7 @@ def test_ground_truth_in_a_room_without_occluders() -> None:
     rng = np.random.default_rng(2)
     body = synth.random_body(rng)
     for _ in range(3):
-        scene = synth.random_scene(rng, K, occluder_prob=0.0)
+        scene = synth_scene.random_scene(rng, K, occluder_prob=0.0)
         room = in_room(scene, standing_pose())
         room[:, :2] += np.array([0.0, 2.8]) - room[0, :2]
         room[:, 2] -= room[[14, 15, 18, 19], 2].min() - body.radii['foot']
@@ -101,7 +102,7 @@ def test_occluder_hides_the_legs_sometimes() -> None:
     body = synth.random_body(rng)
     hidden = 0
     for _ in range(6):
-        scene = synth.random_scene(rng, K, occluder_prob=1.0)
+        scene = synth_scene.random_scene(rng, K, occluder_prob=1.0)
         assert any(b.kind == 'occluder' for b in scene.boxes)
         room = in_room(scene, standing_pose())
         room[:, :2] += np.array([0.0, 2.6]) - room[0, :2]
@@ -119,7 +120,7 @@ def test_render_is_deterministic_with_a_seed() -> None:
     def once(seed: int) -> synth.Rendered:
         rng = np.random.default_rng(seed)
         body = synth.random_body(rng)
-        scene = synth.random_scene(rng, K)
+        scene = synth_scene.random_scene(rng, K)
         room = in_room(scene, standing_pose())
         room[:, :2] += np.array([0.0, 3.0]) - room[0, :2]
         return synth.render(scene.to_optical(room), body, scene, K, rng=rng)
@@ -136,7 +137,7 @@ def test_render_is_deterministic_with_a_seed() -> None:
 def test_kinect_depth_has_holes_quantisation_and_range() -> None:
     rng = np.random.default_rng(4)
     body = synth.random_body(rng)
-    scene = synth.random_scene(rng, K, occluder_prob=0.0)
+    scene = synth_scene.random_scene(rng, K, occluder_prob=0.0)
     room = in_room(scene, standing_pose())
     room[:, :2] += np.array([0.0, 2.8]) - room[0, :2]
     pose = scene.to_optical(room)
@@ -309,7 +310,7 @@ def test_real_utkinect_take_renders_on_the_floor(tmp_path: Path) -> None:
 def test_a_sitting_window_gets_a_chair_under_the_hips() -> None:
     rng = np.random.default_rng(5)
     body = synth.random_body(rng)
-    scene = synth.random_scene(rng, K, occluder_prob=0.0)
+    scene = synth_scene.random_scene(rng, K, occluder_prob=0.0)
     stand = in_room(scene, standing_pose())
     stand[:, :2] += np.array([0.0, 2.8]) - stand[0, :2]
     sit = stand.copy()
@@ -338,7 +339,7 @@ def test_staging_puts_the_body_where_asked(stature: float, distance: float, turn
                                   turn_deg=(turn, turn))
     body = synth.random_body(rng, stature_m=staging.stature_m)
     assert body.stature_m == stature
-    scene = synth.random_scene(rng, K, occluder_prob=0.0, person_zone=staging.person_zone)
+    scene = synth_scene.random_scene(rng, K, occluder_prob=0.0, person_zone=staging.person_zone)
     assert max(b.center[1] for b in scene.boxes if b.kind == 'wall') > distance + 0.3
     # a person facing the camera (-Y in the room): the left shoulder on the camera's right (+X)
     floor = np.zeros((2, 20, 3))

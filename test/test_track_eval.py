@@ -1,4 +1,5 @@
-"""Offline evaluation of tracker and IK on motion (cli/_motion_eval.py, `pose4d track-eval`)."""
+"""Offline evaluation of tracker and IK on motion (evaluation/tracking.py, evaluation/ik.py,
+`pose4d track-eval`)."""
 
 from __future__ import annotations
 
@@ -10,11 +11,11 @@ import numpy as np
 import pytest
 from numpy.testing import assert_allclose
 
-from pose4d_ros.cli import _motion_eval as me
 from pose4d_ros.cli.main import main
 from pose4d_ros.core.kinematics import IkConfig
 from pose4d_ros.core.slqe import CvConfig, SlqeConfig
 from pose4d_ros.datasets.utkinect import UTKINECT_JOINTS, Take
+from pose4d_ros.evaluation import ik, tracking
 
 DATA = Path(__file__).resolve().parents[2] / 'shared' / 'data' / 'utkinect'
 
@@ -69,7 +70,7 @@ def test_corruption_rates_and_seeding() -> None:
     rng = np.random.default_rng(0)
     clean = rng.uniform(0, 300, (2000, 10, 2))
     before = clean.copy()
-    noisy, kind = me.corrupt(clean, np.random.default_rng(1))
+    noisy, kind = tracking.corrupt(clean, np.random.default_rng(1))
     assert_allclose(clean, before)  # not modified
     assert_allclose(np.mean(kind == 1), 0.10, atol=0.01)
     assert_allclose(np.mean(kind == 2), 0.05, atol=0.01)
@@ -77,37 +78,37 @@ def test_corruption_rates_and_seeding() -> None:
     d = np.linalg.norm(noisy - clean, axis=-1)
     assert_allclose(np.std((noisy - clean)[kind == 0]), 3.0, rtol=0.05)
     assert d[kind == 1].min() > 20 - 4 * 3 and d[kind == 1].max() < 60 + 4 * 3
-    again, _ = me.corrupt(clean, np.random.default_rng(1))
+    again, _ = tracking.corrupt(clean, np.random.default_rng(1))
     assert_allclose(again, noisy)
 
 
 def test_split_take_at_gaps() -> None:
     frames, joints = synthetic_take(np.random.default_rng(0))
-    segs = me.split_take(Take('s03_e02', frames, joints))
+    segs = tracking.split_take(Take('s03_e02', frames, joints))
     assert [s.name for s in segs] == ['s03_e02/0', 's03_e02/1']
     assert all(s.subject == 3 for s in segs)
     for s in segs:
         assert_allclose(np.diff(s.times), 1 / 30.0, atol=1e-9)
-    native = me.split_take(Take('s03_e02', frames, joints), native=True)
+    native = tracking.split_take(Take('s03_e02', frames, joints), native=True)
     assert_allclose(native[0].times, (frames[:81] - frames[0]) / 30.0)
     # Optical frame: SDK x and y flip.
     assert_allclose(native[0].joints[0, 0], joints[0, 0] * [-1, -1, 1])
 
 
 def test_trackers_reduce_error_on_synthetic_motion(utkinect_dir: Path) -> None:
-    segs = me.load_segments(utkinect_dir)
-    res = me.evaluate_tracking(segs, me.default_methods(), seed=0)['detected_frames']
+    segs = tracking.load_segments(utkinect_dir)
+    res = tracking.evaluate_tracking(segs, tracking.default_methods(), seed=0)['detected_frames']
     assert res['slqe']['average'] < 0.75 * res['input']['average']
     assert res['slqe']['average'] < res['cv']['average']
     assert res['cv']['coverage'] == 1.0
 
 
 def test_ik_on_synthetic_motion(utkinect_dir: Path) -> None:
-    segs = me.load_segments(utkinect_dir)
-    lengths = me.take_lengths(segs, 'take')
+    segs = tracking.load_segments(utkinect_dir)
+    lengths = ik.take_lengths(segs, 'take')
     assert_allclose(lengths['s01_e01']['left_leg'], (0.45, 0.4), atol=0.01)
-    prior = me.evaluate_ik(segs, lengths, stride=5)
-    depth = me.evaluate_ik(segs, lengths, depth='capsules', stride=10,
+    prior = ik.evaluate_ik(segs, lengths, stride=5)
+    depth = ik.evaluate_ik(segs, lengths, depth='capsules', stride=10,
                            config=IkConfig(length_scales=(1.0,)))
     assert prior['flags']['missing'] == 0 and depth['flags']['depth'] > 0
     assert depth['average'] < 40.0, depth
@@ -147,15 +148,15 @@ def test_track_eval_refuses_bad_input(tmp_path: Path, capsys) -> None:
 def test_targets_on_real_motion_subset() -> None:
     """SLQE: >= 25 % below the corrupted input and below the CV filter on a test take;
     depth-supported IK below the prior alone."""
-    first = me.load_segments(DATA, [7])[0]  # s07_e01: its first 50 s at 30 fps
-    segs = [me.Segment(first.name, first.subject, first.times[:1500], first.joints[:1500])]
-    methods = me.default_methods(SlqeConfig(), CvConfig())
-    res = me.evaluate_tracking(segs, methods, seed=0)['detected_frames']
-    assert me.reduction(res['slqe'], res['input']) >= 0.25, res
+    first = tracking.load_segments(DATA, [7])[0]  # s07_e01: its first 50 s at 30 fps
+    segs = [tracking.Segment(first.name, first.subject, first.times[:1500], first.joints[:1500])]
+    methods = tracking.default_methods(SlqeConfig(), CvConfig())
+    res = tracking.evaluate_tracking(segs, methods, seed=0)['detected_frames']
+    assert tracking.reduction(res['slqe'], res['input']) >= 0.25, res
     assert res['slqe']['average'] < res['cv']['average']
-    lengths = me.take_lengths(segs, 'take')
-    prior = me.evaluate_ik(segs, lengths, stride=15)
-    depth = me.evaluate_ik(segs, lengths, depth='capsules', stride=30)
+    lengths = ik.take_lengths(segs, 'take')
+    prior = ik.evaluate_ik(segs, lengths, stride=15)
+    depth = ik.evaluate_ik(segs, lengths, depth='capsules', stride=30)
     # The IK target (<= 60 mm) holds on the whole test set, not on every take: here only
     # that depth support beats the prior alone.
     assert depth['average'] < prior['average'], (depth, prior)

@@ -22,7 +22,6 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # the source tree
 
-from pose4d_ros.cli._dpm import load_frames  # noqa: E402
 from pose4d_ros.core.dpm.infer import (  # noqa: E402
     LIMB_CANDIDATES,
     Detector,
@@ -33,8 +32,9 @@ from pose4d_ros.core.dpm.infer import (  # noqa: E402
     score_level,
 )
 from pose4d_ros.core.dpm.model import load_model  # noqa: E402
-from pose4d_ros.core.dpm.threads import set_blas_threads  # noqa: E402
 from pose4d_ros.core.pipeline import ForegroundStage  # noqa: E402
+from pose4d_ros.core.threads import set_blas_threads  # noqa: E402
+from pose4d_ros.datasets.sources import load_frames  # noqa: E402
 from pose4d_ros.models import model_path  # noqa: E402
 
 

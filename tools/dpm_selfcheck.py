@@ -31,8 +31,6 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 from lspet_diagnose import labelled_score  # noqa: E402
 
-from pose4d_ros.cli._dpm import load_frames  # noqa: E402
-from pose4d_ros.cli.train import build_negatives  # noqa: E402
 from pose4d_ros.core.dpm.infer import (  # noqa: E402
     Detector,
     SearchPlan,
@@ -42,6 +40,7 @@ from pose4d_ros.core.dpm.infer import (  # noqa: E402
     score_level,
 )
 from pose4d_ros.core.dpm.model import load_model  # noqa: E402
+from pose4d_ros.core.dpm.negatives import build_negatives  # noqa: E402
 from pose4d_ros.core.dpm.samples import (  # noqa: E402
     TrainConfig,
     frame_of,
@@ -52,6 +51,7 @@ from pose4d_ros.core.dpm.samples import (  # noqa: E402
 )
 from pose4d_ros.core.dpm.solver import Layout, pose_blocks  # noqa: E402
 from pose4d_ros.core.dpm.train import train  # noqa: E402
+from pose4d_ros.datasets.sources import load_frames  # noqa: E402
 
 
 def raw_w(model) -> tuple[np.ndarray, Layout]:

@@ -27,14 +27,14 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # the source tree
 
-from pose4d_ros.cli._dpm import load_frames  # noqa: E402
-from pose4d_ros.cli._pipeline_eval import pipeline_rows  # noqa: E402
 from pose4d_ros.core.camera import backproject  # noqa: E402
 from pose4d_ros.core.dpm.infer import Detector  # noqa: E402
 from pose4d_ros.core.dpm.model import load_model  # noqa: E402
-from pose4d_ros.core.dpm.threads import set_blas_threads  # noqa: E402
-from pose4d_ros.core.pipeline import lift_parts  # noqa: E402
+from pose4d_ros.core.lifting import lift_parts  # noqa: E402
 from pose4d_ros.core.skeleton import SKELETON_14  # noqa: E402
+from pose4d_ros.core.threads import set_blas_threads  # noqa: E402
+from pose4d_ros.datasets.sources import load_frames  # noqa: E402
+from pose4d_ros.evaluation.pipeline import pipeline_rows  # noqa: E402
 from pose4d_ros.models import model_path  # noqa: E402
 
 REACH_PX = (0, 5, 7, 9, 12, np.inf)

@@ -25,7 +25,7 @@ process per stage as `ros2 run` starts them (`nodes`), and through the one-proce
 node: colour frames in and skeletons out are counted, and the latency from a frame's arrival to
 its skeleton's is measured in this process on one clock. The machine (cores,
 CPU) and the thread settings are printed, because on a 2-core machine they decide the numbers:
-BLAS is set to `--blas-threads` (1 by default, the measured best; see `core.dpm.threads`).
+BLAS is set to `--blas-threads` (1 by default, the measured best; see `core.threads`).
 """
 
 from __future__ import annotations
@@ -37,18 +37,20 @@ from pathlib import Path
 
 import numpy as np
 
-from pose4d_ros.cli._dpm import factor_list, load_frames, machine, ms_stats
-from pose4d_ros.cli._progress import progress
-from pose4d_ros.cli.eval import default_models
+from pose4d_ros.cli._args import factor_list
 from pose4d_ros.core.dpm.infer import SearchConfig
 from pose4d_ros.core.dpm.model import load_model
 from pose4d_ros.core.dpm.scale import ScaleConfig
-from pose4d_ros.core.dpm.threads import set_blas_threads
 from pose4d_ros.core.files import write_json
+from pose4d_ros.core.threads import set_blas_threads
 from pose4d_ros.datasets.frame import Frame
-from pose4d_ros.datasets.sources import source_kind
+from pose4d_ros.datasets.sources import load_frames, source_kind
+from pose4d_ros.evaluation.pipeline import ms_stats
+from pose4d_ros.evaluation.tables import default_models
 from pose4d_ros.models import model_path
 from pose4d_ros.peer import PEERS, MediaPipePeer
+from pose4d_ros.util.machine import machine
+from pose4d_ros.util.progress import progress
 
 
 def add_parser(subparsers: argparse._SubParsersAction) -> None:
@@ -164,7 +166,7 @@ def time_peer(peer: MediaPipePeer, frames: list[Frame], warmup: int
 
 def graph_bench(bag_path: Path, args: argparse.Namespace) -> dict:
     """Replay a bag through the stage processes and through the pipeline node."""
-    from pose4d_ros.cli.demo import run_graph
+    from pose4d_ros.graph.run import run_graph
 
     if (kind := source_kind(bag_path)) != 'bag':
         raise ValueError(f'{bag_path}: --graph needs a bag (got a {kind} source)')

@@ -5,8 +5,8 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from pose4d_ros.cli._progress import progress
 from pose4d_ros.datasets import cad60_bag
+from pose4d_ros.util.progress import progress
 
 
 def add_parser(subparsers: argparse._SubParsersAction) -> None:

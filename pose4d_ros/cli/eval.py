@@ -5,7 +5,8 @@
 
 SOURCE is a CAD-60 directory (real or synthetic), a rosbag2 with ground truth (`pose4d
 cad60-to-bag`) or an LSPET root (with --range). Every row runs the live pipeline's own stages
-(`core.pipeline.FramePipeline`, what the nodes run) over every frame (`_pipeline_eval`):
+(`core.pipeline.FramePipeline`, what the nodes run) over every frame
+(`evaluation.pipeline`):
 
 - `rgbd`, `rgbd_kf`, `rgbd_kf_ik`: frame after frame, each video a new track: the foreground
   stage (`core.foreground`) masks the person on the depth image, the RGB-D part model searches
@@ -28,9 +29,9 @@ cad60-to-bag`) or an LSPET root (with --range). Every row runs the live pipeline
 Default models: the shipped `rgbd_14` (what the nodes run) and `rgb_10` for a CAD-60 set,
 `lspet_convnet` for LSPET; `--model` (repeatable) replaces them (`--model rgbd_10` gives the
 paper's 10-part rows), each model giving the rows of its channels. Every row
-records its CPU time per frame (`cpu_ms`: p50, p95; see `_pipeline_eval`). `--draw DIR`
+records its CPU time per frame (`cpu_ms`: p50, p95; see `evaluation.pipeline`). `--draw DIR`
 writes every frame with each row's skeleton and the ground truth, and each row's worst and best
-frames as one grid (`_draw`).
+frames as one grid (`evaluation.draw`).
 """
 
 from __future__ import annotations
@@ -39,11 +40,17 @@ import argparse
 from pathlib import Path
 
 import cv2
-import numpy as np
 
-from pose4d_ros.cli import _draw, _plot
-from pose4d_ros.cli._dpm import factor_list, load_frames, log
-from pose4d_ros.cli._pipeline_eval import (
+from pose4d_ros.cli._args import factor_list
+from pose4d_ros.core.convnet import PHOTO_SCALES, ConvNet, valid_scales
+from pose4d_ros.core.dpm.infer import SearchConfig
+from pose4d_ros.core.dpm.model import PartModel
+from pose4d_ros.core.dpm.scale import ScaleConfig
+from pose4d_ros.core.files import write_atomic, write_json
+from pose4d_ros.core.threads import set_blas_threads
+from pose4d_ros.datasets.sources import load_frames, source_kind
+from pose4d_ros.evaluation import draw, plot
+from pose4d_ros.evaluation.pipeline import (
     Row,
     convnet_rows,
     curve_rows,
@@ -51,69 +58,9 @@ from pose4d_ros.cli._pipeline_eval import (
     pipeline_rows,
     score_rows,
 )
-from pose4d_ros.cli._progress import progress
-from pose4d_ros.core.convnet import (
-    PHOTO_SCALES,
-    ConvNet,
-    is_convnet,
-    load_convnet,
-    valid_scales,
-)
-from pose4d_ros.core.dpm.infer import SearchConfig
-from pose4d_ros.core.dpm.model import PartModel, load_model
-from pose4d_ros.core.dpm.scale import ScaleConfig
-from pose4d_ros.core.dpm.threads import set_blas_threads
-from pose4d_ros.core.files import write_atomic, write_json
-from pose4d_ros.core.skeleton import JOINT_GROUPS
-from pose4d_ros.datasets.sources import source_kind
-from pose4d_ros.models import model_path
+from pose4d_ros.evaluation.tables import clean_row, default_models, format_table, load_any
 from pose4d_ros.peer import PEERS, MediaPipePeer
-
-TABLE_METRICS = (('pck', 'PCK@0.1 (%)'), ('pck@0.2', 'PCK@0.2 (%)'), ('apk', 'APK (%)'),
-                 ('error_px', 'error (px)'), ('error_mm', '3-D median error (mm)'),
-                 ('within_10cm', '3-D within 10 cm (%)'))
-
-
-def format_table(rows: dict[str, dict[str, dict[str, float]]], frames: int) -> str:
-    """The rows as text: one block per metric (those some row has), groups as columns; '-'
-    where a row has no value, 'inf' for a median that more than half the joints miss."""
-    groups = [g for g in JOINT_GROUPS if any(g in r['pck'] for r in rows.values())]
-    cols = groups + ['average', 'average7']
-    width = max(14, *(len(name) + 2 for name in rows))
-    lines = [f'{frames} frames']
-    for key, title in TABLE_METRICS:
-        if not any(key in row for row in rows.values()):
-            continue
-        shown = [c for c in cols if any(c in row.get(key, {}) for row in rows.values())]
-        lines += ['', title, ' ' * width + ''.join(f'{c:>10}' for c in shown)]
-        for name, row in rows.items():
-            vals = row.get(key, {})
-            lines.append(f'{name:<{width}}' + ''.join(
-                f'{vals[c]:>10.1f}' if c in vals and not np.isnan(vals[c]) else f'{"-":>10}'
-                for c in shown))
-    if any('cpu_ms' in row for row in rows.values()):
-        lines += ['', 'CPU per frame (ms)', ' ' * width + f'{"p50":>10}{"p95":>10}']
-        lines += [f'{name:<{width}}' + ''.join(
-            f'{row["cpu_ms"][k]:>10.1f}' if row['cpu_ms'][k] is not None else f'{"-":>10}'
-            for k in ('p50', 'p95')) for name, row in rows.items() if 'cpu_ms' in row]
-    return '\n'.join(lines)
-
-
-def _clean(table: dict[str, dict[str, float]]) -> dict[str, dict[str, float | None]]:
-    """The row in the JSON's order (`TABLE_METRICS`, then cpu_ms), NaN and infinity as null."""
-    order = [k for k, _ in TABLE_METRICS] + [k for k in table if k not in dict(TABLE_METRICS)]
-    return {k: {g: (round(float(v), 3) if v is not None and np.isfinite(v) else None)
-                for g, v in table[k].items()} for k in order if k in table}
-
-
-def default_models(kind: str) -> list[str]:
-    return ['lspet_convnet'] if kind == 'lspet' else ['rgbd_14', 'rgb_10']
-
-
-def load_any(name: str) -> PartModel | ConvNet:
-    """A part model or a photograph network (`core.convnet`), by shipped name or path."""
-    path = model_path(name)
-    return load_convnet(path) if is_convnet(path) else load_model(path)
+from pose4d_ros.util.progress import log, progress
 
 
 def add_parser(subparsers: argparse._SubParsersAction) -> None:
@@ -170,12 +117,12 @@ def run(args: argparse.Namespace) -> int:
         if peer is not None:
             peer.close()
     print(format_table(rows, frames))
-    out = {'frames': frames, 'rows': {k: _clean(v) for k, v in rows.items()}}
+    out = {'frames': frames, 'rows': {k: clean_row(v) for k, v in rows.items()}}
     if peer is not None:
         out['peer'] = peer.description
     write_json(args.json, out)
     if args.plot is not None:
-        figure = _plot.draw(curves, f'{Path(args.source).name}: {frames} frames')
+        figure = plot.draw(curves, f'{Path(args.source).name}: {frames} frames')
         ok, png = cv2.imencode('.png', figure, [cv2.IMWRITE_PNG_COMPRESSION, 9])
         if not ok:
             raise ValueError(f'could not encode the figure {figure.shape}')
@@ -187,7 +134,7 @@ def run(args: argparse.Namespace) -> int:
 def table_rows(args: argparse.Namespace, kind: str, models: list[PartModel | ConvNet],
                peer: MediaPipePeer | None) -> tuple[dict[str, dict], int, dict[str, dict]]:
     """Every model's rows and the peer's ({row name: table}), the number of frames, and the
-    rows' accuracy curves (`_pipeline_eval.curve_rows` at `_plot.ALPHAS`)."""
+    rows' accuracy curves (`evaluation.pipeline.curve_rows` at `evaluation.plot.ALPHAS`)."""
     frames = load_frames([args.source], frame_range=args.frame_range, stride=args.stride,
                          max_frames=args.max_frames)
     sequence = kind in ('cad60', 'bag') and args.max_frames is None
@@ -211,6 +158,6 @@ def table_rows(args: argparse.Namespace, kind: str, models: list[PartModel | Con
         if row.no_pose:
             log(f'{name}: no pose in {row.no_pose} of {len(frames)} frames')
     if args.draw is not None:
-        for path in _draw.draw_rows(rows, frames, args.draw):
+        for path in draw.draw_rows(rows, frames, args.draw):
             log(f'wrote {path}')
-    return score_rows(rows, frames), len(frames), curve_rows(rows, frames, _plot.ALPHAS)
+    return score_rows(rows, frames), len(frames), curve_rows(rows, frames, plot.ALPHAS)

@@ -129,11 +129,11 @@ def run(args: argparse.Namespace) -> int:
     # heavy imports here, so that `pose4d --help` stays fast
     import numpy as np
 
-    from pose4d_ros.cli._progress import progress
     from pose4d_ros.datasets import cad60
     from pose4d_ros.datasets.utkinect import list_takes
     from pose4d_ros.synth import video
     from pose4d_ros.synth.render import HC, Body
+    from pose4d_ros.util.progress import progress
 
     _check(args)
     default = video.Staging()

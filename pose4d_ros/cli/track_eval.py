@@ -19,10 +19,10 @@ from dataclasses import replace
 from pathlib import Path
 
 from pose4d_ros import __version__
-from pose4d_ros.cli import _motion_eval as me
 from pose4d_ros.core.files import write_json
 from pose4d_ros.core.kinematics import IkConfig
 from pose4d_ros.core.slqe import CvConfig, SlqeConfig
+from pose4d_ros.evaluation import ik, tracking
 
 
 def _subjects(spec: str) -> tuple[int, ...]:
@@ -106,8 +106,8 @@ def run(args: argparse.Namespace) -> int:
     if set(train_s) & set(test_s):
         raise ValueError(f'training {train_s} and test {test_s} subjects overlap')
     t0 = time.perf_counter()
-    train = me.load_segments(args.utkinect, train_s)
-    test = me.load_segments(args.utkinect, test_s)
+    train = tracking.load_segments(args.utkinect, train_s)
+    test = tracking.load_segments(args.utkinect, test_s)
     if not train or not test:
         raise ValueError(f'{args.utkinect}: no takes for training subjects {train_s} '
                          f'({len(train)} segments) or test subjects {test_s} '
@@ -116,34 +116,35 @@ def run(args: argparse.Namespace) -> int:
         f'{len(test)} test segments ({sum(len(s.times) for s in test)} frames)')
 
     # The shipped defaults were tuned on subjects s01-s06, seed 0 (`--tune` redoes it).
-    slqe, cv, cvg = SlqeConfig(), CvConfig(), me.GATED_CV
+    slqe, cv, cvg = SlqeConfig(), CvConfig(), tracking.GATED_CV
     report: dict = {'version': __version__, 'seed': args.seed, 'utkinect': str(args.utkinect),
                     'train_subjects': train_s, 'test_subjects': test_s,
-                    'corruption': me.config_dict(me.Corruption())}
+                    'corruption': tracking.config_dict(tracking.Corruption())}
     if args.tune:
         say('tuning the trackers on the training subjects (minutes)')
-        slqe, cv, cvg, log = me.tune_tracking(train, seed=args.seed, progress=say)
+        slqe, cv, cvg, log = tracking.tune_tracking(train, seed=args.seed, progress=say)
         report['tracking_tuning_log'] = log
-    report['tracker_configs'] = {'slqe': me.config_dict(slqe), 'cv': me.config_dict(cv),
-                                 'cv_gated': me.config_dict(cvg)}
-    methods = me.default_methods(slqe, cv, cvg, ablations=not args.no_ablations)
-    tracking = {}
+    report['tracker_configs'] = {'slqe': tracking.config_dict(slqe),
+                                 'cv': tracking.config_dict(cv),
+                                 'cv_gated': tracking.config_dict(cvg)}
+    methods = tracking.default_methods(slqe, cv, cvg, ablations=not args.no_ablations)
+    tables = {}
     for name, segs in (('train', train), ('test', test)):
         say(f'tracking on the {name} subjects')
-        tracking[name] = me.evaluate_tracking(segs, methods, seed=args.seed)
+        tables[name] = tracking.evaluate_tracking(segs, methods, seed=args.seed)
     say('tracking on the test subjects at the recorded, irregular frame times')
-    native = me.load_segments(args.utkinect, test_s, native=True)
-    tracking['test_native_dt'] = me.evaluate_tracking(native, methods, seed=args.seed)
-    report['tracking'] = tracking
-    for name, res in tracking.items():
+    native = tracking.load_segments(args.utkinect, test_s, native=True)
+    tables['test_native_dt'] = tracking.evaluate_tracking(native, methods, seed=args.seed)
+    report['tracking'] = tables
+    for name, res in tables.items():
         _print_tracking(f'Tracking, {name}: mean pixel error on the detected part-frames',
                         res['detected_frames'])
         _print_tracking(f'Tracking, {name}: mean pixel error on all part-frames',
                         res['all_frames'])
     targets = {}
     for name in ('train', 'test'):
-        det = tracking[name]['detected_frames']
-        red = me.reduction(det['slqe'], det['input'])
+        det = tables[name]['detected_frames']
+        red = tracking.reduction(det['slqe'], det['input'])
         targets[name] = {'slqe_reduction_vs_input': red,
                          'slqe_beats_cv': det['slqe']['average'] < det['cv']['average'],
                          'slqe_beats_cv_gated':
@@ -163,7 +164,7 @@ def run(args: argparse.Namespace) -> int:
 def _run_ik(args: argparse.Namespace, train: list, test: list, say) -> dict:
     config = IkConfig()
     out: dict = {}
-    lengths = {name: {mode: me.take_lengths(segs, mode) for mode in ('take', 'fixed')}
+    lengths = {name: {mode: ik.take_lengths(segs, mode) for mode in ('take', 'fixed')}
                for name, segs in (('train', train), ('test', test))}
     out['lengths'] = {'take': 'per take: medians of the bone lengths over the take\'s frames '
                               '(elbows/knees visible there)',
@@ -171,45 +172,45 @@ def _run_ik(args: argparse.Namespace, train: list, test: list, say) -> dict:
                       'render': 'the rendered body\'s bones (= the take\'s median bones)'}
     if args.tune:
         say('fitting the IK prior on the training subjects')
-        prior = me.fit_swivel_prior(train, lengths['train']['take'], shrink=False)
+        prior = ik.fit_swivel_prior(train, lengths['train']['take'], shrink=False)
         config = replace(config, arm_prior=prior['arm'][0], leg_prior=prior['leg'][0])
         out['prior_fit'] = prior
         say('tuning the depth cost on training frames (minutes)')
-        frames = list(me.ik_frames(train, depth='capsules', stride=30, seed=args.seed))
-        config, log = me.tune_ik_depth(frames, lengths['train']['take'], config,
+        frames = list(ik.ik_frames(train, depth='capsules', stride=30, seed=args.seed))
+        config, log = ik.tune_ik_depth(frames, lengths['train']['take'], config,
                                        progress=say)
         out['tuning_log'] = log
-    shrink = me.SHRUNK_PRIOR
+    shrink = ik.SHRUNK_PRIOR
     if args.tune:
-        fit = me.fit_swivel_prior(train, lengths['train']['take'], directions={
+        fit = ik.fit_swivel_prior(train, lengths['train']['take'], directions={
             'arm': config.arm_prior, 'leg': config.leg_prior})
         shrink = (fit['arm'][1], fit['leg'][1])
-    out['config'] = me.config_dict(config)
+    out['config'] = tracking.config_dict(config)
     out['prior_shrink'] = shrink
     shrunk = replace(config, prior_shrink=shrink)
     renderer = None if args.no_render else {
-        name: me.synth_renderer(segs, seed=args.seed)
+        name: ik.synth_renderer(segs, seed=args.seed)
         for name, segs in (('train', train), ('test', test))}
     for name, segs in (('train', train), ('test', test)):
         rows: dict = {}
         for mode in ('take', 'fixed'):
             say(f'IK on the {name} subjects, prior only, lengths {mode}')
-            rows[f'prior, lengths {mode}'] = me.evaluate_ik(
+            rows[f'prior, lengths {mode}'] = ik.evaluate_ik(
                 segs, lengths[name][mode], config=config, stride=args.ik_stride)
-        rows['prior shrunk, lengths take'] = me.evaluate_ik(
+        rows['prior shrunk, lengths take'] = ik.evaluate_ik(
             segs, lengths[name]['take'], config=shrunk, stride=args.ik_stride)
         say(f'IK on the {name} subjects, depth (capsules ray-cast on the real skeleton)')
-        rows['depth capsules, lengths take'] = me.evaluate_ik(
+        rows['depth capsules, lengths take'] = ik.evaluate_ik(
             segs, lengths[name]['take'], depth='capsules', config=config,
             stride=args.depth_stride, seed=args.seed)
         if renderer is not None:
             render, render_lengths = renderer[name]
             say(f'IK on the {name} subjects, synthetic renderer (prior only and depth)')
-            frames = list(me.ik_frames(segs, depth='render', stride=args.depth_stride,
+            frames = list(ik.ik_frames(segs, depth='render', stride=args.depth_stride,
                                        seed=args.seed, renderer=render))
             no_depth = [(take, None, None, truth) for take, _, _, truth in frames]
-            rows['render: prior'] = me.score_ik(no_depth, render_lengths, config=config)
-            rows['render: depth'] = me.score_ik(frames, render_lengths, config=config)
+            rows['render: prior'] = ik.score_ik(no_depth, render_lengths, config=config)
+            rows['render: depth'] = ik.score_ik(frames, render_lengths, config=config)
         out[name] = rows
         _print_ik(f'IK, {name} subjects: mean 3-D error of the inferred joints, mm', rows)
     return out

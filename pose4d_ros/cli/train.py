@@ -14,40 +14,22 @@ from __future__ import annotations
 
 import argparse
 import json
-import shlex
-import sys
 import time
-from collections import defaultdict
-from dataclasses import dataclass, replace
+from dataclasses import replace
 from pathlib import Path
 
-import numpy as np
-from numpy.typing import NDArray
-
-from pose4d_ros.cli._dpm import git_commit, load_frames, log, machine
-from pose4d_ros.cli._progress import progress
-from pose4d_ros.core.camera import Intrinsics
-from pose4d_ros.core.dpm.model import PartModel, load_model, save_model
-from pose4d_ros.core.dpm.samples import (
-    Negative,
-    TrainConfig,
-    background_crops,
-    bone_ratios,
-    part_joints,
-    person_scale,
-)
-from pose4d_ros.core.dpm.threads import set_blas_threads
-from pose4d_ros.core.dpm.train import (
-    calibrate,
-    positive_scale,
-    scale_span,
-    train,
-)
-from pose4d_ros.core.pipeline import DetectorStage, ForegroundStage
-from pose4d_ros.core.refine import OUTPUTS, PartRefiner, fit_refiner, known_parts, targets
-from pose4d_ros.core.refine import features as refine_features
+from pose4d_ros.core.dpm.model import load_model, save_model
+from pose4d_ros.core.dpm.negatives import build_negatives
+from pose4d_ros.core.dpm.samples import TrainConfig, bone_ratios, part_joints
+from pose4d_ros.core.dpm.train import train
+from pose4d_ros.core.threads import set_blas_threads
 from pose4d_ros.datasets.frame import Frame
+from pose4d_ros.datasets.sources import load_frames
 from pose4d_ros.models import model_path
+from pose4d_ros.training.part_model import depth_lifting, recalibrate, with_foreground_masks
+from pose4d_ros.training.refiner import fit_stages, refiner_frames
+from pose4d_ros.util.machine import command_line, git_commit, machine
+from pose4d_ros.util.progress import log, progress
 
 
 def add_parser(subparsers: argparse._SubParsersAction) -> None:
@@ -132,104 +114,6 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     p.set_defaults(func=run)
 
 
-def room_backgrounds(samples: list[Frame], *, dilate_px: int = 5) -> list[Negative]:
-    """The room behind the person, per video of a masked (synthetic) set: every pixel from the
-    latest frame in which the (dilated) person mask leaves it free; pixels the person never
-    leaves are cut off by keeping the widest free band of columns on either side."""
-    import cv2
-
-    by_video: dict[str, list[Frame]] = defaultdict(list)
-    for s in samples:
-        if s.mask is not None and s.depth_m is not None:
-            by_video[s.video or s.key].append(s)
-    kernel = np.ones((2 * dilate_px + 1, 2 * dilate_px + 1), np.uint8)
-    out = []
-    for vid, ss in by_video.items():
-        h, w = ss[0].color.shape[:2]
-        col = np.zeros((h, w, 3), np.uint8)
-        dep = np.full((h, w), np.nan, np.float32)
-        free = np.zeros((h, w), bool)
-        for s in ss:
-            busy = cv2.dilate(s.mask.astype(np.uint8), kernel) > 0
-            ok = ~busy
-            col[ok] = s.color[ok]
-            dep[ok] = s.depth_m[ok]
-            free |= ok
-        if free.all():
-            out.append(Negative(col, dep, f'{vid} (room)'))
-            continue
-        cols_free = free.all(axis=0)
-        # widest run of fully free columns
-        best, start, run0 = (0, 0), None, 0
-        for x in range(w + 1):
-            if x < w and cols_free[x]:
-                if start is None:
-                    start = x
-            elif start is not None:
-                if x - start > best[1] - best[0]:
-                    best = (start, x)
-                start = None
-        run0 = best[1] - best[0]
-        if run0 >= w // 4:
-            x0, x1 = best
-            out.append(Negative(np.ascontiguousarray(col[:, x0:x1]),
-                                np.ascontiguousarray(dep[:, x0:x1]), f'{vid} (room)'))
-    return out
-
-
-def with_foreground_masks(samples: list[Frame]) -> list[Frame]:
-    """The samples with `mask` replaced by the foreground stage's mask (`core.foreground`),
-    so that a masked model trains on what it will see; a frame where the foreground finds no
-    person keeps its own mask (the renderer's), or none."""
-    from pose4d_ros.core.camera import cad60_intrinsics
-    from pose4d_ros.core.foreground import segment
-
-    out = []
-    missed = 0
-    for s in progress(samples, 'foreground'):
-        if s.depth_m is None:
-            out.append(s)
-            continue
-        h, w = s.depth_m.shape
-        res = segment(s.depth_m, s.intrinsics or cad60_intrinsics(w, h))
-        if res.found:
-            out.append(replace(s, mask=res.mask))
-        else:
-            missed += 1
-            out.append(s)
-    if missed:
-        log(f'foreground found no person in {missed} of {len(samples)} frames '
-            '(their own masks are used)')
-    return out
-
-
-def build_negatives(samples: list[Frame], cfg: TrainConfig, max_images: int, seed: int,
-                    extra: list[Frame] | None = None) -> list[Negative]:
-    """Background images for mining: room plates (masked sets, and the `extra` frames, which
-    serve as backgrounds only) + strips beside the person."""
-    negs = room_backgrounds(samples)
-    if extra:
-        rooms = room_backgrounds(extra)
-        if not rooms:
-            raise ValueError(f'--background: no room could be assembled from {len(extra)} '
-                             'frames (a synthetic set with person masks and depth is needed)')
-        negs += rooms
-    strips: list[Negative] = []
-    for s in samples:
-        uv, _ = part_joints(s, cfg.tree.names)
-        sc = person_scale(s, cfg.tree.names, cfg, uv)
-        if np.isfinite(sc):
-            strips.extend(background_crops(s, sc))
-    rng = np.random.default_rng(seed)
-    room = max(max_images - len(negs), 0)
-    if len(strips) > room:
-        strips = [strips[i] for i in np.sort(rng.choice(len(strips), room, replace=False))]
-    if cfg.channels == 'rgb':
-        negs = [Negative(n.color, None, n.key) for n in negs]
-        strips = [Negative(n.color, None, n.key) for n in strips]
-    return negs + strips
-
-
 def run(args: argparse.Namespace) -> int:
     import pose4d_ros.core.foreground  # noqa: F401  (loads scipy and its BLAS before the set)
 
@@ -252,7 +136,7 @@ def run(args: argparse.Namespace) -> int:
     samples = load_frames(args.sources, frame_range=args.frame_range, stride=args.stride,
                           max_frames=args.max_frames)
     if args.calibrate is not None:
-        return recalibrate(args, samples, t0)
+        return calibrate_again(args, samples, t0)
     if args.refine is not None:
         return refine(args, samples, t0)
     if cfg.channels == 'rgbd' and not any(s.depth_m is not None for s in samples):
@@ -274,8 +158,7 @@ def run(args: argparse.Namespace) -> int:
     meta = {
         'data': ' '.join(str(Path(s).resolve()) for s in args.sources)
                 + (f' range {args.frame_range}' if args.frame_range else ''),
-        'command': 'pose4d train ' + ' '.join(shlex.quote(a) for a in sys.argv[2:])
-                   if len(sys.argv) > 1 and sys.argv[1] == 'train' else '',
+        'command': command_line('train'),
         'seed': str(args.seed), 'git_commit': git_commit(),
         'trained_at': time.strftime('%Y-%m-%dT%H:%M:%S%z'),
         'machine': f"{m['cores']} cores, {m['cpu']}",
@@ -293,126 +176,34 @@ def run(args: argparse.Namespace) -> int:
     return 0
 
 
-def depth_lifting(model: PartModel) -> str:
-    """How the model lifts each part to 3-D, in a line."""
-    if model.depth_offset_m is None:
-        return 'no depth look-up'
-    lookup = model.depth_lookup
-    return 'depth look-up per part (window radius, quantile, mm behind the surface): ' + ', '.join(
-        f'{n} ' + ('3 px, 0.5' if lookup is None else f'{100 * lookup[i, 0]:.1f} cm, '
-                   f'{lookup[i, 1]:.1f}') + f', {1e3 * model.depth_offset_m[i]:+.0f}'
-        for i, n in enumerate(model.part_names))
-
-
-def recalibrate(args: argparse.Namespace, samples: list[Frame], t0: float) -> int:
-    """`--calibrate MODEL`: the last steps of `train` alone, on `samples`: the person scales
-    searched without depth (from all of them) and the calibration (on the same deterministic
-    subset of `TrainConfig.calibration_samples` frames, masked as the model was trained),
-    recorded in the model's metadata."""
-    model = load_model(model_path(str(args.calibrate)))
-    trained = TrainConfig.of_model(model.metadata)
-    if trained.masked_input:
-        samples = with_foreground_masks(samples)
-    # the search without depth covers the middle of the people's scales, as `train` sets it
-    scales = np.array([positive_scale(s, model.part_names, trained) for s in samples])
-    scales = scales[scales > 2]
-    if len(scales):
-        model = replace(model, search_range_px=scale_span(scales, args.search_percent))
-    usable = [s for s in samples if part_joints(s, model.part_names)[1].sum() >= 2]
-    n = trained.calibration_samples
-    if len(usable) > n:
-        rng = np.random.default_rng(args.seed)
-        usable = [usable[i] for i in np.sort(rng.choice(len(usable), n, replace=False))]
-    model = calibrate(model, usable, use_depth=model.channels == 'rgbd', progress=progress)
-    meta = dict(model.metadata)
-    meta['calibrated'] = json.dumps({
-        'command': 'pose4d train ' + ' '.join(shlex.quote(a) for a in sys.argv[2:])
-                   if sys.argv[1:2] == ['train'] else '',
-        'data': ' '.join(str(Path(s).resolve()) for s in args.sources), 'frames': len(usable),
+def _provenance(args: argparse.Namespace, t0: float, **facts: object) -> str:
+    """What `--calibrate` and `--refine` record in the model's metadata (JSON)."""
+    return json.dumps({
+        'command': command_line('train'),
+        'data': ' '.join(str(Path(s).resolve()) for s in args.sources), **facts,
         'git_commit': git_commit(), 'at': time.strftime('%Y-%m-%dT%H:%M:%S%z'),
         'wall_seconds': round(time.time() - t0, 1)})
-    model = replace(model, metadata=meta)
+
+
+def calibrate_again(args: argparse.Namespace, samples: list[Frame], t0: float) -> int:
+    """`--calibrate MODEL`: `training.part_model.recalibrate` on `samples`, recorded in the
+    model's metadata."""
+    model, n = recalibrate(load_model(model_path(str(args.calibrate))), samples,
+                           search_percent=args.search_percent, seed=args.seed)
+    model = replace(model, metadata={**model.metadata,
+                                     'calibrated': _provenance(args, t0, frames=n)})
     save_model(model, args.out)
     span = model.search_range_px or model.scale_range_px
-    print(f'wrote {args.out}: {args.calibrate} calibrated on {len(usable)} frames; person '
+    print(f'wrote {args.out}: {args.calibrate} calibrated on {n} frames; person '
           f'scales searched without depth {span[0]:.1f}-{span[1]:.1f} px'
           + (f', ranked with a scale prior of {model.scale_prior:g} per octave'
              if model.channels == 'rgb' else '') + f'; {depth_lifting(model)}')
     return 0
 
 
-@dataclass
-class RefinerFrame:
-    """What a refiner stage learns from, per labelled frame: the detector's parts (`uv`, lifted
-    depths `z`, `confidence`), the frame's depth on the person (NaN elsewhere) and its camera,
-    and the joints' true pixels and depths where `labelled`."""
-
-    uv: NDArray[np.float64]
-    z: NDArray[np.float64]
-    confidence: NDArray[np.float64]
-    depth: NDArray[np.float32]
-    intrinsics: Intrinsics
-    true_uv: NDArray[np.float64]
-    true_z: NDArray[np.float64]
-    labelled: NDArray[np.bool_]
-
-
-def refiner_frames(model: PartModel, samples: list[Frame]) -> list[RefinerFrame]:
-    """The foreground and `model`'s detector (its refiner left out) run over `samples` as the
-    nodes run them (each video in order, the previous frame guiding the arms), once for all
-    the stages: each frame's depth is kept in memory (0.3 MB at 320x240; 11,092 frames, 3.4
-    GB)."""
-    foreground = ForegroundStage()
-    detector = DetectorStage(replace(model, refiner=None))
-    out = []
-    video = None
-    for f in progress(samples, 'detections', len(samples)):
-        if f.depth_m is None or f.intrinsics is None:
-            raise ValueError(f'{f.key}: --refine needs RGB-D frames with camera intrinsics')
-        if f.video != video:
-            foreground.reset()
-            detector.reset()
-            video = f.video
-        fg, color, depth = foreground.step(f.color, f.depth_m, f.intrinsics)
-        found = detector.step(color, depth, f.intrinsics, mask=fg.mask,
-                              stamp_s=f.stamp_ns * 1e-9, blanked=True)
-        true_uv, truth, labelled = f.truth.labelled(found.names)
-        out.append(RefinerFrame(found.uv, found.xyz[:, 2], found.confidence.astype(np.float64),
-                                np.where(fg.mask, depth, np.nan).astype(np.float32),
-                                f.intrinsics, true_uv, truth[:, 2], labelled))
-    return out
-
-
-def moved(frame: RefinerFrame, model: PartModel, stage: PartRefiner) -> RefinerFrame:
-    """`frame` with its parts where `stage` (one or more of `model`'s refiner stages) puts
-    them."""
-    uv, z = stage.apply(model.part_names, model.parents, frame.uv, frame.z, frame.confidence,
-                        frame.depth, frame.intrinsics)
-    return replace(frame, uv=uv, z=z)
-
-
-def refiner_samples(model: PartModel, frames: list[RefinerFrame]
-                    ) -> tuple[NDArray[np.float32], NDArray[np.int64], NDArray[np.float64]]:
-    """The training samples of a refiner stage: for every labelled part of `frames` with a
-    detection and a lifted depth, where the stages before it put it, its features
-    (`core.refine.features`), its index and what the stage is to learn
-    (`core.refine.targets`)."""
-    names = model.part_names
-    xs, parts, ys = [], [], []
-    for f in frames:
-        x = refine_features(names, model.parents, f.uv, f.z, f.confidence, f.depth,
-                            f.intrinsics)
-        y = targets(names, f.uv, f.z, f.true_uv, f.true_z, f.intrinsics.fx)
-        use = f.labelled & np.isfinite(y).all(axis=1) & known_parts(x)
-        xs.append(x[use])
-        parts.append(np.flatnonzero(use))
-        ys.append(y[use])
-    return np.concatenate(xs), np.concatenate(parts), np.concatenate(ys)
-
-
 def refine(args: argparse.Namespace, samples: list[Frame], t0: float) -> int:
     """`--refine MODEL`: fit MODEL's part refiner on `samples`, `--stages` stages one after
-    the other, recorded in the model's metadata."""
+    the other (`training.refiner`), recorded in the model's metadata."""
     model = load_model(model_path(str(args.refine)))
     if model.channels != 'rgbd':
         raise ValueError(f'{args.refine}: the refiner reads depth; an RGB model has none')
@@ -421,34 +212,16 @@ def refine(args: argparse.Namespace, samples: list[Frame], t0: float) -> int:
                          f'and {args.depth_stages}')
     frames = refiner_frames(model, samples)
     t1 = time.time()
-    refiner: PartRefiner | None = None
-    n_stages = args.stages + args.depth_stages
-    for stage in range(n_stages):
-        x, part, target = refiner_samples(model, frames)
-        fitted = fit_refiner(model.part_names, x, part, target, trees=args.trees,
-                             depth=args.tree_depth,
-                             outputs=OUTPUTS if stage < args.stages else ('dz',))
-        refiner = fitted if refiner is None else refiner.then(fitted)
-        if stage + 1 < n_stages:  # the next stage learns where this one puts the parts
-            frames = [moved(f, model, fitted) for f in frames]
-        print(f'refiner stage {stage + 1}: {len(target)} parts, median residual '
-              f'{1000 * np.median(np.abs(target[:, 2])):.1f} mm in depth, '
-              f'{np.median(np.hypot(*target[:, :2].T)):.3f} person scales across')
-    meta = dict(model.metadata)
-    meta['refiner'] = json.dumps({
-        'command': 'pose4d train ' + ' '.join(shlex.quote(a) for a in sys.argv[2:])
-                   if sys.argv[1:2] == ['train'] else '',
-        'data': ' '.join(str(Path(s).resolve()) for s in args.sources), 'frames': len(samples),
-        'samples': len(target), 'stages': args.stages, 'depth_stages': args.depth_stages,
-        'trees': args.trees,
-        'depth': args.tree_depth, 'fit_seconds': round(time.time() - t1, 1),
-        'git_commit': git_commit(), 'at': time.strftime('%Y-%m-%dT%H:%M:%S%z'),
-        'wall_seconds': round(time.time() - t0, 1)})
-    model = replace(model, refiner=refiner, metadata=meta)
+    refiner, n = fit_stages(model, frames, stages=args.stages, depth_stages=args.depth_stages,
+                            trees=args.trees, tree_depth=args.tree_depth)
+    meta = _provenance(args, t0, frames=len(samples), samples=n, stages=args.stages,
+                       depth_stages=args.depth_stages, trees=args.trees,
+                       depth=args.tree_depth, fit_seconds=round(time.time() - t1, 1))
+    model = replace(model, refiner=refiner, metadata={**model.metadata, 'refiner': meta})
     save_model(model, args.out)
     print(f'wrote {args.out}: {args.refine} with a {refiner.stages}-stage part refiner '
           f'({args.depth_stages} of depth only) fitted on '
-          f'{len(target)} parts of {len(samples)} frames ({", ".join(refiner.groups)}; '
+          f'{n} parts of {len(samples)} frames ({", ".join(refiner.groups)}; '
           f'{args.trees} trees of depth '
           f'{args.tree_depth} per group and output), {(time.time() - t0) / 60:.1f} min')
     return 0

@@ -4,42 +4,26 @@
 
 Needs PyTorch, for training only: `make train-env` makes `.venv-train` (our Python
 dependencies, PyTorch's CPU build from `requirements/convnet.txt`, pose4d_ros, no ROS), whose
-`pose4d train-convnet` this is. The network is trained for a fixed time budget on the CPU
-(AdamW, cosine learning rate, batches of 32), each photograph turned (within 40 degrees, 1 in 5
-any way up), scaled (0.78-1.28), shifted (a tenth of its size), mirrored with left and right
-swapped, and its colours jittered; a joint's loss is the cross-entropy of its softmax over the
-cells against a Gaussian of one cell around the label, counted only where the joint is
-labelled. The weights are written for `core.convnet` (numpy, batch normalisation folded) with
-the command, data, seed and time in the model's metadata.
+`pose4d train-convnet` this is. How the network is trained: `training.convnet_torch`. The
+weights are written for `core.convnet` (numpy, batch normalisation folded) with the command,
+data, seed and time in the model's metadata.
 """
 
 from __future__ import annotations
 
 import argparse
-import math
-import shlex
-import sys
 import time
 from pathlib import Path
-from typing import Any
 
 import numpy as np
 
-from pose4d_ros.cli._dpm import log
-from pose4d_ros.core.convnet import (
-    ConvNet,
-    cell_targets,
-    crop_transform,
-    layer_names,
-    normalise,
-    save_convnet,
-    warp,
-)
+from pose4d_ros.core.convnet import ConvNet, save_convnet
 from pose4d_ros.core.dpm.samples import mirror_index
 from pose4d_ros.datasets import lspet
 from pose4d_ros.datasets.sources import source_kind
-
-INSTALL = '`make train-env`, then .venv-train/bin/pose4d train-convnet ...'
+from pose4d_ros.training.convnet_torch import export_weights, import_torch, train
+from pose4d_ros.util.machine import command_line
+from pose4d_ros.util.progress import log
 
 
 def add_parser(subparsers: argparse._SubParsersAction) -> None:
@@ -59,104 +43,13 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     p.set_defaults(func=run)
 
 
-def _torch() -> Any:
-    try:
-        import torch
-    except ModuleNotFoundError as exc:
-        raise ValueError(f'train-convnet needs PyTorch, which is not installed: {INSTALL}') \
-            from exc
-    return torch
-
-
-def _network(torch: Any, width: int, joints: int) -> Any:
-    """The PyTorch twin of `core.convnet.ConvNet.forward` (same layer names)."""
-    nn, F = torch.nn, torch.nn.functional
-
-    class Block(nn.Module):
-        def __init__(self, cin: int, cout: int, stride: int) -> None:
-            super().__init__()
-            self.c1 = nn.Sequential(nn.Conv2d(cin, cout, 3, stride, 1, bias=False),
-                                    nn.BatchNorm2d(cout))
-            self.c2 = nn.Sequential(nn.Conv2d(cout, cout, 3, 1, 1, bias=False),
-                                    nn.BatchNorm2d(cout))
-            self.skip = None if cin == cout and stride == 1 else nn.Sequential(
-                nn.Conv2d(cin, cout, 1, stride, bias=False), nn.BatchNorm2d(cout))
-
-        def forward(self, x: Any) -> Any:
-            y = self.c2(F.relu(self.c1(x)))
-            return F.relu(y + (x if self.skip is None else self.skip(x)))
-
-    class Net(nn.Module):
-        def __init__(self, w: int) -> None:
-            super().__init__()
-            self.stem = nn.Sequential(nn.Conv2d(3, w, 3, 2, 1, bias=False), nn.BatchNorm2d(w))
-            self.s2 = nn.Sequential(Block(w, 2 * w, 2), Block(2 * w, 2 * w, 1))
-            self.s3 = nn.Sequential(Block(2 * w, 4 * w, 2), Block(4 * w, 4 * w, 1))
-            self.s4 = nn.Sequential(Block(4 * w, 6 * w, 2), Block(6 * w, 6 * w, 1),
-                                    Block(6 * w, 6 * w, 1))
-            self.l3 = nn.Conv2d(4 * w, 6 * w, 1)
-            self.u3 = Block(6 * w, 4 * w, 1)
-            self.l2 = nn.Conv2d(2 * w, 4 * w, 1)
-            self.u2 = Block(4 * w, 2 * w, 1)
-            self.head = nn.Conv2d(2 * w, joints, 1)
-
-        def forward(self, x: Any) -> Any:
-            a = self.s2(F.relu(self.stem(x)))
-            b = self.s3(a)
-            c = self.s4(b)
-            y = self.u3(F.interpolate(c, scale_factor=2, mode='nearest') + self.l3(b))
-            y = self.u2(F.interpolate(y, scale_factor=2, mode='nearest') + self.l2(a))
-            return self.head(y)
-
-    return Net(width)
-
-
-def export_weights(net: Any) -> dict[str, tuple[np.ndarray, np.ndarray]]:
-    """`core.convnet` weights of the PyTorch network: (k, k, C_in, C_out) and (C_out,) per
-    layer, each batch normalisation folded into the convolution before it."""
-    modules = dict(net.named_modules())
-    out = {}
-    for name in layer_names():
-        m = modules[name]
-        conv, bn = (m[0], m[1]) if hasattr(m, '__getitem__') else (m, None)
-        w = conv.weight.detach().double().numpy()
-        b = conv.bias.detach().double().numpy() if conv.bias is not None else \
-            np.zeros(w.shape[0])
-        if bn is not None:
-            s = bn.weight.detach().double().numpy() / np.sqrt(
-                bn.running_var.detach().double().numpy() + bn.eps)
-            w = w * s[:, None, None, None]
-            b = (b - bn.running_mean.detach().double().numpy()) * s + \
-                bn.bias.detach().double().numpy()
-        out[name] = (w.transpose(2, 3, 1, 0).astype(np.float32).copy(), b.astype(np.float32))
-    return out
-
-
-def _sample(rng: np.random.Generator, image: np.ndarray, uv: np.ndarray, vis: np.ndarray,
-            mirror: list[int], input_px: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """One augmented photograph: input (S, S, 3) float 0-255, its joints' input pixels and
-    labelled flags (mirrored joints swapped left for right)."""
-    h, w = image.shape[:2]
-    flip = bool(rng.random() < 0.5)
-    rotation = rng.uniform(-40, 40) if rng.random() < 0.8 else rng.uniform(-180, 180)
-    m = crop_transform(image.shape, input_px, scale=math.exp(rng.uniform(-0.25, 0.25)),
-                       rotation_deg=rotation, mirror=flip,
-                       shift_px=tuple(rng.uniform(-0.1, 0.1, 2) * max(h, w)))
-    x = warp(image, m, input_px).astype(np.float32)
-    x = np.clip(x * rng.uniform(0.7, 1.3, 3) + rng.uniform(-20, 20), 0, 255)
-    p = np.c_[np.nan_to_num(uv), np.ones(len(uv))] @ m.T
-    if flip:
-        p, vis = p[mirror], vis[mirror]
-    return x, p, vis
-
-
 def run(args: argparse.Namespace) -> int:
     if source_kind(args.source) != 'lspet':
         raise ValueError(f'{args.source}: train-convnet trains on an LSPET root')
     if args.minutes <= 0 or args.input_px % 32 or args.width < 4:
         raise ValueError(f'--minutes {args.minutes} must be > 0, --input-px {args.input_px} a '
                          f'multiple of 32, --width {args.width} at least 4')
-    torch = _torch()
+    torch = import_torch()
     torch.manual_seed(args.seed)
     torch.set_num_threads(args.threads)
     rng = np.random.default_rng(args.seed)
@@ -166,58 +59,20 @@ def run(args: argparse.Namespace) -> int:
         raise ValueError(f'--range {args.frame_range} outside 1-{len(all_uv)}')
     started = time.time()
     images = [lspet.read_image(args.source, i) for i in range(first, last + 1)]
-    uv, vis = all_uv[first - 1:last], all_vis[first - 1:last]
     names = lspet.LSPET_JOINTS
     mirror = mirror_index(names)
-    cells = args.input_px // 4
-    net = _network(torch, args.width, len(names))
-    opt = torch.optim.AdamW(net.parameters(), lr=2e-3, weight_decay=1e-4)
-    log(f'{len(images)} photographs, {sum(p.numel() for p in net.parameters()) / 1e6:.2f} M '
-        f'weights, {args.minutes} min')
-    budget = args.minutes * 60.0
-    t0 = time.time()
-    steps = epochs = 0
-    losses: list[float] = []
-    batch = 32
-    while time.time() - t0 < budget:
-        order = rng.permutation(len(images))
-        for k in range(0, len(order) - batch + 1, batch):
-            done = (time.time() - t0) / budget
-            if done >= 1:
-                break
-            for group in opt.param_groups:
-                group['lr'] = 2e-3 * 0.5 * (1 + math.cos(math.pi * done))
-            xs, ts, ws = [], [], []
-            for i in order[k:k + batch]:
-                x, p, v = _sample(rng, images[i], uv[i], vis[i], mirror, args.input_px)
-                t, wt = cell_targets(p, v, cells)
-                xs.append(x)
-                ts.append(t)
-                ws.append(wt)
-            x = torch.from_numpy(normalise(np.stack(xs)).transpose(0, 3, 1, 2).copy())
-            t = torch.from_numpy(np.stack(ts)).flatten(2)
-            wt = torch.from_numpy(np.stack(ws))
-            logp = torch.nn.functional.log_softmax(net(x).flatten(2), -1)
-            loss = (-(t * logp).sum(-1) * wt).sum() / wt.sum().clamp(min=1)
-            opt.zero_grad()
-            loss.backward()
-            opt.step()
-            steps += 1
-            losses.append(loss.item())
-            if steps % 200 == 0:
-                log(f'{time.time() - t0:5.0f} s, step {steps}, loss {np.mean(losses[-200:]):.3f}')
-        epochs += 1
-    net.eval()
+    done = train(torch, images, all_uv[first - 1:last], all_vis[first - 1:last], mirror,
+                 minutes=args.minutes, input_px=args.input_px, width=args.width, rng=rng)
     minutes = (time.time() - started) / 60.0
     metadata = {
-        'command': 'pose4d train-convnet ' + ' '.join(shlex.quote(a) for a in sys.argv[2:])
-                   if sys.argv[1:2] == ['train-convnet'] else '',
-        'data': f'LSPET {first}-{last}', 'seed': args.seed, 'steps': steps, 'epochs': epochs,
-        'final_loss': round(float(np.mean(losses[-200:])), 4) if losses else None,
+        'command': command_line('train-convnet'),
+        'data': f'LSPET {first}-{last}', 'seed': args.seed, 'steps': done.steps,
+        'epochs': done.epochs,
+        'final_loss': round(float(np.mean(done.losses[-200:])), 4) if done.losses else None,
         'train_minutes': round(minutes, 1), 'threads': args.threads,
         'torch': str(torch.__version__),
     }
-    model = ConvNet(names, tuple(mirror), args.input_px, export_weights(net), metadata)
+    model = ConvNet(names, tuple(mirror), args.input_px, export_weights(done.net), metadata)
     save_convnet(model, args.out)
-    log(f'wrote {args.out}: {steps} steps, {epochs} epochs, {minutes:.1f} min')
+    log(f'wrote {args.out}: {done.steps} steps, {done.epochs} epochs, {minutes:.1f} min')
     return 0

@@ -45,6 +45,8 @@ _EPS = 0.0001
 @nb.njit(cache=True, fastmath=False)
 def _hog_kernel(im: NDArray[np.float32], sbin: int, uu: NDArray[np.float32],
                 vv: NDArray[np.float32]) -> NDArray[np.float32]:
+    """Felzenszwalb's HOG of `im` in one pass (numba). One kernel of more than 100 lines:
+    split into calls, its per-pixel loops would pay for them."""
     h, w, nch = im.shape
     bh = int(math.floor(h / sbin + 0.5))
     bw = int(math.floor(w / sbin + 0.5))

@@ -203,7 +203,7 @@ class IkConfig:
     The prior's directions (`arm_prior`, `leg_prior`) were fitted and the depth cost
     (`surface_offset_m`, `depth_scale_m`, `occluded_weight`, `unknown_cost`, `prior_weight`,
     `length_scales`, `scale_weight`) tuned on real Kinect motion of UTKinect subjects s01-s06
-    (`cli._motion_eval.fit_swivel_prior`, `tune_ik_depth`; depth from capsules around the
+    (`evaluation.ik.fit_swivel_prior`, `tune_ik_depth`; depth from capsules around the
     recorded skeletons): what ``pose4d track-eval --tune --seed 0`` finds, rounded.
 
     Attributes
@@ -227,7 +227,7 @@ class IkConfig:
     scale_weight : cost per unit of |log(scale)| (prefers the given lengths).
     prior_shrink : (arm, leg) fraction of the radius at which the prior puts the joint (1 = on
         the circle, the default; less = the expected position under the swivel's uncertainty,
-        closer on average but off the bone lengths; `cli._motion_eval.SHRUNK_PRIOR` was
+        closer on average but off the bone lengths; `evaluation.ik.SHRUNK_PRIOR` was
         fitted on Kinect skeletons).
     arm_prior, leg_prior : preferred direction of the elbow / knee from the circle's centre, as
         (outward, up, forward) coefficients in the body frame (outward = away from the body's

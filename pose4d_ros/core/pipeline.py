@@ -33,9 +33,7 @@ from pose4d_ros.core import joints as cj
 from pose4d_ros.core.camera import (
     Intrinsics,
     backproject,
-    lift_depth,
     project,
-    robust_depth,
 )
 from pose4d_ros.core.dpm.infer import Detector, SearchConfig
 from pose4d_ros.core.dpm.model import PartModel
@@ -49,23 +47,14 @@ from pose4d_ros.core.foreground import (
 )
 from pose4d_ros.core.joints import JointSet
 from pose4d_ros.core.kinematics import IkConfig, IkFlag, LimbLengths, infer_middle_joints
+from pose4d_ros.core.lifting import lift_parts, medoid_parts, person_scale_px, valid_xyz
 from pose4d_ros.core.skeleton import LIMBS, PARTS_10, SKELETON_14, PartTree, tree_for
 from pose4d_ros.core.slqe import ConstantVelocityTracker, CvConfig, SlqeConfig, SlqeTracker
-from pose4d_ros.core.stats import median
-
-# Half-size of the window of the robust depth look-up that lifts a detected joint to 3-D, pixels
-# (the detector's default; `pose4d_ros.peer` lifts MediaPipe's joints with it too)
-DEPTH_RADIUS_PX = 3
+from pose4d_ros.core.warm_up import warm_up_frame
 
 # The previous frame's parts guide the detector's arms (`SearchConfig.arm_prior`) when it is
 # at most this old, seconds (a 30 fps camera that drops a few frames; 10 fps recordings)
 PRIOR_MAX_GAP_S = 0.25
-
-
-def _valid_xyz(xyz: NDArray[np.float64]) -> NDArray[np.bool_]:
-    """Finite and in front of the camera."""
-    with np.errstate(invalid='ignore'):
-        return np.isfinite(xyz).all(axis=1) & (xyz[:, 2] > 0)
 
 
 def check_known(joints: JointSet, names: tuple[str, ...], intrinsics: Intrinsics | None
@@ -153,26 +142,6 @@ class ForegroundStage:
         else:
             self.previous = None
         return (fg, *apply_mask(color, depth_m, fg.mask))
-
-
-def lift_parts(model: PartModel, depth_m: NDArray[np.floating], uv: NDArray[np.floating],
-               intrinsics: Intrinsics, mask: NDArray[np.bool_] | None = None
-               ) -> NDArray[np.float64]:
-    """The depth of each of the model's parts' joint centres at pixels `uv` (P, 2), as `model`
-    learned to read it.
-
-    Each part has its own look-up (`PartModel.depth_lookup`: a window of a size on the body and
-    a quantile of its depths; without one, the median of a `DEPTH_RADIUS_PX` window) and lies
-    its `depth_offset_m` behind the surface the camera sees.
-    """
-    if model.depth_lookup is None:
-        z = robust_depth(depth_m, uv, radius=DEPTH_RADIUS_PX, mask=mask)
-    else:
-        z = lift_depth(depth_m, uv, intrinsics, model.depth_lookup[:, 0],
-                       model.depth_lookup[:, 1], mask=mask)
-    if model.depth_offset_m is not None:
-        z = z + model.depth_offset_m
-    return z
 
 
 class DetectorStage:
@@ -291,29 +260,6 @@ class DetectorStage:
                         source=src, score=float(pose.score))
 
 
-def medoid_parts(uvs: list[NDArray[np.float64]]) -> NDArray[np.float64]:
-    """(P, 2): each part's position, among those of the poses `uvs` (each (P, 2) pixels), with
-    the least summed distance to the others' (the medoid: a part one pose puts elsewhere
-    while the others agree is not taken)."""
-    p = np.stack(uvs)
-    d = np.linalg.norm(p[:, None] - p[None], axis=3).sum(axis=1)
-    return p[np.argmin(d, axis=0), np.arange(p.shape[1])]
-
-
-# Metres of body per person scale: the tracker's pixel parameters are stated for a person of
-# `slqe.REFERENCE_SCALE_PX` such scales (the part models' `scale_length_m`)
-PERSON_SCALE_M = 0.5
-
-
-def person_scale_px(xyz: NDArray[np.float64], intrinsics: Intrinsics | None) -> float | None:
-    """The person's scale in the image, pixels per `PERSON_SCALE_M` of body, from the median
-    depth of the parts' 3-D positions `xyz` (N, 3); None without a camera or a valid depth."""
-    if intrinsics is None:
-        return None
-    z = xyz[_valid_xyz(xyz), 2]
-    return intrinsics.fx * PERSON_SCALE_M / median(z) if len(z) else None
-
-
 class TrackerStage:
     """SLQE tracking of the detected parts (or the constant-velocity filter, `kind='cv'`).
 
@@ -390,7 +336,7 @@ class TrackerStage:
         if new_track and self.filter.state.active.any():
             self.track_id += 1
         # a part's depth is its accepted detection's: a rejected one lies elsewhere
-        measured = detected & (out.source == cj.DETECTED) & _valid_xyz(parts.xyz)
+        measured = detected & (out.source == cj.DETECTED) & valid_xyz(parts.xyz)
         self.depth[measured] = parts.xyz[measured, 2]
         # an accepted detection lies on the image, and so does its filtered estimate (the
         # prediction may overshoot an edge the part moves towards)
@@ -415,7 +361,7 @@ class TrackerStage:
             scale = np.stack([self.depth / intrinsics.fx, self.depth / intrinsics.fy], axis=1)
             cov[:, :2, :2] = out.covariances * scale[:, :, None] * scale[:, None, :]
             cov[:, 2, 2] = self.depth_std_m ** 2
-            cov[~_valid_xyz(xyz)] = 0.0
+            cov[~valid_xyz(xyz)] = 0.0
         live = ~missing
         score = float(np.mean(out.confidence[live])) if live.any() else float('nan')
         return JointSet(self.tree.names, out.positions, xyz, confidence=out.confidence,
@@ -498,7 +444,7 @@ class IkStage:
             self.learner = LimbLengths(self.defaults)
             self.track_id = tracked.track_id
         out = reorder(tracked, SKELETON_14)
-        valid = _valid_xyz(out.xyz)
+        valid = valid_xyz(out.xyz)
         uv, xyz = out.uv.copy(), out.xyz.copy()
         conf, src, cov = out.confidence.copy(), out.source.copy(), out.covariance.copy()
         bad = (src != cj.MISSING) & ~valid & np.isfinite(xyz).any(axis=1)
@@ -611,54 +557,3 @@ class FramePipeline:
         for stamp_s in (0.0, 1.0 / 30.0):
             self.step(color, depth, intrinsics, stamp_s)
         self.reset()
-
-
-def limb_bones() -> list[tuple[int, int]]:
-    """Bones of the 14-joint skeleton as index pairs (for drawing)."""
-    names = SKELETON_14
-    bones = [(names.index('head'), names.index('neck'))]
-    for root, middle, end in LIMBS.values():
-        bones += [(names.index(root), names.index(middle)), (names.index(middle),
-                                                              names.index(end))]
-    for side in ('left', 'right'):
-        bones.append((names.index('neck'), names.index(f'{side}_shoulder')))
-        bones.append((names.index(f'{side}_shoulder'), names.index(f'{side}_hip')))
-    bones.append((names.index('left_hip'), names.index('right_hip')))
-    return bones
-
-
-def warm_up_frame(intrinsics: Intrinsics) -> tuple[NDArray[np.uint8], NDArray[np.float32],
-                                                   NDArray[np.bool_]]:
-    """A simple synthetic RGB-D frame to run a stage once before real frames come.
-
-    The numba kernels compile (or load their cache) on their first call, which takes seconds;
-    a node runs its stage on this frame at start-up so that the first camera frame is not the
-    one that pays for it. A camera 1.1 m above a floor, a wall at 4.3 m and a textured 1.75 m
-    "person" of slabs (head, torso, arms, legs) at 2.8 m, with Kinect-like depth noise, so that
-    the foreground finds a person and every stage takes its usual path.
-
-    Returns
-    -------
-    color : (H, W, 3) uint8; depth_m : (H, W) float32 metres; mask : (H, W) bool (the person).
-    """
-    h, w = intrinsics.height, intrinsics.width
-    v, u = np.mgrid[0:h, 0:w].astype(np.float32)
-    ray_x = (u - intrinsics.cx) / intrinsics.fx
-    ray_y = (v - intrinsics.cy) / intrinsics.fy
-    depth = np.full((h, w), 4.3, np.float32)
-    floor = np.where(ray_y > 0, 1.1 / np.maximum(ray_y, 1e-6), np.inf)
-    depth = np.minimum(depth, floor).astype(np.float32)
-    x, y = ray_x * 2.8, ray_y * 2.8  # where a ray meets the person's plane (y down from the eye)
-    ax, top = np.abs(x), 1.1 - 1.75
-    mask = ((ax < 0.2) & (y > top + 0.25) & (y < 0.25)                  # torso
-            | (ax < 0.1) & (y >= top) & (y < top + 0.27)                # head and neck
-            | (ax > 0.2) & (ax < 0.3) & (y > top + 0.28) & (y < 0.2)    # arms
-            | (ax > 0.04) & (ax < 0.18) & (y >= 0.25) & (y < 1.1))      # legs
-    depth[mask] = 2.8
-    rng = np.random.default_rng(0)
-    depth = (depth + rng.normal(0.0, 0.0015, depth.shape) * depth ** 2).astype(np.float32)
-    depth[rng.random(depth.shape) < 0.02] = np.nan
-    color = np.clip(80 + 60 * np.sin(u / 9)[..., None] + rng.normal(0, 8, (h, w, 3)), 0, 255)
-    color[mask] = np.clip(160 + 50 * np.cos(v[mask] / 5)[:, None]
-                          + rng.normal(0, 8, (int(mask.sum()), 3)), 0, 255)
-    return color.astype(np.uint8), depth, mask

@@ -181,3 +181,17 @@ def group_of(name: str) -> str | None:
 def ground_truth_name(name: str) -> str:
     """The CAD-60 name under which a predicted joint's ground truth is stored."""
     return GROUND_TRUTH_ALIASES.get(name, name)
+
+
+def limb_bones() -> list[tuple[int, int]]:
+    """Bones of the 14-joint skeleton as index pairs (for drawing)."""
+    names = SKELETON_14
+    bones = [(names.index('head'), names.index('neck'))]
+    for root, middle, end in LIMBS.values():
+        bones += [(names.index(root), names.index(middle)), (names.index(middle),
+                                                              names.index(end))]
+    for side in ('left', 'right'):
+        bones.append((names.index('neck'), names.index(f'{side}_shoulder')))
+        bones.append((names.index(f'{side}_shoulder'), names.index(f'{side}_hip')))
+    bones.append((names.index('left_hip'), names.index('right_hip')))
+    return bones

@@ -116,8 +116,8 @@ class SlqeConfig:
     The defaults of `coupling`, `process_noise`, `measurement_noise_px`, `gate_chi2` and
     `output` were tuned on real motion (UTKinect subjects s01-s06 at 30 fps, 320x240, detector-
     like corruption: 3 px noise, 10 % outliers 20-60 px away, 5 % dropouts; see
-    `cli._motion_eval.tune_tracking`); `accel_time_s`, `shadow_frames` and `limb_tolerance` on the
-    detector's own output on the validation renders (val30, tune30_wide, tune30_arms; README,
+    `evaluation.tracking.tune_tracking`); `accel_time_s`, `shadow_frames` and `limb_tolerance` on
+    the detector's own output on the validation renders (val30, tune30_wide, tune30_arms; README,
     "Results").
 
     Attributes

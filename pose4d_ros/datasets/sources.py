@@ -1,4 +1,5 @@
-"""One opener for every source of frames: `open_source` (CAD-60 directory, rosbag2, LSPET).
+"""One opener for every source of frames: `open_source` (CAD-60 directory, rosbag2, LSPET),
+and `load_frames`, all the frames of several sources in memory.
 
 Every source yields `frame.Frame`s; adding a source means writing one generator of them (like
 `cad60.read_frames`, `cad60_bag.read_frames`, `lspet.read_frames`) and naming it here.
@@ -10,8 +11,11 @@ import itertools
 from collections.abc import Iterator
 from pathlib import Path
 
+import numpy as np
+
 from pose4d_ros.datasets import cad60, cad60_bag, lspet
 from pose4d_ros.datasets.frame import Frame
+from pose4d_ros.util.progress import progress
 
 
 def parse_range(text: str | None) -> tuple[int, int] | None:
@@ -67,3 +71,26 @@ def open_source(path: str | Path, *, frame_range: tuple[int, int] | None = None,
     else:
         frames = cad60_bag.read_frames(path)
     return itertools.islice(frames, 0, None, stride)
+
+
+def load_frames(sources: list[str], *, frame_range: str | None = None, stride: int = 1,
+                max_frames: int | None = None, labelled: bool = True) -> list[Frame]:
+    """All frames of the sources (an LSPET source uses `frame_range`); `max_frames` keeps an
+    evenly spread subset (deterministic). With `labelled`, a frame without ground truth is an
+    error."""
+    rng_ = parse_range(frame_range)
+    frames: list[Frame] = []
+    for src in sources:
+        it = open_source(src, frame_range=rng_, stride=stride)
+        with progress(it, f'reading {Path(src).name}') as bar:  # closed on a damaged file too
+            frames.extend(bar)
+    if max_frames is not None and len(frames) > max_frames:
+        idx = np.unique(np.linspace(0, len(frames) - 1, max_frames).round().astype(int))
+        frames = [frames[i] for i in idx]
+    if not frames:
+        raise ValueError(f'no frames in {", ".join(sources)}')
+    if labelled:
+        for f in frames:
+            if f.truth is None:
+                raise ValueError(f'{f.key}: no ground truth (a bag needs /cad60/skeleton)')
+    return frames

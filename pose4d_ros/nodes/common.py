@@ -35,8 +35,8 @@ from sensor_msgs.msg import CameraInfo
 from std_msgs.msg import Header
 
 from pose4d_ros.core.camera import Intrinsics
-from pose4d_ros.core.dpm.threads import set_blas_threads
 from pose4d_ros.core.sync import StampJumps, StampSync
+from pose4d_ros.core.threads import set_blas_threads
 from pose4d_ros.nodes import qos
 from pose4d_ros.nodes.convert import intrinsics_from_msg, stamp_to_ns
 from pose4d_ros.nodes.params import ParameterError
@@ -91,7 +91,7 @@ def run(factory: Callable[[], Node], args: list[str] | None = None,
     could not be read (`InputFailure`; both logged as FATAL, no traceback).
     """
     # One owner of parallelism: the graph's processes share the cores, and OpenBLAS threads
-    # spin-waiting for a core make the detector's GEMM several times slower (core.dpm.threads).
+    # spin-waiting for a core make the detector's GEMM several times slower (core.threads).
     set_blas_threads(1)
     rclpy.init(args=args, signal_handler_options=None if signal_handlers
                else SignalHandlerOptions.NO)

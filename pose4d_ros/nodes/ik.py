@@ -37,7 +37,8 @@ from visualization_msgs.msg import MarkerArray
 from pose4d_ros.core.camera import cad60_intrinsics
 from pose4d_ros.core.joints import JointSet
 from pose4d_ros.core.kinematics import DEFAULT_LIMB_LENGTHS_M
-from pose4d_ros.core.pipeline import IkStage, limb_bones
+from pose4d_ros.core.pipeline import IkStage
+from pose4d_ros.core.skeleton import limb_bones
 from pose4d_ros.nodes import qos
 from pose4d_ros.nodes.common import (
     LatestIntrinsics,

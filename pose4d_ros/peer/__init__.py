@@ -29,7 +29,7 @@ from numpy.typing import NDArray
 
 from pose4d_ros.core.camera import Intrinsics, backproject, robust_depth
 from pose4d_ros.core.joints import JointSet
-from pose4d_ros.core.pipeline import DEPTH_RADIUS_PX
+from pose4d_ros.core.lifting import DEPTH_RADIUS_PX
 from pose4d_ros.peer import worker
 
 # Our joint <- the MediaPipe Pose landmarks it is the mean of (`PoseLandmark` numbers)

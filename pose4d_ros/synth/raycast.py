@@ -183,7 +183,8 @@ def raycast_body(fx: float, fy: float, cx: float, cy: float, zbuf: NDArray[np.fl
                  ell_c: NDArray[np.float64], ell_rot: NDArray[np.float64],
                  ell_r: NDArray[np.float64], ids: NDArray[np.int32],
                  normal: NDArray[np.float32], st: NDArray[np.float32]) -> None:
-    """Ray-cast the body's capsules and ellipsoids into a depth buffer.
+    """Ray-cast the body's capsules and ellipsoids into a depth buffer. (One numba kernel of
+    more than 100 lines: split into calls, its per-pixel loop would pay for them.)
 
     Parameters
     ----------

@@ -4,7 +4,7 @@ A take is resampled to 30 fps (`utkinect.resample`) and moved into a floor frame
 the plane through the lower foot joint of each frame (robust least squares), which removes the
 recording camera's height and tilt; the lower foot is then put on it in every frame. A
 video is a window of a take (every `stride`-th frame), posed by that motion on a fresh random
-body (`render.random_body`) in a fresh random room (`render.random_scene`): the walk keeps its
+body (`render.random_body`) in a fresh random room (`scene.random_scene`): the walk keeps its
 shape and its heading towards the camera but is turned by up to +-25 degrees and moved so that
 the person stands 2.4-3.4 m from the camera, clear of the furniture and behind any occluder
 (`Staging` sets other statures, distances and turns: a person seen from the side, or near).
@@ -30,8 +30,10 @@ from pose4d_ros.core.camera import Intrinsics
 from pose4d_ros.datasets import cad60
 from pose4d_ros.datasets.utkinect import read_actions, read_take, resample, to_optical
 from pose4d_ros.synth import render
+from pose4d_ros.synth import scene as rooms
 from pose4d_ros.synth import textures as tex
-from pose4d_ros.synth.render import HC, LAN, LFT, RAN, RFT, Body, Rendered, Scene
+from pose4d_ros.synth.render import HC, LAN, LFT, RAN, RFT, Body, Rendered
+from pose4d_ros.synth.scene import Scene
 
 FPS = 30.0
 SIT_ACTIONS = ('sitDown', 'standUp')
@@ -71,8 +73,8 @@ class Staging:
 
     @property
     def person_zone(self) -> tuple[float, float, float, float]:
-        """The room's free zone for the person's hips (`render.PERSON_ZONE` by default)."""
-        x0, x1, y0, y1 = render.PERSON_ZONE
+        """The room's free zone for the person's hips (`scene.PERSON_ZONE` by default)."""
+        x0, x1, y0, y1 = rooms.PERSON_ZONE
         return (x0, x1, self.distance_m[0] - 0.2, self.distance_m[1] + 0.3)
 
 
@@ -274,7 +276,7 @@ def prepare_video(plan: VideoPlan, motion: TakeMotion, intrinsics: Intrinsics, *
     if body is None:
         body = render.random_body(video_rng(plan, 1), stature_m=staging.stature_m)
     rng = video_rng(plan, 2)
-    scene = render.random_scene(rng, intrinsics, occluder_prob=occluder_prob,
+    scene = rooms.random_scene(rng, intrinsics, occluder_prob=occluder_prob,
                                 person_zone=staging.person_zone)
     room = motion.joints[plan.indices].copy()
     if staging.arm_jitter_deg > 0:
@@ -425,10 +427,10 @@ def _add_seat(scene: Scene, room: NDArray[np.float64], body: Body, standing_hip:
     pos = j[HC, :2] - 0.05 * fwd
     tile, scale, _ = tex.furniture_tile(rng, str(rng.choice(['wood', 'metal', 'fabric'])))
     mat = len(scene.materials)
-    parts = render._table((float(pos[0]), float(pos[1])), (0.22, 0.22), seat_top, mat, yaw,
+    parts = rooms.table((float(pos[0]), float(pos[1])), (0.22, 0.22), seat_top, mat, yaw,
                          'furniture')
     back = pos - 0.2 * fwd  # the backrest stands behind the seat
-    parts.append(render.Box((float(back[0]), float(back[1]), seat_top + 0.22),
+    parts.append(rooms.Box((float(back[0]), float(back[1]), seat_top + 0.22),
                            (0.22, 0.02, 0.22), mat, yaw, 'furniture'))
     return scene.with_boxes(parts, (('seat', tile, scale),))
 

@@ -11,22 +11,22 @@ ground truth's box size, the table's rule. The prediction is drawn by joint sour
 
 from __future__ import annotations
 
+import os
 import re
-from collections.abc import Sequence
+from collections.abc import Iterable, Sequence
 from pathlib import Path
 
 import cv2
 import numpy as np
 from numpy.typing import NDArray
 
-from pose4d_ros.cli._pipeline_eval import Row, row_arrays
-from pose4d_ros.core.draw import draw_skeleton
+from pose4d_ros.core.draw import draw_skeleton, legend
 from pose4d_ros.core.files import write_atomic
 from pose4d_ros.core.joints import JointSet
 from pose4d_ros.core.metrics import correct
-from pose4d_ros.core.pipeline import limb_bones
-from pose4d_ros.core.skeleton import SKELETON_14
+from pose4d_ros.core.skeleton import SKELETON_14, limb_bones
 from pose4d_ros.datasets.frame import Frame
+from pose4d_ros.evaluation.pipeline import Row, row_arrays
 
 TILE = 240  # grid tile side, pixels
 
@@ -113,3 +113,51 @@ def draw_rows(rows: dict[str, Row], frames: Sequence[Frame], out_dir: Path, *,
         write_atomic(path, _jpeg(grid_img))
         written.append(path)
     return written
+
+
+def overlay_frame(frame: Frame, skeleton: JointSet, latency_ms: float | None) -> np.ndarray:
+    """One video frame (RGB): the skeleton by joint source on the frame, the ground truth
+    crossed, the frame's latency from camera to /pose4d/skeleton, and the legend."""
+    img = draw_skeleton(frame.color, skeleton, limb_bones(), truth_uv=frame.truth.uv)
+    text = f'latency {latency_ms:.0f} ms' if latency_ms is not None else 'latency unknown'
+    for colour, width in (((0, 0, 0), 3), ((255, 255, 255), 1)):
+        cv2.putText(img, text, (8, 22), cv2.FONT_HERSHEY_SIMPLEX, 0.6, colour, width,
+                    cv2.LINE_AA)
+    return np.vstack([img, legend(img.shape[1])])
+
+
+def write_video(path: Path, frames: Iterable[np.ndarray], *, fps: float) -> int:
+    """RGB frames of one size into an MPEG-4 video (OpenCV's `mp4v`, which OpenCV, ffmpeg and
+    common players read), written under a temporary name and renamed when complete; returns
+    the number of frames. `fps` that is not finite and positive becomes 30."""
+    fps = fps if np.isfinite(fps) and fps > 0 else 30.0
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_name(f'.{path.stem}.{os.getpid()}.tmp{path.suffix}')
+    writer, n = None, 0
+    try:
+        for img in frames:
+            if writer is None:
+                h, w = img.shape[:2]
+                writer = cv2.VideoWriter(str(tmp), cv2.VideoWriter_fourcc(*'mp4v'), fps, (w, h))
+                if not writer.isOpened():
+                    raise OSError(f'{path}: OpenCV cannot write an mp4v video here')
+            writer.write(np.ascontiguousarray(img[:, :, ::-1]))
+            n += 1
+        if writer is None:
+            raise ValueError(f'{path}: no frames to write')
+        writer.release()
+        os.replace(tmp, path)
+    finally:
+        if writer is not None:
+            writer.release()
+        tmp.unlink(missing_ok=True)
+    return n
+
+
+def overlay_picture(frames: list[Frame], skeletons: list[JointSet], n: int = 4) -> np.ndarray:
+    """n frames spread over the bag, skeletons drawn by joint source, ground truth crossed."""
+    bones = limb_bones()
+    tiles = [draw_skeleton(frames[i].color, skeletons[i], bones, truth_uv=frames[i].truth.uv)
+             for i in np.linspace(0, len(frames) - 1, n).astype(int)]
+    row = np.hstack(tiles)
+    return np.vstack([row, legend(row.shape[1])])

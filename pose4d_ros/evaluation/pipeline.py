@@ -23,7 +23,6 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from pose4d_ros.cli._dpm import ms_stats
 from pose4d_ros.core import joints as cj
 from pose4d_ros.core.convnet import PHOTO_SCALES, ConvNet
 from pose4d_ros.core.dpm.infer import SearchConfig
@@ -37,7 +36,17 @@ from pose4d_ros.core.slqe import SlqeConfig
 from pose4d_ros.datasets.frame import Frame
 from pose4d_ros.peer import MediaPipePeer
 
+
 # A model's rows (suffixes of its channels) and the stages each one's CPU time counts
+def ms_stats(ms: Iterable[float]) -> dict[str, float | None]:
+    """p50 and p95 of per-frame times in ms (None for none)."""
+    a = np.asarray(list(ms), np.float64)
+    if not a.size:
+        return {'p50': None, 'p95': None}
+    return {'p50': round(float(np.percentile(a, 50)), 3),
+            'p95': round(float(np.percentile(a, 95)), 3)}
+
+
 ROW_STAGES = {'': STAGES[:2], '_kf': STAGES[:3], '_kf_ik': STAGES}
 
 

@@ -16,6 +16,11 @@ from typing import Any, TextIO
 LOG_PERIOD_S = 10.0
 
 
+def log(message: str) -> None:
+    """One line of an offline job's log, on stderr."""
+    print(message, file=sys.stderr, flush=True)
+
+
 def progress(iterable: Iterable | None = None, desc: str = '', total: int | None = None, *,
              unit: str = 'frame', disable: bool = False, file: TextIO | None = None) -> Any:
     """A progress counter over `iterable` (or updated by hand: `update(n)`, `n`, `close()`,

@@ -1,0 +1,142 @@
+"""The floor plane (step 1 of `segment`): RANSAC on the 3-D points of the lower part of the
+image, planes through three points whose normal is within `floor_max_tilt_deg` of the optical
+"up" (-y) and that pass `floor_min_height_m`-`floor_max_height_m` below the camera; the plane
+with most inliers (tolerance growing with z^2, as Kinect noise does) is refined by weighted
+least squares."""
+
+from __future__ import annotations
+
+import functools
+import math
+
+import numpy as np
+from numpy.typing import NDArray
+
+from pose4d_ros.core.camera import Intrinsics
+from pose4d_ros.core.foreground.config import FloorConfig
+
+DEFAULT = FloorConfig()  # the defaults, one instance (frozen)
+
+
+_RAYS: dict[Intrinsics, tuple[NDArray[np.float32], NDArray[np.float32]]] = {}
+
+
+def _rays(intrinsics: Intrinsics) -> tuple[NDArray[np.float32], NDArray[np.float32]]:
+    """Per-column (u - cx) / fx (1, W) and per-row (v - cy) / fy (H, 1), float32."""
+    rays = _RAYS.get(intrinsics)
+    if rays is None:
+        rx = ((np.arange(intrinsics.width) - intrinsics.cx) / intrinsics.fx)
+        ry = ((np.arange(intrinsics.height) - intrinsics.cy) / intrinsics.fy)
+        rays = (rx.astype(np.float32)[None, :], ry.astype(np.float32)[:, None])
+        if len(_RAYS) > 16:
+            _RAYS.clear()
+        _RAYS[intrinsics] = rays
+    return rays
+
+
+@functools.lru_cache(maxsize=64)
+def _ransac_draws(seed: int, n_pts: int, iterations: int) -> NDArray[np.int64]:
+    """The RANSAC sample: (iterations, 3) point indices (read-only), a function of its
+    arguments, drawn once (seeding a generator costs more than the fit's arithmetic)."""
+    idx = np.random.default_rng(seed).integers(0, n_pts, size=(iterations, 3))
+    idx.setflags(write=False)
+    return idx
+
+
+def fit_floor(depth_m: NDArray[np.floating], intrinsics: Intrinsics, *,
+              config: FloorConfig = DEFAULT,
+              previous: NDArray[np.floating] | None = None) -> NDArray[np.float64] | None:
+    """RANSAC fit of the floor plane in the lower part of a depth image.
+
+    Parameters
+    ----------
+    depth_m : (H, W) float32 metres, NaN = no reading.
+    intrinsics : the camera, of the same size.
+    config : uses the `floor_*` fields and `seed`.
+    previous : (4,) plane from an earlier frame, tried as one more hypothesis.
+
+    Returns
+    -------
+    (4,) float64 plane (nx, ny, nz, d), optical frame, unit normal pointing up (ny < 0), so that
+    ``n . p + d`` is the height above the floor in metres; None when no plane has
+    `floor_min_inliers` inliers.
+    """
+    h, w = depth_m.shape
+    step = config.floor_sample_step
+    r0 = int(h * (1.0 - config.floor_rows_fraction))
+    sub = depth_m[r0::step, ::step]
+    rx, ry = _rays(intrinsics)
+    ok = np.isfinite(sub)
+    if np.count_nonzero(ok) < max(config.floor_min_inliers, 3):
+        return None
+    z = sub[ok].astype(np.float64)
+    rr, cc = np.nonzero(ok)
+    x = rx[0, cc * step] * z
+    y = ry[r0 + rr * step, 0] * z
+    pts = np.stack([x, y, z], axis=1)
+    n_pts = len(pts)
+    # Kinect v1 depth error grows with z^2 (disparity quantisation)
+    tol = config.floor_inlier_m * np.maximum(z, 1.0) ** 2
+
+    idx = _ransac_draws(config.seed, n_pts, config.floor_iterations)
+    p0, p1, p2 = pts[idx[:, 0]], pts[idx[:, 1]], pts[idx[:, 2]]
+    normal = np.cross(p1 - p0, p2 - p0)
+    norm = np.linalg.norm(normal, axis=1)
+    good = norm > 1e-9
+    normal = normal[good] / norm[good, None]
+    p0 = p0[good]
+    normal *= np.where(normal[:, 1] > 0, -1.0, 1.0)[:, None]  # point up (optical -y)
+    d = -np.einsum('ij,ij->i', normal, p0)
+    if previous is not None:
+        prev = np.asarray(previous, dtype=np.float64).reshape(4)
+        if np.all(np.isfinite(prev)):
+            normal = np.vstack([normal, prev[:3]])
+            d = np.append(d, prev[3])
+    cos_tilt = math.cos(math.radians(config.floor_max_tilt_deg))
+    plausible = ((-normal[:, 1] >= cos_tilt) & (d >= config.floor_min_height_m)
+                 & (d <= config.floor_max_height_m))
+    if not plausible.any():
+        return None
+    normal, d = normal[plausible], d[plausible]
+    dist = np.abs(pts @ normal.T + d[None, :])
+    counts = np.count_nonzero(dist < tol[:, None], axis=0)
+    best = int(np.argmax(counts))
+    if counts[best] < config.floor_min_inliers:
+        return None
+    plane = np.append(normal[best], d[best])
+    for _ in range(2):  # least-squares refinement on the inliers
+        inl = np.abs(pts @ plane[:3] + plane[3]) < tol
+        if np.count_nonzero(inl) < 3:
+            break
+        # weighted total least squares, weights 1 / sigma^2 with sigma ~ z^2
+        q = pts[inl]
+        wt = 1.0 / np.maximum(q[:, 2], 1.0) ** 4
+        c = (wt @ q) / wt.sum()
+        qc = q - c
+        # the normal: the weighted scatter's eigenvector of the smallest eigenvalue
+        _, vecs = np.linalg.eigh((qc * wt[:, None]).T @ qc)
+        n = vecs[:, 0] * (-1.0 if vecs[1, 0] > 0 else 1.0)
+        if -n[1] < cos_tilt:
+            break
+        plane = np.append(n, -float(n @ c))
+    return plane
+
+
+def floor_height(depth_m: NDArray[np.floating], intrinsics: Intrinsics,
+                 plane: NDArray[np.floating]) -> NDArray[np.float32]:
+    """Height of every pixel's 3-D point above a plane.
+
+    Parameters
+    ----------
+    depth_m : (H, W) float32 metres, NaN = no reading.
+    intrinsics : the camera.
+    plane : (4,) (nx, ny, nz, d) as returned by `fit_floor`.
+
+    Returns
+    -------
+    (H, W) float32 metres; NaN where the depth is NaN.
+    """
+    rx, ry = _rays(intrinsics)
+    n = np.asarray(plane, dtype=np.float32)
+    along = n[0] * rx + n[1] * ry + n[2]  # n . ray, (H, W) by broadcasting
+    return depth_m * along + n[3]

@@ -1,0 +1,159 @@
+"""`segment`: the steps of the foreground (the package docstring) composed, on one depth frame
+at the working resolution."""
+
+from __future__ import annotations
+
+from dataclasses import replace
+
+import numpy as np
+from numpy.typing import NDArray
+
+from pose4d_ros.core.camera import Intrinsics, depth_to_metres
+from pose4d_ros.core.foreground.config import (
+    REASON_NO_DEPTH,
+    REASON_NO_PERSON,
+    REASON_NO_REGION,
+    REASON_OK,
+    REASON_TOO_SMALL,
+    ForegroundConfig,
+    ForegroundResult,
+    not_found,
+)
+from pose4d_ros.core.foreground.floor import fit_floor, floor_height
+from pose4d_ros.core.foreground.mask import complete, upsample_mask
+from pose4d_ros.core.foreground.person import (
+    Part,
+    depth_parts,
+    part_score,
+    person_rules,
+    person_sized,
+)
+from pose4d_ros.core.foreground.regions import depth_to_levels, stable_regions
+from pose4d_ros.core.stats import median
+
+DEFAULT = ForegroundConfig()  # the defaults, one instance (frozen)
+
+
+def segment(depth_m: NDArray[np.floating], intrinsics: Intrinsics, *,
+            config: ForegroundConfig = DEFAULT,
+            previous: ForegroundResult | None = None) -> ForegroundResult:
+    """Find the person in a depth image (floor removal, MSER, person-size rules).
+
+    Parameters
+    ----------
+    depth_m : (H, W) float32 metres, NaN (or 0) = no reading, optical frame; uint16
+        millimetres (0 = no reading) is accepted too.
+    intrinsics : the depth camera, same size as `depth_m`.
+    config : parameters (module docstring).
+    previous : the result of the previous frame, optional: its floor plane is tried as a
+        RANSAC hypothesis and regions overlapping its box are preferred.
+
+    Returns
+    -------
+    ForegroundResult. When no person is found, ``found`` is False, the mask is empty and
+    ``reason`` says why (image too small, no valid depth, no stable region, no region of
+    person size).
+
+    Raises
+    ------
+    ValueError : `depth_m` is not 2-D, or its size differs from the intrinsics'.
+    """
+    depth = np.asarray(depth_m)
+    if depth.ndim != 2:
+        raise ValueError(f'depth image must be 2-D, got shape {depth.shape}')
+    h, w = depth.shape
+    if h < 8 or w < 8:
+        return not_found((h, w), REASON_TOO_SMALL)
+    if (intrinsics.width, intrinsics.height) != (w, h):
+        raise ValueError(f'depth image is {w}x{h} but the intrinsics are '
+                         f'{intrinsics.width}x{intrinsics.height}')
+    f = max(h // config.working_height_px, 1)
+    if f > 1:
+        return _subsampled_segment(depth, intrinsics, f, config, previous)
+    depth = depth_to_metres(depth)  # new float32 array: inputs are never touched
+    valid = np.isfinite(depth)
+    if not valid.any():
+        return not_found((h, w), REASON_NO_DEPTH)
+
+    floor, parts, reason = _examine(depth, intrinsics, config, previous)
+    if not parts:
+        return not_found((h, w), reason, floor)
+    prev_box = previous.box if previous is not None and previous.found else None
+    scores = [part_score(pt, config, prev_box) for pt in parts]
+    ok = [k for k, pt in enumerate(parts) if person_rules(pt, config)]
+    if not ok:  # a person too near to be seen whole, only when no whole one is in view
+        ok = [k for k, pt in enumerate(parts) if person_rules(pt, config, near=True)]
+    if not ok:
+        return not_found((h, w), REASON_NO_PERSON, floor)
+    best = parts[max(ok, key=lambda k: scores[k])]
+    mask = np.zeros((h, w), dtype=bool)
+    x0, y0 = best.origin
+    mask[y0:y0 + best.crop.shape[0], x0:x0 + best.crop.shape[1]] = best.crop
+    complete(mask, ~valid, best.box, config)
+    zr = depth[mask]
+    zr = zr[np.isfinite(zr)]
+    return ForegroundResult(mask=mask, box=best.box, depth_m=median(zr), found=True,
+                            reason=REASON_OK, stability=best.variation, level=best.lo,
+                            floor=floor)
+
+
+def _subsampled_segment(depth: NDArray, intrinsics: Intrinsics, f: int,
+                        config: ForegroundConfig, previous: ForegroundResult | None
+                        ) -> ForegroundResult:
+    """`segment` on every f-th pixel of every f-th row, its mask brought back to full size
+    (each pixel takes the value of the one it was represented by)."""
+    h, w = depth.shape
+    small = np.ascontiguousarray(depth[::f, ::f])
+    k = intrinsics
+    small_k = Intrinsics(k.fx / f, k.fy / f, k.cx / f, k.cy / f, small.shape[1], small.shape[0])
+    if previous is not None and previous.box is not None:
+        x0, y0, x1, y1 = previous.box
+        previous = replace(previous, box=(x0 // f, y0 // f, -(-x1 // f), -(-y1 // f)))
+    out = segment(small, small_k, config=config, previous=previous)
+    if not out.found:
+        return replace(out, mask=np.zeros((h, w), bool))
+    floor = np.full(4, np.nan) if out.floor is None else out.floor
+    depth = np.asarray(depth)
+    mask = upsample_mask(out.mask, depth_to_metres(small), depth,
+                          0.001 if depth.dtype == np.uint16 else 1.0, f,
+                          np.array([k.fx, k.fy, k.cx, k.cy]), floor,
+                          config.floor_tolerance_m, config.mser_delta * config.metres_per_level)
+    rows, cols = np.flatnonzero(mask.any(axis=1)), np.flatnonzero(mask.any(axis=0))
+    box = (int(cols[0]), int(rows[0]), int(cols[-1]) + 1, int(rows[-1]) + 1)
+    return replace(out, mask=mask, box=box)
+
+
+def _floor(depth: NDArray[np.float32], intrinsics: Intrinsics, config: ForegroundConfig,
+           previous: ForegroundResult | None
+           ) -> tuple[NDArray[np.float64] | None, NDArray[np.float32] | None,
+                      NDArray[np.bool_] | None]:
+    """Step 1: the floor plane (or None), every pixel's height above it and the pixels that
+    are floor (None without a floor)."""
+    if not config.floor_remove:
+        return None, None, None
+    floor = fit_floor(depth, intrinsics, config=config,
+                      previous=None if previous is None else previous.floor)
+    if floor is None:
+        return None, None, None
+    above = floor_height(depth, intrinsics, floor)
+    with np.errstate(invalid='ignore'):
+        drop = above < config.floor_tolerance_m
+    return floor, above, drop
+
+
+def _examine(depth: NDArray[np.float32], intrinsics: Intrinsics, config: ForegroundConfig,
+             previous: ForegroundResult | None
+             ) -> tuple[NDArray[np.float64] | None, list[Part], str]:
+    """Floor, stable regions and their depth parts (the candidates `segment` chooses from).
+
+    Returns the floor plane (or None), the parts, and the reason when there are none.
+    """
+    floor, above, drop = _floor(depth, intrinsics, config, previous)
+    g = depth_to_levels(depth, config=config, drop=drop)
+    regions = stable_regions(g, config)
+    if regions.stable.size == 0:
+        return floor, [], REASON_NO_REGION
+    order = person_sized(regions, intrinsics, config)
+    if order.size == 0:
+        return floor, [], REASON_NO_PERSON
+    return floor, depth_parts(g, regions, order, above, intrinsics, config), REASON_NO_PERSON

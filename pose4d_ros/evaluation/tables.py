@@ -1,0 +1,57 @@
+"""The paper's tables: the models a source is scored with by default, and the scores as text and
+as JSON rows."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from pose4d_ros.core.convnet import ConvNet, is_convnet, load_convnet
+from pose4d_ros.core.dpm.model import PartModel, load_model
+from pose4d_ros.core.skeleton import JOINT_GROUPS
+from pose4d_ros.models import model_path
+
+TABLE_METRICS = (('pck', 'PCK@0.1 (%)'), ('pck@0.2', 'PCK@0.2 (%)'), ('apk', 'APK (%)'),
+                 ('error_px', 'error (px)'), ('error_mm', '3-D median error (mm)'),
+                 ('within_10cm', '3-D within 10 cm (%)'))
+
+
+def format_table(rows: dict[str, dict[str, dict[str, float]]], frames: int) -> str:
+    """The rows as text: one block per metric (those some row has), groups as columns; '-'
+    where a row has no value, 'inf' for a median that more than half the joints miss."""
+    groups = [g for g in JOINT_GROUPS if any(g in r['pck'] for r in rows.values())]
+    cols = groups + ['average', 'average7']
+    width = max(14, *(len(name) + 2 for name in rows))
+    lines = [f'{frames} frames']
+    for key, title in TABLE_METRICS:
+        if not any(key in row for row in rows.values()):
+            continue
+        shown = [c for c in cols if any(c in row.get(key, {}) for row in rows.values())]
+        lines += ['', title, ' ' * width + ''.join(f'{c:>10}' for c in shown)]
+        for name, row in rows.items():
+            vals = row.get(key, {})
+            lines.append(f'{name:<{width}}' + ''.join(
+                f'{vals[c]:>10.1f}' if c in vals and not np.isnan(vals[c]) else f'{"-":>10}'
+                for c in shown))
+    if any('cpu_ms' in row for row in rows.values()):
+        lines += ['', 'CPU per frame (ms)', ' ' * width + f'{"p50":>10}{"p95":>10}']
+        lines += [f'{name:<{width}}' + ''.join(
+            f'{row["cpu_ms"][k]:>10.1f}' if row['cpu_ms'][k] is not None else f'{"-":>10}'
+            for k in ('p50', 'p95')) for name, row in rows.items() if 'cpu_ms' in row]
+    return '\n'.join(lines)
+
+
+def clean_row(table: dict[str, dict[str, float]]) -> dict[str, dict[str, float | None]]:
+    """The row in the JSON's order (`TABLE_METRICS`, then cpu_ms), NaN and infinity as null."""
+    order = [k for k, _ in TABLE_METRICS] + [k for k in table if k not in dict(TABLE_METRICS)]
+    return {k: {g: (round(float(v), 3) if v is not None and np.isfinite(v) else None)
+                for g, v in table[k].items()} for k in order if k in table}
+
+
+def default_models(kind: str) -> list[str]:
+    return ['lspet_convnet'] if kind == 'lspet' else ['rgbd_14', 'rgb_10']
+
+
+def load_any(name: str) -> PartModel | ConvNet:
+    """A part model or a photograph network (`core.convnet`), by shipped name or path."""
+    path = model_path(name)
+    return load_convnet(path) if is_convnet(path) else load_model(path)
