@@ -44,10 +44,12 @@ from pose4d_ros.core.foreground import (
     apply_mask,
     hold,
     segment,
+    segment_people,
 )
 from pose4d_ros.core.joints import JointSet
 from pose4d_ros.core.kinematics import IkConfig, IkFlag, LimbLengths, infer_middle_joints
 from pose4d_ros.core.lifting import lift_parts, medoid_parts, person_scale_px, valid_xyz
+from pose4d_ros.core.people import PeopleDetector, PeopleIk, PeopleTracker, TrackingConfig
 from pose4d_ros.core.skeleton import LIMBS, PARTS_10, SKELETON_14, PartTree, tree_for
 from pose4d_ros.core.slqe import ConstantVelocityTracker, CvConfig, SlqeConfig, SlqeTracker
 from pose4d_ros.core.warm_up import warm_up_frame
@@ -102,6 +104,8 @@ class ForegroundStage:
         self.configure(config, temporal=temporal)
         self.previous: ForegroundResult | None = None
         self.held = 0
+        self.previous_people: list[ForegroundResult] = []
+        self.held_people = 0
 
     def configure(self, config: ForegroundConfig | None = None, *, temporal: bool = True
                   ) -> None:
@@ -112,6 +116,7 @@ class ForegroundStage:
     def reset(self) -> None:
         self.previous = None
         self.held = 0
+        self.previous_people, self.held_people = [], 0
 
     def warm_up(self, intrinsics: Intrinsics) -> None:
         """Run on `warm_up_frame` twice (the second time with a previous frame), at the
@@ -142,6 +147,32 @@ class ForegroundStage:
         else:
             self.previous = None
         return (fg, *apply_mask(color, depth_m, fg.mask))
+
+    def step_people(self, color: NDArray[np.uint8], depth_m: NDArray[np.floating],
+                    intrinsics: Intrinsics, max_people: int
+                    ) -> tuple[list[ForegroundResult], int, NDArray[np.uint8],
+                               NDArray[np.float32]]:
+        """Every person of one frame (`core.foreground.segment_people`, at most `max_people`,
+        best first), how many the rules found, and the colour and depth blanked outside all
+        of them. Held like `step`'s person when a frame finds nobody."""
+        color, depth_m = np.asarray(color), np.asarray(depth_m, np.float32)
+        if color.shape[:2] != depth_m.shape:
+            raise ValueError(f'colour is {color.shape[1]}x{color.shape[0]} but depth is '
+                             f'{depth_m.shape[1]}x{depth_m.shape[0]} (not registered?)')
+        people, found = segment_people(depth_m, intrinsics, config=self.config,
+                                       previous=self.previous_people if self.temporal else (),
+                                       max_people=max_people)
+        if people or not self.temporal:
+            self.previous_people, self.held_people = people, 0
+        elif self.previous_people and self.held_people < self.HOLD_FRAMES:
+            people = [hold(p, depth_m) for p in self.previous_people]
+            self.held_people += 1
+        else:
+            self.previous_people = []
+        union = np.zeros(depth_m.shape, bool)
+        for person in people:
+            union |= person.mask
+        return (people, found, *apply_mask(color, depth_m, union))
 
 
 class DetectorStage:
@@ -499,6 +530,10 @@ class FrameResult:
     skeleton: JointSet
     cpu_s: dict[str, float]
     wall_s: dict[str, float]
+    people: tuple[JointSet, ...] = ()
+    candidates: int = 0
+    born: tuple[int, ...] = ()
+    ended: tuple[int, ...] = ()
 
 
 class FramePipeline:
@@ -508,14 +543,22 @@ class FramePipeline:
     ----------
     detector : the detector stage (holds the part model).
     foreground, tracker, ik : the other stages (defaults if None).
+    people : several people (`core.people`): every candidate of the foreground searched, each
+        person tracked and completed on their own (the stages above are the first person's
+        and the template of the others'); `FrameResult.people` holds every confirmed track's
+        skeleton and `skeleton` the primary person's. None: one person, as the paper.
     """
 
     def __init__(self, detector: DetectorStage, *, foreground: ForegroundStage | None = None,
-                 tracker: TrackerStage | None = None, ik: IkStage | None = None) -> None:
+                 tracker: TrackerStage | None = None, ik: IkStage | None = None,
+                 people: TrackingConfig | None = None) -> None:
         self.foreground = foreground or ForegroundStage()
         self.detector = detector
         self.tracker = tracker or TrackerStage()
         self.ik = ik or IkStage()
+        self.people = people
+        self.multi = None if people is None else PeopleStages(
+            self.detector, self.tracker, self.ik, people)
 
     def reset(self) -> None:
         """Forget the previous frames (the next one starts a new track)."""
@@ -523,6 +566,8 @@ class FramePipeline:
         self.detector.reset()
         self.tracker.reset()
         self.ik.reset()
+        if self.multi is not None:
+            self.multi.reset()
 
     def step(self, color: NDArray[np.uint8], depth_m: NDArray[np.floating] | None,
              intrinsics: Intrinsics | None, stamp_s: float) -> FrameResult:
@@ -531,6 +576,8 @@ class FramePipeline:
         Without depth (an RGB-only model's source) there is no foreground: the detector
         searches the whole colour image.
         """
+        if self.multi is not None and depth_m is not None:
+            return self._step_people(color, depth_m, intrinsics, stamp_s)
         clock = [(time.process_time(), time.perf_counter())]
         fg, color_m, depth_mm = None, color, None
         if depth_m is not None:
@@ -549,6 +596,31 @@ class FramePipeline:
                          for c in (0, 1))
         return FrameResult(fg, color_m, depth_mm, parts, tracked, skeleton, cpu_s, wall_s)
 
+    def _step_people(self, color: NDArray[np.uint8], depth_m: NDArray[np.floating],
+                     intrinsics: Intrinsics, stamp_s: float) -> FrameResult:
+        multi = self.multi
+        clock = [(time.process_time(), time.perf_counter())]
+        found, n, color_m, depth_mm = self.foreground.step_people(
+            color, depth_m, intrinsics, multi.config.max_people)
+        clock.append((time.process_time(), time.perf_counter()))
+        parts = multi.detector.step(color, np.asarray(depth_m, np.float32), intrinsics, found,
+                                    stamp_s=stamp_s)
+        clock.append((time.process_time(), time.perf_counter()))
+        tracked = multi.tracker.step(parts, stamp_s, intrinsics)
+        clock.append((time.process_time(), time.perf_counter()))
+        skeletons = multi.ik.step(tracked, depth_mm, intrinsics)
+        clock.append((time.process_time(), time.perf_counter()))
+        cpu_s, wall_s = ({stage: clock[k + 1][c] - clock[k][c] for k, stage in enumerate(STAGES)}
+                         for c in (0, 1))
+        fg = found[0] if found else None
+        return FrameResult(
+            fg, color_m, depth_mm,
+            parts[0] if parts else JointSet.missing(self.detector.names),
+            tracked[0] if tracked else JointSet.missing(self.tracker.tree.names),
+            skeletons[0] if skeletons else JointSet.missing(SKELETON_14), cpu_s, wall_s,
+            people=tuple(skeletons), candidates=n, born=tuple(multi.tracker.born),
+            ended=tuple(multi.tracker.ended))
+
     def warm_up(self, intrinsics: Intrinsics) -> None:
         """Compile the kernels on a synthetic frame, twice (the second frame guided by the
         first, `SearchConfig.arm_prior`), then forget it (`warm_up_frame`)."""
@@ -557,3 +629,40 @@ class FramePipeline:
         for stamp_s in (0.0, 1.0 / 30.0):
             self.step(color, depth, intrinsics, stamp_s)
         self.reset()
+
+
+class PeopleStages:
+    """The several-person stages (`core.people`), each person served by a copy of the
+    single-person stages given, made with their settings (`configure` passes new ones on)."""
+
+    def __init__(self, detector: DetectorStage, tracker: TrackerStage, ik: IkStage,
+                 config: TrackingConfig) -> None:
+        self.config = config
+        self.templates = (detector, tracker, ik)
+        self.detector = PeopleDetector(lambda: DetectorStage(
+            detector.model, search=detector.detector.config,
+            scale=detector.person_scale.config, min_confidence=detector.min_confidence),
+            config)
+        self.tracker = PeopleTracker(lambda: TrackerStage(
+            kind=tracker.kind, slqe=tracker.slqe_config, cv=tracker.cv_config,
+            tree=tracker.fixed_tree, depth_std_m=tracker.depth_std_m), config)
+        self.ik = PeopleIk(lambda: IkStage(ik.config, lengths=ik.defaults, learn=ik.learn,
+                                           use_depth=ik.use_depth))
+
+    def reset(self) -> None:
+        self.detector.reset()
+        self.tracker.reset()
+        self.ik.reset()
+
+    def configure(self) -> None:
+        """Give every person's stages the templates' current settings."""
+        detector, tracker, ik = self.templates
+        for slot in self.detector.slots:
+            slot.stage.configure(search=detector.detector.config,
+                                 scale=detector.person_scale.config,
+                                 min_confidence=detector.min_confidence)
+        for track in self.tracker.tracks:
+            track.stage.configure(slqe=tracker.slqe_config, cv=tracker.cv_config,
+                                  depth_std_m=tracker.depth_std_m)
+        for stage in self.ik.stages.values():
+            stage.configure(lengths=ik.defaults, learn=ik.learn)

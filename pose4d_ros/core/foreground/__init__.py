@@ -77,11 +77,11 @@ from pose4d_ros.core.foreground.floor import fit_floor, floor_height
 from pose4d_ros.core.foreground.mask import apply_mask, hold
 from pose4d_ros.core.foreground.person import Part, part_score, person_rules, size_rules
 from pose4d_ros.core.foreground.regions import depth_to_levels
-from pose4d_ros.core.foreground.segmentation import segment
+from pose4d_ros.core.foreground.segmentation import segment, segment_people
 
 __all__ = [
     'REASON_NO_DEPTH', 'REASON_NO_PERSON', 'REASON_NO_REGION', 'REASON_OK', 'REASON_TOO_SMALL',
     'FloorConfig', 'ForegroundConfig', 'ForegroundResult', 'MaskConfig', 'Part', 'PersonConfig',
     'RegionConfig', 'apply_mask', 'depth_to_levels', 'fit_floor', 'floor_height', 'hold',
-    'part_score', 'person_rules', 'segment', 'size_rules',
+    'part_score', 'person_rules', 'segment', 'segment_people', 'size_rules',
 ]

@@ -32,6 +32,8 @@ from pose4d_ros.core.foreground.regions import depth_to_levels, stable_regions
 from pose4d_ros.core.stats import median
 
 DEFAULT = ForegroundConfig()  # the defaults, one instance (frozen)
+# Largest share of a part's pixels that another, better person may hold (`segment_people`)
+OVERLAP = 0.2
 
 
 def segment(depth_m: NDArray[np.floating], intrinsics: Intrinsics, *,
@@ -86,15 +88,88 @@ def segment(depth_m: NDArray[np.floating], intrinsics: Intrinsics, *,
     if not ok:
         return not_found((h, w), REASON_NO_PERSON, floor)
     best = parts[max(ok, key=lambda k: scores[k])]
-    mask = np.zeros((h, w), dtype=bool)
-    x0, y0 = best.origin
-    mask[y0:y0 + best.crop.shape[0], x0:x0 + best.crop.shape[1]] = best.crop
-    complete(mask, ~valid, best.box, config)
+    return _result(best, depth, valid, floor, config)
+
+
+def _result(part: Part, depth: NDArray[np.float32], valid: NDArray[np.bool_],
+            floor: NDArray[np.float64] | None, config: ForegroundConfig) -> ForegroundResult:
+    """The foreground of one chosen part: its pixels completed (step 5), its median depth."""
+    mask = _part_mask(part, depth.shape)
+    complete(mask, ~valid, part.box, config)
     zr = depth[mask]
     zr = zr[np.isfinite(zr)]
-    return ForegroundResult(mask=mask, box=best.box, depth_m=median(zr), found=True,
-                            reason=REASON_OK, stability=best.variation, level=best.lo,
+    return ForegroundResult(mask=mask, box=part.box, depth_m=median(zr), found=True,
+                            reason=REASON_OK, stability=part.variation, level=part.lo,
                             floor=floor)
+
+
+def _part_mask(part: Part, shape: tuple[int, ...]) -> NDArray[np.bool_]:
+    mask = np.zeros(shape, dtype=bool)
+    x0, y0 = part.origin
+    mask[y0:y0 + part.crop.shape[0], x0:x0 + part.crop.shape[1]] = part.crop
+    return mask
+
+
+def segment_people(depth_m: NDArray[np.floating], intrinsics: Intrinsics, *,
+                   config: ForegroundConfig = DEFAULT,
+                   previous: list[ForegroundResult] | tuple[ForegroundResult, ...] = (),
+                   max_people: int = 4) -> tuple[list[ForegroundResult], int]:
+    """Every person in a depth image: the parts of `segment` that pass the person rules, best
+    first, each sharing at most `OVERLAP` of its pixels with a better one (a region of the same
+    person at another level is not another person).
+
+    Parameters are `segment`'s; `previous` are the people of the previous frame (a part
+    overlapping one of their boxes gets the `previous_bonus`); `max_people` bounds what is
+    returned (the work of tracing is the same).
+
+    Returns
+    -------
+    people : at most `max_people` results (found, each its own mask), best first.
+    found : how many distinct people the rules passed (may exceed `max_people`).
+    """
+    if max_people < 1:
+        raise ValueError(f'max_people must be >= 1, got {max_people}')
+    depth = np.asarray(depth_m)
+    if depth.ndim != 2:
+        raise ValueError(f'depth image must be 2-D, got shape {depth.shape}')
+    h, w = depth.shape
+    if h < 8 or w < 8:
+        return [], 0
+    if (intrinsics.width, intrinsics.height) != (w, h):
+        raise ValueError(f'depth image is {w}x{h} but the intrinsics are '
+                         f'{intrinsics.width}x{intrinsics.height}')
+    f = max(h // config.working_height_px, 1)
+    if f > 1:
+        small, small_k, _ = _subsampled(depth, intrinsics, f, None)
+        prev = [_subsampled(depth, intrinsics, f, p)[2] for p in previous]
+        people, found = segment_people(small, small_k, config=config, previous=prev,
+                                       max_people=max_people)
+        return [_upsampled(p, small, depth, intrinsics, f, config) for p in people], found
+    depth = depth_to_metres(depth)
+    valid = np.isfinite(depth)
+    if not valid.any():
+        return [], 0
+    floor, parts, _ = _examine(depth, intrinsics, config,
+                               previous[0] if len(previous) else None)
+    ok = [pt for pt in parts if person_rules(pt, config)]
+    if not ok:
+        ok = [pt for pt in parts if person_rules(pt, config, near=True)]
+    boxes = [p.box for p in previous if p.found and p.box is not None]
+    ok.sort(key=lambda pt: -max([part_score(pt, config, b) for b in boxes]
+                                or [part_score(pt, config)]))
+    picked: list[tuple[Part, NDArray[np.bool_]]] = []
+    for pt in ok:
+        mask = _part_mask(pt, depth.shape)
+        if any((mask & m).sum() > OVERLAP * min(pt.n, q.n) for q, m in picked):
+            continue
+        picked.append((pt, mask))
+    people = [_result(pt, depth, valid, floor, config) for pt, _ in picked[:max_people]]
+    # completion may add a pixel to two people: it stays with the better one
+    taken = np.zeros(depth.shape, bool)
+    for k, person in enumerate(people):
+        people[k] = replace(person, mask=person.mask & ~taken)
+        taken |= person.mask
+    return people, len(picked)
 
 
 def _subsampled_segment(depth: NDArray, intrinsics: Intrinsics, f: int,
@@ -102,14 +177,28 @@ def _subsampled_segment(depth: NDArray, intrinsics: Intrinsics, f: int,
                         ) -> ForegroundResult:
     """`segment` on every f-th pixel of every f-th row, its mask brought back to full size
     (each pixel takes the value of the one it was represented by)."""
-    h, w = depth.shape
+    small, small_k, previous = _subsampled(depth, intrinsics, f, previous)
+    return _upsampled(segment(small, small_k, config=config, previous=previous), small,
+                      depth, intrinsics, f, config)
+
+
+def _subsampled(depth: NDArray, intrinsics: Intrinsics, f: int,
+                previous: ForegroundResult | None
+                ) -> tuple[NDArray, Intrinsics, ForegroundResult | None]:
+    """Every f-th pixel of every f-th row, its intrinsics, and `previous` on that grid."""
     small = np.ascontiguousarray(depth[::f, ::f])
     k = intrinsics
     small_k = Intrinsics(k.fx / f, k.fy / f, k.cx / f, k.cy / f, small.shape[1], small.shape[0])
     if previous is not None and previous.box is not None:
         x0, y0, x1, y1 = previous.box
         previous = replace(previous, box=(x0 // f, y0 // f, -(-x1 // f), -(-y1 // f)))
-    out = segment(small, small_k, config=config, previous=previous)
+    return small, small_k, previous
+
+
+def _upsampled(out: ForegroundResult, small: NDArray, depth: NDArray, k: Intrinsics, f: int,
+               config: ForegroundConfig) -> ForegroundResult:
+    """A result found on the subsampled grid, its mask at full size."""
+    h, w = depth.shape
     if not out.found:
         return replace(out, mask=np.zeros((h, w), bool))
     floor = np.full(4, np.nan) if out.floor is None else out.floor

@@ -1,0 +1,299 @@
+"""Several people at once: one detector state, one SLQE and one IK per person, with stable ids.
+
+The paper's stages extend to several people as they are: the foreground gives one candidate
+per person (`core.foreground.segment_people`), the part model searches each candidate
+(`PeopleDetector`), each person's parts are tracked by their own SLQE (`PeopleTracker`) and
+completed by their own IK with their own learned bone lengths (`PeopleIk`).
+
+Association (our design; the paper tracks one person). Each frame, detections are assigned to
+tracks by one global assignment (`scipy.optimize.linear_sum_assignment`) on the squared
+Mahalanobis distance between torso points in 3-D: the track's torso predicted to this frame at
+its velocity, its covariance the SLQE's covariance of the torso joints plus the detection's,
+plus `TrackingConfig.torso_std_m` and a spread growing with the time the track went unseen
+(`max_speed_mps`). A pair beyond `gate_chi2` is never assigned. A detection left over starts a
+tentative track, confirmed (and given its id) after `confirm_frames` frames matched, or at
+once when no confirmed track exists (the first person in view is trusted, as the
+single-person tracker always did). A confirmed track survives `max_unseen_s` unseen (its parts
+predicted, TRACKED, as long as the SLQE keeps them) and is matched again when the person comes
+back; ids count up from 1 in a run and are never reused. One track and one detection are
+always paired: the SLQE's own gate then judges each part, as it does for a single person.
+
+The primary person (the one `/pose4d/skeleton` carries): the confirmed track seen this frame
+that was confirmed first (the longest tracked); when none is seen, the longest-tracked one
+still predicted. Outputs are ordered primary first, then by id.
+
+The same detector slots do the same for candidates before detection (`PeopleDetector`): each
+slot keeps one person's detector state (their scale, the previous frame's parts that guide
+the arms), matched to candidates by the 3-D centre of their regions.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field, replace
+
+import numpy as np
+from numpy.typing import NDArray
+from scipy.optimize import linear_sum_assignment
+
+from pose4d_ros.core import joints as cj
+from pose4d_ros.core.camera import Intrinsics, backproject
+from pose4d_ros.core.foreground import ForegroundResult, apply_mask
+from pose4d_ros.core.joints import JointSet
+
+# The joints whose mean is a person's torso point, in the order they are looked for
+TORSO = ('left_shoulder', 'right_shoulder', 'left_hip', 'right_hip', 'torso', 'neck')
+
+
+@dataclass(frozen=True)
+class TrackingConfig:
+    """How people are told apart over time (module docstring).
+
+    max_people : candidates searched per frame at most (the best first); the rest are counted.
+    confirm_frames : frames a new track must be matched before it is published, while another
+        confirmed track exists.
+    max_unseen_s : a confirmed track unseen longer than this ends, seconds.
+    torso_std_m : standard deviation of a torso point's position besides the covariances,
+        metres (the torso point moves within the body as arms and legs do).
+    max_speed_mps : how fast an unseen person may have gone, metres a second (the spread of an
+        unseen track's position grows with it).
+    gate_chi2 : largest squared Mahalanobis distance of an assigned pair (3 degrees of freedom).
+    """
+
+    max_people: int = 4
+    confirm_frames: int = 3
+    max_unseen_s: float = 1.0
+    torso_std_m: float = 0.15
+    max_speed_mps: float = 1.5
+    gate_chi2: float = 16.0
+
+    def __post_init__(self) -> None:
+        if self.max_people < 1 or self.confirm_frames < 1:
+            raise ValueError(f'max_people and confirm_frames must be >= 1, got '
+                             f'{self.max_people} and {self.confirm_frames}')
+        for name in ('max_unseen_s', 'torso_std_m', 'max_speed_mps', 'gate_chi2'):
+            if not getattr(self, name) > 0:
+                raise ValueError(f'{name} must be > 0, got {getattr(self, name)}')
+
+
+def torso(joints: JointSet) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """A person's torso point: the mean 3-D position of the located `TORSO` joints (NaN if
+    none has one) and the mean of their covariances ((3,), (3, 3))."""
+    idx = [k for name in TORSO if (k := joints.get(name)) is not None
+           and joints.source[k] != cj.MISSING and np.isfinite(joints.xyz[k]).all()]
+    if not idx:
+        return np.full(3, np.nan), np.zeros((3, 3))
+    return joints.xyz[idx].mean(axis=0), joints.covariance[idx].mean(axis=0)
+
+
+def assign(cost: NDArray[np.float64], gate: float) -> list[tuple[int, int]]:
+    """The pairs (row, column) of the least-cost one-to-one assignment whose cost is at most
+    `gate` (NaN = never). A single row and a single column are always paired when finite."""
+    cost = np.asarray(cost, np.float64)
+    if cost.size == 0:
+        return []
+    if cost.shape == (1, 1):
+        return [(0, 0)] if np.isfinite(cost[0, 0]) else []
+    big = 1e12
+    rows, cols = linear_sum_assignment(np.where(np.isfinite(cost), np.minimum(cost, big), big))
+    return [(int(r), int(c)) for r, c in zip(rows, cols, strict=True) if cost[r, c] <= gate]
+
+
+def _mahalanobis2(d: NDArray[np.float64], s: NDArray[np.float64]) -> float:
+    try:
+        return float(d @ np.linalg.solve(s, d))
+    except np.linalg.LinAlgError:
+        return math.inf
+
+
+@dataclass
+class _Slot:
+    """One person's detector state and where their region last was."""
+
+    stage: object
+    centre: NDArray[np.float64]
+    seen_s: float
+
+
+class PeopleDetector:
+    """One part-model search per person candidate, each person with their own detector state.
+
+    Parameters
+    ----------
+    make : a new `core.pipeline.DetectorStage` (sharing the model) for a new person.
+    config : `TrackingConfig` (max_people, max_unseen_s, max_speed_mps, torso_std_m).
+    """
+
+    def __init__(self, make: Callable[[], object], config: TrackingConfig | None = None) -> None:
+        self.make = make
+        self.config = config or TrackingConfig()
+        self.slots: list[_Slot] = []
+
+    def reset(self) -> None:
+        self.slots = []
+
+    def step(self, color: NDArray[np.uint8], depth_m: NDArray[np.floating],
+             intrinsics: Intrinsics | None, people: Sequence[ForegroundResult], *,
+             stamp_s: float) -> list[JointSet]:
+        """The detected parts of each candidate in `people` (at most `max_people`, in their
+        order), each searched in its own mask with its person's state."""
+        people = list(people)[:self.config.max_people]
+        centres = [_centre(p, intrinsics) for p in people]
+        cfg = self.config
+        cost = np.full((len(self.slots), len(people)), np.nan)
+        for i, slot in enumerate(self.slots):
+            spread = cfg.torso_std_m + cfg.max_speed_mps * max(stamp_s - slot.seen_s, 0.0)
+            for j, c in enumerate(centres):
+                cost[i, j] = float(np.sum((slot.centre - c) ** 2)) / spread ** 2
+        pairs = dict((j, i) for i, j in assign(cost, cfg.gate_chi2))
+        out = []
+        for j, (person, centre) in enumerate(zip(people, centres, strict=True)):
+            if j in pairs:
+                slot = self.slots[pairs[j]]
+            else:
+                slot = _Slot(self.make(), centre, stamp_s)
+                self.slots.append(slot)
+            slot.centre, slot.seen_s = centre, stamp_s
+            color_m, depth_mm = apply_mask(color, depth_m, person.mask)
+            out.append(slot.stage.step(color_m, depth_mm, intrinsics, mask=person.mask,
+                                       stamp_s=stamp_s, blanked=True))
+        self.slots = [s for s in self.slots if stamp_s - s.seen_s <= cfg.max_unseen_s]
+        return out
+
+
+def _centre(person: ForegroundResult, intrinsics: Intrinsics | None) -> NDArray[np.float64]:
+    """The 3-D centre of a candidate's box at its median depth (pixels and 1 m without
+    intrinsics)."""
+    x0, y0, x1, y1 = person.box or (0, 0, 0, 0)
+    uv = np.array([[(x0 + x1) / 2, (y0 + y1) / 2]], float)
+    if intrinsics is None or not math.isfinite(person.depth_m):
+        return np.array([uv[0, 0] / 100, uv[0, 1] / 100, 1.0])
+    return backproject(uv, np.array([person.depth_m]), intrinsics)[0]
+
+
+@dataclass
+class _Track:
+    stage: object
+    id: int = 0  # 0 while tentative
+    hits: int = 0
+    seen_s: float = -math.inf
+    point: NDArray[np.float64] = field(default_factory=lambda: np.full(3, np.nan))
+    cov: NDArray[np.float64] = field(default_factory=lambda: np.zeros((3, 3)))
+    velocity: NDArray[np.float64] = field(default_factory=lambda: np.zeros(3))
+    names: tuple[str, ...] = ()
+    last: JointSet | None = None
+
+
+class PeopleTracker:
+    """One SLQE per person (`core.pipeline.TrackerStage`), detections assigned to tracks each
+    frame (module docstring).
+
+    Parameters
+    ----------
+    make : a new TrackerStage for a new track.
+    config : `TrackingConfig`.
+
+    Attributes
+    ----------
+    born, ended : ids of the tracks confirmed and ended by the last `step`.
+    next_id : the id the next confirmed track gets (ids are never reused).
+    """
+
+    def __init__(self, make: Callable[[], object], config: TrackingConfig | None = None) -> None:
+        self.make = make
+        self.config = config or TrackingConfig()
+        self.tracks: list[_Track] = []
+        self.next_id = 1
+        self.born: list[int] = []
+        self.ended: list[int] = []
+
+    def reset(self) -> None:
+        """End every track (ids still count on)."""
+        self.ended = [t.id for t in self.tracks if t.id]
+        self.tracks = []
+
+    def step(self, detections: Sequence[JointSet], stamp_s: float,
+             intrinsics: Intrinsics | None) -> list[JointSet]:
+        """Track one frame: the tracked parts of every confirmed track (its `track_id` set),
+        primary first, then by id."""
+        cfg = self.config
+        self.born, self.ended = [], []
+        points = [torso(d) for d in detections]
+        pairs = assign(self._cost(points, stamp_s), cfg.gate_chi2)
+        matched = {j: i for i, j in pairs}
+        for j, det in enumerate(detections):
+            if j not in matched and np.isfinite(points[j][0]).all():
+                self.tracks.append(_Track(self.make(), names=det.names))
+                matched[j] = len(self.tracks) - 1
+        seen = {i: j for j, i in matched.items()}
+        any_confirmed = any(t.id for t in self.tracks)
+        for i, track in enumerate(self.tracks):
+            det = detections[seen[i]] if i in seen else JointSet.missing(track.names)
+            out = track.stage.step(det, stamp_s, intrinsics)
+            track.names = out.names
+            if i in seen:
+                self._seen(track, out, stamp_s)
+                if not track.id and (track.hits >= cfg.confirm_frames or not any_confirmed):
+                    track.id, self.next_id = self.next_id, self.next_id + 1
+                    self.born.append(track.id)
+            track.last = replace(out, track_id=track.id)
+        keep = []
+        for track in self.tracks:
+            unseen = stamp_s - track.seen_s
+            if track.id and unseen > cfg.max_unseen_s:
+                self.ended.append(track.id)
+            elif track.id or unseen <= 0.0:  # a tentative track must be matched every frame
+                keep.append(track)
+        self.tracks = keep
+        return [t.last for t in self._ordered(stamp_s)]
+
+    def _cost(self, points: list[tuple[NDArray, NDArray]], stamp_s: float
+              ) -> NDArray[np.float64]:
+        cfg = self.config
+        cost = np.full((len(self.tracks), len(points)), np.nan)
+        for i, t in enumerate(self.tracks):
+            if not np.isfinite(t.point).all():
+                continue
+            dt = max(stamp_s - t.seen_s, 0.0)
+            predicted = t.point + t.velocity * min(dt, cfg.max_unseen_s)
+            spread = (cfg.torso_std_m ** 2 + (cfg.max_speed_mps * dt) ** 2) * np.eye(3)
+            for j, (p, c) in enumerate(points):
+                if np.isfinite(p).all():
+                    cost[i, j] = _mahalanobis2(p - predicted, t.cov + c + spread)
+        return cost
+
+    def _seen(self, track: _Track, out: JointSet, stamp_s: float) -> None:
+        point, cov = torso(out)
+        if np.isfinite(point).all():
+            dt = stamp_s - track.seen_s
+            if np.isfinite(track.point).all() and 0 < dt <= self.config.max_unseen_s:
+                track.velocity = 0.7 * track.velocity + 0.3 * (point - track.point) / dt
+            track.point, track.cov = point, cov
+        track.hits += 1
+        track.seen_s = stamp_s
+
+    def _ordered(self, stamp_s: float) -> list[_Track]:
+        confirmed = sorted((t for t in self.tracks if t.id), key=lambda t: t.id)
+        seen = [t for t in confirmed if t.seen_s == stamp_s]
+        primary = (seen or confirmed)[:1]
+        return primary + [t for t in confirmed if t not in primary]
+
+
+class PeopleIk:
+    """One `core.pipeline.IkStage` per track id (each track its own learned bone lengths);
+    a track's IK ends when its id is no longer given."""
+
+    def __init__(self, make: Callable[[], object]) -> None:
+        self.make = make
+        self.stages: dict[int, object] = {}
+
+    def reset(self) -> None:
+        self.stages = {}
+
+    def step(self, tracked: Sequence[JointSet], depth_m: NDArray[np.floating] | None,
+             intrinsics: Intrinsics | None) -> list[JointSet]:
+        """The 14-joint skeleton of each tracked person, in the order given."""
+        stages = {t.track_id: self.stages.get(t.track_id) or self.make() for t in tracked}
+        self.stages = stages
+        return [stages[t.track_id].step(t, depth_m, intrinsics) for t in tracked]

@@ -1,0 +1,175 @@
+"""Several people (`core.people`, `core.foreground.segment_people`, `FramePipeline(people=)`):
+association on synthetic detections, and the whole core on rendered two-person frames."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from helpers import BODY, INTR, standing_pose
+
+from pose4d_ros.core import joints as cj
+from pose4d_ros.core.camera import project
+from pose4d_ros.core.foreground import segment_people
+from pose4d_ros.core.joints import JointSet
+from pose4d_ros.core.people import PeopleTracker, TrackingConfig, assign, torso
+from pose4d_ros.core.pipeline import TrackerStage
+from pose4d_ros.core.skeleton import PARTS_10
+
+DT = 1 / 30
+
+
+def person(x: float, z: float = 2.5) -> JointSet:
+    """The 10 detected parts of `BODY` moved to lateral offset x and depth z, metres."""
+    xyz = np.array([BODY[n] for n in PARTS_10.names]) + [x, 0.0, z - 2.5]
+    return JointSet(PARTS_10.names, project(xyz, INTR), xyz,
+                    source=np.full(10, cj.DETECTED, np.uint8), confidence=np.full(10, 0.9))
+
+
+def tracker(**kw) -> PeopleTracker:
+    return PeopleTracker(TrackerStage, TrackingConfig(**kw))
+
+
+def ids_by_x(out: list[JointSet]) -> dict[int, float]:
+    return {t.track_id: round(float(torso(t)[0][0]), 2) for t in out}
+
+
+def test_assign_is_one_to_one_and_gated():
+    cost = np.array([[1.0, 9.0], [2.0, 30.0], [np.nan, 3.0]])
+    assert sorted(assign(cost, 10.0)) == [(0, 0), (2, 1)]  # the least total cost
+    assert assign(cost, 2.5) == [(0, 0)]  # (2, 1) costs more than the gate
+    assert assign(np.array([[np.nan]]), 10.0) == []
+    assert assign(np.array([[1e6]]), 10.0) == [(0, 0)]  # one and one: the SLQE judges
+    assert assign(np.zeros((0, 3)), 1.0) == []
+
+
+def test_two_people_crossing_keep_their_ids():
+    """Two people walk past each other at different depths (1 m apart in depth): the ids
+    follow the people, not their order in the image."""
+    tr = tracker()
+    seen = []
+    for k in range(60):
+        a = person(-0.8 + 0.03 * k, z=2.2)
+        b = person(0.8 - 0.03 * k, z=3.2)
+        out = tr.step([b, a] if k % 2 else [a, b], k * DT, INTR)
+        seen.append({t.track_id: torso(t)[0][2] for t in out})
+    assert set(seen[-1]) == {1, 2}
+    # the id of the near person (z 2.2) is the same all along
+    near = [min(s, key=s.get) for s in seen[1:]]
+    assert len(set(near)) == 1, near
+
+
+def test_a_person_hidden_20_frames_comes_back_with_their_id_and_a_third_is_confirmed():
+    tr = tracker(confirm_frames=3)
+    for k in range(10):
+        out = tr.step([person(-0.6), person(0.6)], k * DT, INTR)
+    assert sorted(ids_by_x(out)) == [1, 2]
+    right = next(i for i, x in ids_by_x(out).items() if x > 0)
+    for k in range(10, 30):  # the right person hidden 20 frames (0.67 s)
+        out = tr.step([person(-0.6)], k * DT, INTR)
+        assert right in {t.track_id for t in out}  # still tracked (predicted)
+    assert tr.ended == []
+    out = tr.step([person(-0.6), person(0.62)], 30 * DT, INTR)
+    assert ids_by_x(out) == {1 if right == 2 else 2: -0.6, right: pytest.approx(0.62, abs=0.03)}
+    # a third person: tentative for 2 frames, confirmed (id 3) at the third
+    for k in range(31, 34):
+        out = tr.step([person(-0.6), person(0.6), person(1.6, z=3.5)], k * DT, INTR)
+        assert (3 in {t.track_id for t in out}) == (k == 33)
+    # the first person leaves for good: their track ends after 1 s, and the id is not reused
+    for k in range(34, 70):
+        out = tr.step([person(0.6), person(1.6, z=3.5)], k * DT, INTR)
+    assert {t.track_id for t in out} == {right, 3}
+    for k in range(70, 75):
+        out = tr.step([person(0.6), person(1.6, z=3.5), person(-0.6)], k * DT, INTR)
+    assert max(t.track_id for t in out) == 4
+
+
+def test_primary_person_is_the_longest_tracked_one_in_view():
+    tr = tracker()
+    for k in range(5):
+        out = tr.step([person(0.5)], k * DT, INTR)
+    for k in range(5, 12):
+        out = tr.step([person(-0.5, z=2.0), person(0.5)], k * DT, INTR)
+    assert [t.track_id for t in out] == [1, 2]  # the first one, although the other is nearer
+    assert ids_by_x(out)[1] == pytest.approx(0.5, abs=0.02)
+    out = tr.step([person(-0.5, z=2.0)], 12 * DT, INTR)  # the first one unseen this frame
+    assert out[0].track_id == 2
+
+
+def test_nobody_and_bad_configs():
+    tr = tracker()
+    assert tr.step([], 0.0, INTR) == []
+    assert tr.step([JointSet.missing(PARTS_10.names)], DT, INTR) == []
+    with pytest.raises(ValueError, match='max_people'):
+        TrackingConfig(max_people=0)
+    with pytest.raises(ValueError, match='max_unseen_s'):
+        TrackingConfig(max_unseen_s=0)
+
+
+# --------------------------------------------------------------- rendered frames
+def _two_people(offset: float = 0.55, z: tuple[float, float] = (2.6, 3.3)):
+    """Two rendered people side by side (the nearer one in front where they overlap), with
+    their ground-truth joints' pixels."""
+    from pose4d_ros.synth import render
+
+    rng = np.random.default_rng(3)
+    frames, truths = [], []
+    for k, (dx, dz) in enumerate(((-offset, z[0]), (offset, z[1]))):
+        pose = standing_pose(z=dz, cam_height=1.0, arm=0.4)
+        pose[:, 0] += dx
+        body = render.random_body(np.random.default_rng(k))
+        out = render.render(pose, body, None, INTR, rng=rng, kinect_noise=False)
+        frames.append(out)
+        truths.append(project(out.joints, INTR))
+    d0, d1 = (f.depth_mm.astype(np.int64) for f in frames)
+    first = (d0 > 0) & ((d1 == 0) | (d0 <= d1))
+    depth = np.where(first, d0, d1).astype(np.uint16)
+    rgb = np.where(first[..., None], frames[0].rgb, frames[1].rgb)
+    return rgb, depth, truths
+
+
+def test_segment_people_finds_both_people():
+    _, depth, truths = _two_people()
+    people, found = segment_people(depth, INTR)
+    assert found == 2 and len(people) == 2
+    centres = sorted((p.box[0] + p.box[2]) / 2 for p in people)
+    truth_x = sorted(float(np.nanmean(t[:, 0])) for t in truths)
+    assert np.allclose(centres, truth_x, atol=25), (centres, truth_x)
+    assert not (people[0].mask & people[1].mask).any()
+    one, found = segment_people(depth, INTR, max_people=1)
+    assert len(one) == 1 and found == 2
+
+
+def test_pipeline_tracks_two_rendered_people():
+    from pose4d_ros.core.dpm.model import load_model
+    from pose4d_ros.core.pipeline import DetectorStage, FramePipeline
+    from pose4d_ros.models import model_path
+
+    rgb, depth, truths = _two_people()
+    pipeline = FramePipeline(DetectorStage(load_model(model_path('rgbd_14'))),
+                             people=TrackingConfig())
+    for k in range(6):
+        out = pipeline.step(rgb, depth.astype(np.float32) / 1000, INTR, k * DT)
+    assert [s.track_id for s in out.people] == [1, 2] and out.candidates == 2
+    # each skeleton's head on its own person's head
+    heads = sorted(float(s.uv[s.get('head'), 0]) for s in out.people)
+    truth_heads = sorted(float(t[3, 0]) for t in truths)  # UTKinect joint 3: head
+    assert np.allclose(heads, truth_heads, atol=12), (heads, truth_heads)
+    assert out.skeleton.track_id == 1
+
+
+def test_one_person_the_several_person_path_gives_the_single_persons_skeleton():
+    from pose4d_ros.core.dpm.model import load_model
+    from pose4d_ros.core.pipeline import DetectorStage, FramePipeline
+    from pose4d_ros.core.warm_up import warm_up_frame
+    from pose4d_ros.models import model_path
+
+    model = load_model(model_path('rgbd_14'))
+    single = FramePipeline(DetectorStage(model))
+    several = FramePipeline(DetectorStage(model), people=TrackingConfig())
+    color, depth, _ = warm_up_frame(INTR)
+    for k in range(4):
+        a = single.step(color, depth, INTR, k * DT).skeleton
+        b = several.step(color, depth, INTR, k * DT)
+        assert len(b.people) == 1
+        np.testing.assert_array_equal(a.uv, b.skeleton.uv)
+        np.testing.assert_array_equal(a.source, b.skeleton.source)
