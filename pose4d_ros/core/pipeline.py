@@ -531,6 +531,7 @@ class FrameResult:
     cpu_s: dict[str, float]
     wall_s: dict[str, float]
     people: tuple[JointSet, ...] = ()
+    foregrounds: tuple[ForegroundResult, ...] = ()
     candidates: int = 0
     born: tuple[int, ...] = ()
     ended: tuple[int, ...] = ()
@@ -618,8 +619,8 @@ class FramePipeline:
             parts[0] if parts else JointSet.missing(self.detector.names),
             tracked[0] if tracked else JointSet.missing(self.tracker.tree.names),
             skeletons[0] if skeletons else JointSet.missing(SKELETON_14), cpu_s, wall_s,
-            people=tuple(skeletons), candidates=n, born=tuple(multi.tracker.born),
-            ended=tuple(multi.tracker.ended))
+            people=tuple(skeletons), foregrounds=tuple(found), candidates=n,
+            born=tuple(multi.tracker.born), ended=tuple(multi.tracker.ended))
 
     def warm_up(self, intrinsics: Intrinsics) -> None:
         """Compile the kernels on a synthetic frame, twice (the second frame guided by the
@@ -654,8 +655,10 @@ class PeopleStages:
         self.tracker.reset()
         self.ik.reset()
 
-    def configure(self) -> None:
-        """Give every person's stages the templates' current settings."""
+    def configure(self, config: TrackingConfig | None = None) -> None:
+        """Give every person's stages the templates' current settings (and `config`)."""
+        if config is not None:
+            self.config = self.detector.config = self.tracker.config = config
         detector, tracker, ik = self.templates
         for slot in self.detector.slots:
             slot.stage.configure(search=detector.detector.config,

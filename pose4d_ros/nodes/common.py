@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import os
 import threading
+import time
 from collections import deque
 from collections.abc import Callable
 
@@ -145,6 +146,7 @@ class StageMonitor:
         self.frames = 0
         self.dropped_frames = 0
         self.bad_inputs = 0
+        self.values: dict[str, object] = {}  # the stage's own figures (people in view, ...)
         self._jumps = StampJumps(TIME_JUMP_S)
         self._proc: deque[float] = deque(maxlen=window)
         self._latency: deque[float] = deque(maxlen=window)
@@ -213,7 +215,7 @@ class StageMonitor:
             rate = (len(times) - 1) / (times[-1] - times[0])
         values = {'frames': self.frames, 'dropped': self.dropped_frames,
                   'bad_inputs': self.bad_inputs, 'time_jumps': self._jumps.count,
-                  'rate_hz': round(rate, 2)}
+                  'rate_hz': round(rate, 2), **self.values}
         for key, data in (('processing_ms', proc), ('latency_ms', latency),
                           ('time_step_ms', steps)):
             if data:
@@ -344,7 +346,12 @@ class PairedInputs:
         self._monitor = monitor
         self._queue = FrameQueue(node, process, monitor)
         for k, (kind, topic, profile) in enumerate(topics):
-            subscribe(node, kind, topic, lambda m, k=k: self._on(k, m), profile, monitor)
+            if kind is not None:  # None: the caller pushes that stream (`push`)
+                subscribe(node, kind, topic, lambda m, k=k: self._on(k, m), profile, monitor)
+
+    def push(self, stream: int, msg: object) -> None:
+        """A message of a stream the caller subscribed itself (anything with a `header`)."""
+        self._on(stream, msg)
 
     def _on(self, stream: int, msg: object) -> None:
         before = self._sync.dropped[0]
@@ -367,3 +374,65 @@ class LatestIntrinsics:
             self.intrinsics = intrinsics_from_msg(msg)
         except ValueError as exc:
             self._monitor.bad_input(f'camera_info refused: {exc}')
+
+
+class PeopleInputs:
+    """The several-person input of a stage, with the single-person one beside it.
+
+    Subscribes `people_topic` (pose4d_msgs/SkeletonArray: every person of a frame) and
+    `single_topic` (JointArray: one person); with `extra` topics, each frame is paired by stamp
+    with their messages (as `PairedInputs`). `process(people, header, extra_msgs)` gets a list
+    of JointSets. A single-person message is taken as a list of one, unless a several-person
+    message came in the last `PEOPLE_FRESH_S` seconds: then the upstream stage publishes both,
+    and the single-person one (its primary person) is left out.
+    """
+
+    PEOPLE_FRESH_S = 1.0
+
+    def __init__(self, node: Node, people_topic: str, single_topic: str,
+                 extra: list[tuple[type, str, object]],
+                 process: Callable[[list, object, tuple], None], monitor: StageMonitor, *,
+                 slop_ns: int = 0) -> None:
+        from pose4d_msgs.msg import JointArray, SkeletonArray
+
+        from pose4d_ros.nodes.convert import joints_from_msg, skeletons_from_msg
+
+        self._process = process
+        self._last_people = -float('inf')
+        self._monitor = monitor
+        self._paired = (PairedInputs(node, [(None, people_topic, None), *extra],
+                                     self._frame, monitor, slop_ns=slop_ns) if extra else None)
+
+        def on_people(msg: SkeletonArray) -> None:
+            self._last_people = time.monotonic()
+            self._pivot(_Pivot(msg.header, lambda: skeletons_from_msg(msg)))
+
+        def on_single(msg: JointArray) -> None:
+            if time.monotonic() - self._last_people > self.PEOPLE_FRESH_S:
+                self._pivot(_Pivot(msg.header, lambda: [joints_from_msg(msg)]))
+
+        subscribe(node, SkeletonArray, people_topic, on_people, qos.INPUT_QOS, monitor)
+        subscribe(node, JointArray, single_topic, on_single, qos.INPUT_QOS, monitor)
+
+    def _pivot(self, pivot: _Pivot) -> None:
+        if self._paired is not None:
+            self._paired.push(0, pivot)
+        else:
+            self._frame((pivot,))
+
+    def _frame(self, items: tuple) -> None:
+        header = items[0].header
+        try:
+            people = items[0].people()
+        except ValueError as exc:
+            self._monitor.bad_input(f'frame at {stamp_to_ns(header.stamp)} ns refused: {exc}')
+            return
+        self._process(people, header, items[1:])
+
+
+class _Pivot:
+    """A frame's people, decoded when the frame is processed."""
+
+    def __init__(self, header: object, people: Callable[[], list]) -> None:
+        self.header = header
+        self.people = people

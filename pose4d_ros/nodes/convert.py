@@ -21,7 +21,7 @@ import numpy as np
 from builtin_interfaces.msg import Duration, Time
 from geometry_msgs.msg import Point, Quaternion, Transform, TransformStamped, Vector3
 from numpy.typing import NDArray
-from pose4d_msgs.msg import Joint, JointArray
+from pose4d_msgs.msg import Joint, JointArray, SkeletonArray
 from sensor_msgs.msg import CameraInfo, Image, PointCloud2, PointField
 from std_msgs.msg import ColorRGBA, Header
 from tf2_msgs.msg import TFMessage
@@ -188,11 +188,13 @@ _SOURCE_RGBA = {DETECTED: (0.1, 0.85, 0.2, 1.0), TRACKED: (0.2, 0.5, 1.0, 1.0),
 
 def skeleton_markers(joints: JointSet, bones: list[tuple[int, int]], header: Header,
                      *, namespace: str = 'pose4d', radius_m: float = 0.04,
-                     lifetime_s: float = 0.5) -> MarkerArray:
+                     lifetime_s: float = 0.5,
+                     tint: tuple[float, float, float] | None = None) -> MarkerArray:
     """Spheres for the joints and lines for the bones, coloured by source, for RViz.
 
     Joints without a 3-D position are left out; a bone is drawn when both ends have one, in
-    the colour of its less certain end (inferred over tracked over detected).
+    the colour of its less certain end (inferred over tracked over detected), or in `tint`
+    (the person's colour, `people_markers`).
     """
     lifetime = Duration(sec=int(lifetime_s), nanosec=int((lifetime_s % 1) * 1e9))
     spheres = Marker(header=header, ns=f'{namespace}/joints', id=0,
@@ -221,5 +223,35 @@ def skeleton_markers(joints: JointSet, bones: list[tuple[int, int]], header: Hea
         if valid[a] and valid[b]:
             worst = max(joints.source[a], joints.source[b], key=lambda s: rank[int(s)])
             lines.points.extend([point(a), point(b)])
-            lines.colors.extend([color(worst), color(worst)])
+            c = color(worst) if tint is None else ColorRGBA(r=tint[0], g=tint[1], b=tint[2],
+                                                            a=1.0)
+            lines.colors.extend([c, c])
     return MarkerArray(markers=[spheres, lines])
+
+
+# One colour per track id (cycled): the bones of each person in RViz
+PERSON_RGB = ((0.95, 0.6, 0.1), (0.2, 0.8, 0.9), (0.9, 0.3, 0.8), (0.95, 0.95, 0.2),
+              (0.5, 0.35, 0.95), (0.3, 0.95, 0.5))
+
+
+def people_markers(people: list[JointSet], bones: list[tuple[int, int]], header: Header, *,
+                   lifetime_s: float = 0.5) -> MarkerArray:
+    """`skeleton_markers` of every person, each in its namespace `pose4d/<track_id>` with its
+    bones in its id's colour (`PERSON_RGB`)."""
+    out = MarkerArray()
+    for joints in people:
+        tid = int(joints.track_id)
+        out.markers.extend(skeleton_markers(
+            joints, bones, header, namespace=f'pose4d/{tid}', lifetime_s=lifetime_s,
+            tint=PERSON_RGB[tid % len(PERSON_RGB)]).markers)
+    return out
+
+
+def skeletons_to_msg(people: list[JointSet], header: Header) -> SkeletonArray:
+    """Every person of a frame as a SkeletonArray (each JointArray with the same header)."""
+    return SkeletonArray(header=header, skeletons=[joints_to_msg(j, header) for j in people])
+
+
+def skeletons_from_msg(msg: SkeletonArray) -> list[JointSet]:
+    """The people of a SkeletonArray (ValueError as `joints_from_msg` for a bad one)."""
+    return [joints_from_msg(m) for m in msg.skeletons]

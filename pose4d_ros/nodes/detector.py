@@ -9,13 +9,21 @@ frame and drops the others (counted) instead of falling behind.
 Subscriptions
     pose4d/foreground/color (sensor_msgs/Image, rgb8/bgr8)
     pose4d/foreground/depth (sensor_msgs/Image, 16UC1 mm or 32FC1 m)
-    pose4d/foreground/mask (sensor_msgs/Image, mono8, 255 = person)
+    pose4d/foreground/mask (sensor_msgs/Image, mono8 labels, one value > 127 per person)
     camera/color/camera_info (sensor_msgs/CameraInfo; the latest)
-Publications
-    pose4d/parts (pose4d_msgs/JointArray: parts DETECTED or MISSING, input header), /diagnostics
+One search per person of the mask (its labels, `core.people.people_from_labels`), each
+person with their own detector state (`core.people.PeopleDetector`), at most
+`detector.max_people` a frame.
+
+Publications (input header)
+    pose4d/parts/people (pose4d_msgs/SkeletonArray: every person's parts, DETECTED or MISSING,
+    track_id 0; in the mask's order, the best region first)
+    pose4d/parts (pose4d_msgs/JointArray: the first person's, all MISSING when nobody)
+    /diagnostics (also: people, people_over_limit: people in view beyond max_people, counted)
 Parameters (config/detector.yaml)
     detector.model, detector.n_levels, detector.margin, detector.person_scales,
-    detector.scale_warm_up_frames, detector.scale_probe_every, detector.min_confidence
+    detector.scale_warm_up_frames, detector.scale_probe_every, detector.min_confidence,
+    detector.max_people
     (a part's depth look-up is the model's: `core.pipeline.lift_parts`)
 """
 
@@ -25,7 +33,8 @@ import time
 from pathlib import Path
 from typing import Any
 
-from pose4d_msgs.msg import JointArray
+import numpy as np
+from pose4d_msgs.msg import JointArray, SkeletonArray
 from rclpy.node import Node
 from sensor_msgs.msg import Image
 
@@ -33,6 +42,8 @@ from pose4d_ros.core.camera import cad60_intrinsics
 from pose4d_ros.core.dpm.infer import SearchConfig
 from pose4d_ros.core.dpm.model import load_model
 from pose4d_ros.core.dpm.scale import ScaleConfig
+from pose4d_ros.core.joints import JointSet
+from pose4d_ros.core.people import PeopleDetector, TrackingConfig, people_from_labels
 from pose4d_ros.core.pipeline import DetectorStage
 from pose4d_ros.models import model_path
 from pose4d_ros.nodes import qos
@@ -42,6 +53,7 @@ from pose4d_ros.nodes.convert import (
     depth_from_msg,
     image_to_array,
     joints_to_cdr,
+    skeletons_to_msg,
     stamp_to_ns,
 )
 from pose4d_ros.nodes.params import NodeParams, Param, ParameterError
@@ -85,6 +97,9 @@ PARAMS = (
           range=(0, 100000), live=True),
     Param('detector.min_confidence', 0.0, 'Parts less confident than this are MISSING.',
           range=(0.0, 1.0), live=True),
+    Param('detector.max_people', TrackingConfig.max_people, 'People searched per frame at '
+          'most (the best regions of the mask first); more in view are counted on /diagnostics '
+          '(people_over_limit).', range=(1, 16), live=True),
     Param('detector.arm_prior', _S.arm_prior, "Weight of the previous frame's elbows and "
           'wrists (at most 0.25 s old) when each arm is chosen among the few best the part model '
           'allows, per squared person scale of distance; 0 = the part model alone.',
@@ -113,49 +128,75 @@ def detector_stage(p: dict[str, Any]) -> DetectorStage:
     return DetectorStage(model, **detector_settings(p))
 
 
+def people_config(p: dict[str, Any]) -> TrackingConfig:
+    return TrackingConfig(max_people=p['detector.max_people'])
+
+
 class DetectorNode(Node):
-    """Detects the person's parts; see the module docstring."""
+    """Detects every person's parts; see the module docstring."""
 
     def __init__(self) -> None:
         super().__init__('detector')
         self.params = NodeParams(self, PARAMS, check=detector_settings)
         p = self.params.values
-        self.stage = detector_stage(p)
-        self.stage.warm_up(cad60_intrinsics())  # compile before the first camera frame
+        self.template = detector_stage(p)
+        self.template.warm_up(cad60_intrinsics())  # compile before the first camera frame
+        self.people = PeopleDetector(self._new_stage, people_config(p))
         self.monitor = StageMonitor(self, 'detector')
+        self.monitor.values.update(people=0, people_over_limit=0)
         self.camera = LatestIntrinsics(self, self.monitor)
+        self.pub_people = self.create_publisher(SkeletonArray, 'pose4d/parts/people',
+                                                qos.OUTPUT_QOS)
         self.pub = self.create_publisher(JointArray, 'pose4d/parts', qos.OUTPUT_QOS)
         self.inputs = PairedInputs(
             self, [(Image, f'pose4d/foreground/{name}', qos.SENSOR_QOS)
                    for name in ('color', 'depth', 'mask')], self.process, self.monitor)
         self.get_logger().info(
-            f'detecting {len(self.stage.names)} parts with {Path(str(p["detector.model"])).name}'
-            f' ({self.stage.model.channels}) in {self.resolve_topic_name("pose4d/foreground")}'
-            f' -> {self.resolve_topic_name("pose4d/parts")}')
+            f'detecting {len(self.template.names)} parts with '
+            f'{Path(str(p["detector.model"])).name} ({self.template.model.channels}) in '
+            f'{self.resolve_topic_name("pose4d/foreground")} -> '
+            f'{self.resolve_topic_name("pose4d/parts")}(/people), up to '
+            f'{p["detector.max_people"]} people')
+
+    def _new_stage(self) -> DetectorStage:
+        t = self.template
+        return DetectorStage(t.model, search=t.detector.config, scale=t.person_scale.config,
+                             min_confidence=t.min_confidence)
 
     def process(self, items: Any) -> None:
         if (p := self.params.changes()) is not None:
-            self.stage.configure(**detector_settings(p))
+            self.template.configure(**detector_settings(p))
+            for slot in self.people.slots:
+                slot.stage.configure(**detector_settings(p))
+            self.people.config = people_config(p)
         color_msg, depth_msg, mask_msg = items
         t0 = time.perf_counter()
         stamp = stamp_to_ns(color_msg.header.stamp)
         if self.monitor.time_jumped(stamp):
-            self.stage.reset()
+            self.people.reset()
         try:
             color = color_from_msg(color_msg)
             depth = depth_from_msg(depth_msg)
-            mask = image_to_array(mask_msg) > 127
-            if not color.shape[:2] == depth.shape == mask.shape:
+            labels = image_to_array(mask_msg)
+            if labels.ndim != 2 or not color.shape[:2] == depth.shape == labels.shape:
                 raise ValueError(f'colour {color.shape[:2]}, depth {depth.shape} and mask '
-                                 f'{mask.shape} differ in size')
-            parts = self.stage.step(color, depth, self.camera.intrinsics, mask=mask,
-                                    stamp_s=stamp * 1e-9)
+                                 f'{labels.shape} differ in size')
+            # the foreground's labels (`people_labels`); a plain mask (255 = person) is one
+            people = people_from_labels(np.where(labels > 127, labels, 0).astype(np.uint8),
+                                        depth)
+            parts = self.people.step(color, depth, self.camera.intrinsics, people,
+                                     stamp_s=stamp * 1e-9)
         except ValueError as exc:
             self.monitor.bad_input(f'frame at {stamp} ns refused: {exc}')
             return
-        if self.stage.last_flags:
-            self.get_logger().debug(f'frame at {stamp} ns: {", ".join(self.stage.last_flags)}')
-        self.pub.publish(joints_to_cdr(parts, color_msg.header))
+        values = self.monitor.values
+        values['people'] = len(parts)
+        values['people_over_limit'] += max(len(people) - len(parts), 0)
+        header = color_msg.header
+        # everyone first: a tracker that hears both then leaves the single person out
+        self.pub_people.publish(skeletons_to_msg(parts, header))
+        self.pub.publish(joints_to_cdr(parts[0] if parts else
+                                       JointSet.missing(self.template.names), header))
         self.monitor.frame(stamp, time.perf_counter() - t0)
 
 

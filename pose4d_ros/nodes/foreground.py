@@ -8,13 +8,18 @@ Subscriptions
     camera/color/image_raw (sensor_msgs/Image, rgb8/bgr8/mono8)
     camera/depth/image_raw (sensor_msgs/Image, 16UC1 mm or 32FC1 m, registered to colour)
     camera/color/camera_info (sensor_msgs/CameraInfo)
+Every person region is a candidate (`core.foreground.segment_people`, at most `MAX_PEOPLE`,
+best first); the mask tells them apart.
+
 Publications (all with the colour image's header)
-    pose4d/foreground/mask (mono8, 255 = person)
-    pose4d/foreground/color (rgb8, 0 outside the person)
-    pose4d/foreground/depth (the input's encoding; 0 / NaN outside the person)
-    pose4d/foreground/points (sensor_msgs/PointCloud2 of the person, if foreground.publish_cloud
-    and while it has a subscriber)
-    /diagnostics
+    pose4d/foreground/mask (mono8 labels: 0 = background, 255 = the best person, 254 the next
+    one, ... (`core.people.people_labels`): `mask > 0` is everyone, and one person's mask is
+    255 = person as before)
+    pose4d/foreground/color (rgb8, 0 outside the people)
+    pose4d/foreground/depth (the input's encoding; 0 / NaN outside the people)
+    pose4d/foreground/points (sensor_msgs/PointCloud2 of the people, if
+    foreground.publish_cloud and while it has a subscriber)
+    /diagnostics (also: people, the person regions found in the last frame)
 Parameters (config/foreground.yaml)
     foreground.max_region_area_px, foreground.mser_delta, foreground.mser_max_variation,
     foreground.depth_near_m, foreground.depth_far_m, foreground.floor_remove,
@@ -34,6 +39,7 @@ from std_msgs.msg import Header
 
 from pose4d_ros.core.camera import backproject, cad60_intrinsics, depth_to_millimetres
 from pose4d_ros.core.foreground import ForegroundConfig
+from pose4d_ros.core.people import people_labels
 from pose4d_ros.core.pipeline import ForegroundStage
 from pose4d_ros.nodes import qos
 from pose4d_ros.nodes.common import PairedInputs, StageMonitor, run
@@ -48,6 +54,8 @@ from pose4d_ros.nodes.convert import (
 from pose4d_ros.nodes.params import NodeParams, Param
 
 _F = ForegroundConfig()
+# Person regions published at most per frame (the detector's max_people bounds its work)
+MAX_PEOPLE = 16
 PARAMS = (
     Param('foreground.max_region_area_px', _F.max_region_area_px, 'The background area '
           'threshold: stable regions larger than this are background, pixels.',
@@ -98,12 +106,13 @@ def foreground_stage(p: dict[str, Any]) -> ForegroundStage:
     return ForegroundStage(**foreground_settings(p))
 
 
-def foreground_messages(mask: np.ndarray, color_m: np.ndarray, depth_m: np.ndarray,
+def foreground_messages(labels: np.ndarray, color_m: np.ndarray, depth_m: np.ndarray,
                         encoding: str, header: Header) -> tuple[Image, Image, Image]:
-    """Mask (mono8), masked colour (rgb8) and masked depth (in the input's `encoding`)."""
+    """Mask (mono8 labels, `core.people.people_labels`), masked colour (rgb8) and masked depth
+    (in the input's `encoding`)."""
     depth = (array_to_image(depth_m, '32FC1', header) if encoding == '32FC1'
              else array_to_image(depth_to_millimetres(depth_m), '16UC1', header))
-    return (array_to_image(mask.astype(np.uint8) * 255, 'mono8', header),
+    return (array_to_image(labels, 'mono8', header),
             array_to_image(color_m, 'rgb8', header), depth)
 
 
@@ -147,20 +156,20 @@ class ForegroundNode(Node):
         try:
             color = color_from_msg(color_msg)
             intrinsics = intrinsics_from_msg(info_msg)
-            result, color_m, depth_m = self.stage.step(color, depth_from_msg(depth_msg),
-                                                       intrinsics)
+            people, found, color_m, depth_m = self.stage.step_people(
+                color, depth_from_msg(depth_msg), intrinsics, MAX_PEOPLE)
         except ValueError as exc:
             self.monitor.bad_input(f'frame at {stamp} ns refused: {exc}')
             return
-        if not result.found:
-            self.get_logger().debug(f'frame at {stamp} ns: no person ({result.reason})')
+        self.monitor.values['people'] = found
         header = color_msg.header
+        labels = people_labels(people, depth_m.shape)
         for pub, msg in zip((self.pub_mask, self.pub_color, self.pub_depth),
-                            foreground_messages(result.mask, color_m, depth_m,
+                            foreground_messages(labels, color_m, depth_m,
                                                 depth_msg.encoding, header), strict=True):
             pub.publish(msg)
         if self.pub_cloud is not None and self.pub_cloud.get_subscription_count():
-            rows, cols = np.nonzero(result.mask[::self.cloud_step, ::self.cloud_step])
+            rows, cols = np.nonzero(labels[::self.cloud_step, ::self.cloud_step])
             rows, cols = rows * self.cloud_step, cols * self.cloud_step
             xyz = backproject(np.stack([cols, rows], axis=1), depth_m[rows, cols], intrinsics)
             ok = np.isfinite(xyz).all(axis=1)

@@ -5,13 +5,20 @@ parameters, or learned per track); the swivel angle on the circle of possible el
 the depth image of the person, with a joint-limit prior where depth cannot tell. Tracked parts
 and depth are paired by stamp (exact, or nearest within `ik.depth_slop_s`).
 
+Several people: one IK per track id, each with its own learned bone lengths.
+
 Subscriptions
-    pose4d/parts/tracked (pose4d_msgs/JointArray, 10 parts)
+    pose4d/parts/tracked/people (pose4d_msgs/SkeletonArray, every tracked person), or from a
+    tracker that publishes only one person, pose4d/parts/tracked (pose4d_msgs/JointArray)
     pose4d/foreground/depth (sensor_msgs/Image, 16UC1 or 32FC1; only when ik.use_depth)
     camera/color/camera_info (sensor_msgs/CameraInfo; the latest)
 Publications
-    pose4d/skeleton (pose4d_msgs/JointArray, 14 joints, input header)
-    pose4d/skeleton/markers (visualization_msgs/MarkerArray, joints and bones by source)
+    pose4d/skeletons (pose4d_msgs/SkeletonArray: every person's 14 joints, the primary first;
+    empty when nobody is in view)
+    pose4d/skeleton (pose4d_msgs/JointArray, 14 joints, input header: the primary person's,
+    the longest-tracked one in view; all MISSING with track_id 0 when nobody is)
+    pose4d/skeleton/markers (visualization_msgs/MarkerArray, joints by source; with several
+    people each in the namespace pose4d/<track_id>, bones in the id's colour)
     /tf (tf2_msgs/TFMessage: each located joint as the frame <tf.prefix>/<track_id>/<joint>
     in the image's frame, stamped like the skeleton; when tf.publish)
     /diagnostics
@@ -27,7 +34,7 @@ from __future__ import annotations
 import time
 from typing import Any
 
-from pose4d_msgs.msg import JointArray
+from pose4d_msgs.msg import JointArray, SkeletonArray
 from rclpy.node import Node
 from sensor_msgs.msg import Image
 from std_msgs.msg import Header
@@ -35,24 +42,20 @@ from tf2_msgs.msg import TFMessage
 from visualization_msgs.msg import MarkerArray
 
 from pose4d_ros.core.camera import cad60_intrinsics
-from pose4d_ros.core.joints import JointSet
+from pose4d_ros.core.joints import MISSING, JointSet
 from pose4d_ros.core.kinematics import DEFAULT_LIMB_LENGTHS_M
+from pose4d_ros.core.people import PeopleIk
 from pose4d_ros.core.pipeline import IkStage
-from pose4d_ros.core.skeleton import limb_bones
+from pose4d_ros.core.skeleton import SKELETON_14, limb_bones
 from pose4d_ros.nodes import qos
-from pose4d_ros.nodes.common import (
-    LatestIntrinsics,
-    PairedInputs,
-    StageMonitor,
-    run,
-    subscribe,
-)
+from pose4d_ros.nodes.common import LatestIntrinsics, PeopleInputs, StageMonitor, run
 from pose4d_ros.nodes.convert import (
     depth_from_msg,
-    joints_from_msg,
     joints_to_cdr,
     joints_to_tf,
+    people_markers,
     skeleton_markers,
+    skeletons_to_msg,
     stamp_to_ns,
 )
 from pose4d_ros.nodes.params import NodeParams, Param
@@ -103,11 +106,13 @@ def ik_stage(p: dict[str, Any]) -> IkStage:
 
 
 class SkeletonOutputs:
-    """The skeleton's publications, the same in the ik and pipeline nodes: pose4d/skeleton,
-    its RViz markers and its joints on /tf."""
+    """The skeletons' publications, the same in the ik and pipeline nodes: pose4d/skeletons
+    (everyone), pose4d/skeleton (the primary person), their RViz markers and joints on /tf."""
 
     def __init__(self, node: Node, p: dict[str, Any]) -> None:
         self.bones = limb_bones()
+        self.skeletons = node.create_publisher(SkeletonArray, 'pose4d/skeletons',
+                                               qos.OUTPUT_QOS)
         self.skeleton = node.create_publisher(JointArray, 'pose4d/skeleton', qos.OUTPUT_QOS)
         self.markers = node.create_publisher(MarkerArray, 'pose4d/skeleton/markers',
                                              qos.OUTPUT_QOS)
@@ -119,60 +124,77 @@ class SkeletonOutputs:
         self.publish_tf = p['tf.publish']
         self.tf_prefix = p['tf.prefix']
 
-    def publish(self, skeleton: JointSet, header: Header) -> None:
-        self.skeleton.publish(joints_to_cdr(skeleton, header))
+    def publish(self, people: list[JointSet], header: Header) -> None:
+        """Every person's skeleton (the primary first); nobody: an empty SkeletonArray and an
+        all-MISSING skeleton of track 0 on pose4d/skeleton."""
+        self.skeletons.publish(skeletons_to_msg(people, header))
+        primary = people[0] if people else JointSet.missing(SKELETON_14)
+        self.skeleton.publish(joints_to_cdr(primary, header))
         # markers and transforms are built only while someone listens: making and serialising
         # them costs more CPU than the IK itself
         if self.markers.get_subscription_count():
-            self.markers.publish(skeleton_markers(skeleton, self.bones, header,
-                                                  lifetime_s=self.marker_lifetime_s))
+            self.markers.publish(
+                skeleton_markers(primary, self.bones, header,
+                                 lifetime_s=self.marker_lifetime_s) if len(people) <= 1
+                else people_markers(people, self.bones, header,
+                                    lifetime_s=self.marker_lifetime_s))
         if self.publish_tf and self.tf.get_subscription_count():
-            frames = joints_to_tf(skeleton, header, self.tf_prefix)
+            frames = TFMessage(transforms=[t for joints in people for t in joints_to_tf(
+                joints, header, self.tf_prefix).transforms])
             if frames.transforms:
                 self.tf.publish(frames)
 
 
 class IkNode(Node):
-    """Completes the tracked parts to a 14-joint skeleton; see the module docstring."""
+    """Completes every person's tracked parts to a 14-joint skeleton; see the module
+    docstring."""
 
     def __init__(self) -> None:
         super().__init__('ik')
         self.params = NodeParams(self, PARAMS, check=ik_settings)
         p = self.params.values
-        self.stage = ik_stage(p)
-        self.stage.warm_up(cad60_intrinsics())  # compile before the first frame
+        self.template = ik_stage(p)
+        self.template.warm_up(cad60_intrinsics())  # compile before the first frame
+        self.people = PeopleIk(self._new_stage)
         self.monitor = StageMonitor(self, 'ik')
+        self.monitor.values['people'] = 0
         self.camera = LatestIntrinsics(self, self.monitor)
         self.outputs = SkeletonOutputs(self, p)
-        if self.stage.use_depth:
-            self.inputs = PairedInputs(
-                self, [(JointArray, 'pose4d/parts/tracked', qos.INPUT_QOS),
-                       (Image, 'pose4d/foreground/depth', qos.SENSOR_QOS)],
-                lambda items: self.process(*items), self.monitor,
-                slop_ns=int(p['ik.depth_slop_s'] * 1e9))
-        else:
-            subscribe(self, JointArray, 'pose4d/parts/tracked',
-                      lambda m: self.process(m, None), qos.INPUT_QOS, self.monitor)
+        depth = ([(Image, 'pose4d/foreground/depth', qos.SENSOR_QOS)]
+                 if self.template.use_depth else [])
+        self.inputs = PeopleInputs(self, 'pose4d/parts/tracked/people', 'pose4d/parts/tracked',
+                                   depth, self.process, self.monitor,
+                                   slop_ns=int(p['ik.depth_slop_s'] * 1e9))
         self.get_logger().info(
-            f'completing {self.resolve_topic_name("pose4d/parts/tracked")} -> '
-            f'{self.resolve_topic_name("pose4d/skeleton")} (depth: {self.stage.use_depth}, '
+            f'completing {self.resolve_topic_name("pose4d/parts/tracked")}(/people) -> '
+            f'{self.resolve_topic_name("pose4d/skeleton")}, '
+            f'{self.resolve_topic_name("pose4d/skeletons")} (depth: {self.template.use_depth}, '
             f'learn lengths: {p["ik.learn_lengths"]}, joints on /tf: {p["tf.publish"]})')
 
-    def process(self, msg: JointArray, depth_msg: Image | None) -> None:
+    def _new_stage(self) -> IkStage:
+        t = self.template
+        return IkStage(t.config, lengths=t.defaults, learn=t.learn, use_depth=t.use_depth)
+
+    def process(self, tracked: list[JointSet], header: Header, extra: tuple) -> None:
         if (p := self.params.changes()) is not None:
-            self.stage.configure(**ik_settings(p))
+            self.template.configure(**ik_settings(p))
+            for stage in self.people.stages.values():
+                stage.configure(**ik_settings(p))
             self.outputs.configure(p)
         t0 = time.perf_counter()
-        stamp = stamp_to_ns(msg.header.stamp)
+        stamp = stamp_to_ns(header.stamp)
         if self.monitor.time_jumped(stamp):
-            self.stage.reset()
+            self.people.reset()
+        # a single-person tracker's message of nobody (track 0, nothing located) is nobody
+        tracked = [t for t in tracked if t.track_id or (t.source != MISSING).any()]
         try:
-            depth = depth_from_msg(depth_msg) if depth_msg is not None else None
-            skeleton = self.stage.step(joints_from_msg(msg), depth, self.camera.intrinsics)
+            depth = depth_from_msg(extra[0]) if extra else None
+            skeletons = self.people.step(tracked, depth, self.camera.intrinsics)
         except ValueError as exc:
             self.monitor.bad_input(f'frame at {stamp} ns refused: {exc}')
             return
-        self.outputs.publish(skeleton, msg.header)
+        self.monitor.values['people'] = len(skeletons)
+        self.outputs.publish(skeletons, header)
         self.monitor.frame(stamp, time.perf_counter() - t0)
 
 

@@ -9,9 +9,13 @@ newest frame and drops the others (counted).
 Subscriptions
     camera/color/image_raw, camera/depth/image_raw (sensor_msgs/Image),
     camera/color/camera_info (sensor_msgs/CameraInfo)
+Several people as the per-stage graph tracks them (`FramePipeline(people=...)`): every person
+region searched (at most detector.max_people), one SLQE and one IK per track.
+
 Publications (all with the colour image's header)
-    pose4d/skeleton (pose4d_msgs/JointArray, 14 joints), pose4d/skeleton/markers, /tf (the
-    joints, as the ik node publishes them),
+    pose4d/skeletons (pose4d_msgs/SkeletonArray, everyone), pose4d/skeleton (pose4d_msgs/
+    JointArray, 14 joints, the primary person), pose4d/skeleton/markers, /tf (the joints, as
+    the ik node publishes them),
     pose4d/parts, pose4d/parts/tracked (JointArray, the model's parts; while subscribed),
     pose4d/foreground/{mask,color,depth} (if pipeline.publish_foreground), /diagnostics
 Parameters (config/pipeline.yaml)
@@ -28,6 +32,7 @@ from rclpy.node import Node
 from sensor_msgs.msg import Image
 
 from pose4d_ros.core.camera import cad60_intrinsics
+from pose4d_ros.core.people import people_labels
 from pose4d_ros.core.pipeline import FramePipeline
 from pose4d_ros.nodes import detector, foreground, ik, qos, tracker
 from pose4d_ros.nodes.common import PairedInputs, StageMonitor, run
@@ -63,10 +68,13 @@ class PipelineNode(Node):
         p = self.params.values
         self.pipeline = FramePipeline(
             detector.detector_stage(p), foreground=foreground.foreground_stage(p),
-            tracker=tracker.tracker_stage(p), ik=ik.ik_stage(p))
+            tracker=tracker.tracker_stage(p), ik=ik.ik_stage(p),
+            people=tracker.people_config(p))
         self.pipeline.warm_up(cad60_intrinsics())  # compile before the first camera frame
         self.publish_foreground = p['pipeline.publish_foreground']
         self.monitor = StageMonitor(self, 'pipeline')
+        self.monitor.values.update(people=0, people_over_limit=0, tracks_born=0,
+                                   tracks_ended=0)
         self.outputs = ik.SkeletonOutputs(self, p)
         pub = self.create_publisher
         self.pubs = {
@@ -89,6 +97,7 @@ class PipelineNode(Node):
         self.pipeline.detector.configure(**detector.detector_settings(p))
         self.pipeline.tracker.configure(**tracker.tracker_settings(p))
         self.pipeline.ik.configure(**ik.ik_settings(p))
+        self.pipeline.multi.configure(tracker.people_config(p))
         self.outputs.configure(p)
 
     def process(self, items: Any) -> None:
@@ -106,12 +115,18 @@ class PipelineNode(Node):
             self.monitor.bad_input(f'frame at {stamp} ns refused: {exc}')
             return
         header = color_msg.header
-        self.outputs.publish(out.skeleton, header)
+        values = self.monitor.values
+        values['people'] = len(out.people)
+        values['people_over_limit'] += max(out.candidates - len(out.foregrounds), 0)
+        values['tracks_born'] += len(out.born)
+        values['tracks_ended'] += len(out.ended)
+        self.outputs.publish(list(out.people), header)
         for name, joints in (('parts', out.parts), ('tracked', out.tracked)):
             if self.pubs[name].get_subscription_count():  # intermediate results: on demand
                 self.pubs[name].publish(joints_to_cdr(joints, header))
         if self.publish_foreground:
-            msgs = foreground.foreground_messages(out.foreground.mask, out.color_masked,
+            labels = people_labels(out.foregrounds, out.depth_masked.shape)
+            msgs = foreground.foreground_messages(labels, out.color_masked,
                                                   out.depth_masked, depth_msg.encoding, header)
             for name, msg in zip(('mask', 'color', 'depth'), msgs, strict=True):
                 self.pubs[name].publish(msg)

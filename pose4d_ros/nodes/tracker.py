@@ -1,14 +1,24 @@
 """`tracker`: SLQE Kalman tracking of the detected parts (eqs. 6-16 of the paper).
 
+Several people: one SLQE per track, the detections assigned to tracks each frame, tracks
+confirmed after `tracker.confirm_frames` frames and kept `tracker.max_unseen_s` unseen, ids
+never reused (`core.people.PeopleTracker`).
+
 Subscriptions
-    pose4d/parts (pose4d_msgs/JointArray, the detector's 10 or 14 parts, DETECTED or MISSING)
+    pose4d/parts/people (pose4d_msgs/SkeletonArray, every person's detected parts), or, from a
+    detector that publishes only one person, pose4d/parts (pose4d_msgs/JointArray, the
+    detector's 10 or 14 parts, DETECTED or MISSING)
     camera/color/camera_info (sensor_msgs/CameraInfo; the latest, for 3-D positions)
-Publications
-    pose4d/parts/tracked (pose4d_msgs/JointArray, the same parts: DETECTED / TRACKED / MISSING,
-    with the input header), /diagnostics
+Publications (with the input header)
+    pose4d/parts/tracked/people (pose4d_msgs/SkeletonArray: every confirmed track's parts,
+    DETECTED / TRACKED / MISSING, track_id set; the primary person first; empty: nobody)
+    pose4d/parts/tracked (pose4d_msgs/JointArray: the primary person's, all MISSING with
+    track_id 0 when nobody is tracked)
+    /diagnostics (also: people, tracks_born, tracks_ended)
 Parameters (config/tracker.yaml)
     tracker.kind, tracker.coupling, tracker.process_noise, tracker.measurement_noise_px,
-    tracker.gate_chi2, tracker.max_missed_frames, tracker.max_dt_s, tracker.depth_std_m
+    tracker.gate_chi2, tracker.max_missed_frames, tracker.max_dt_s, tracker.depth_std_m,
+    tracker.confirm_frames, tracker.max_unseen_s
 """
 
 from __future__ import annotations
@@ -16,18 +26,16 @@ from __future__ import annotations
 import time
 from typing import Any
 
-from pose4d_msgs.msg import JointArray
+from pose4d_msgs.msg import JointArray, SkeletonArray
 from rclpy.node import Node
 
+from pose4d_ros.core.joints import JointSet
+from pose4d_ros.core.people import PeopleTracker, TrackingConfig
 from pose4d_ros.core.pipeline import TrackerStage
 from pose4d_ros.core.slqe import CvConfig, SlqeConfig
 from pose4d_ros.nodes import qos
-from pose4d_ros.nodes.common import LatestIntrinsics, StageMonitor, run, subscribe
-from pose4d_ros.nodes.convert import (
-    joints_from_msg,
-    joints_to_cdr,
-    stamp_to_ns,
-)
+from pose4d_ros.nodes.common import LatestIntrinsics, PeopleInputs, StageMonitor, run
+from pose4d_ros.nodes.convert import joints_to_cdr, skeletons_to_msg, stamp_to_ns
 from pose4d_ros.nodes.params import NodeParams, Param
 
 _D = SlqeConfig()
@@ -51,6 +59,12 @@ PARAMS = (
           'detection before a part is dropped (MISSING).', range=(0, 100000), live=True),
     Param('tracker.max_dt_s', _D.max_dt_s, 'A longer gap between stamps restarts the track, '
           'seconds.', range=(0.001, 3600.0), live=True),
+    Param('tracker.confirm_frames', TrackingConfig.confirm_frames, 'Frames a new person must '
+          'be matched before their track is published, while another track exists.',
+          range=(1, 1000), live=True),
+    Param('tracker.max_unseen_s', TrackingConfig.max_unseen_s, 'A person unseen this long '
+          'ends their track (till then it is predicted), seconds.', range=(0.01, 60.0),
+          live=True),
     Param('tracker.depth_std_m', 0.05, "Standard deviation of a tracked part's depth in its "
           'covariance, metres.', range=(0.0, 10.0), live=True),
 )
@@ -75,35 +89,65 @@ def tracker_stage(p: dict[str, Any]) -> TrackerStage:
     return TrackerStage(kind=p['tracker.kind'], **tracker_settings(p))
 
 
+def people_config(p: dict[str, Any]) -> TrackingConfig:
+    """How people are told apart (`core.people.TrackingConfig`) from the parameters (the
+    pipeline node's include detector.max_people)."""
+    return TrackingConfig(max_people=p.get('detector.max_people', TrackingConfig.max_people),
+                          confirm_frames=p['tracker.confirm_frames'],
+                          max_unseen_s=p['tracker.max_unseen_s'])
+
+
 class TrackerNode(Node):
-    """Tracks the parts of one person; see the module docstring."""
+    """Tracks the parts of every person; see the module docstring."""
 
     def __init__(self) -> None:
         super().__init__('tracker')
         self.params = NodeParams(self, PARAMS, check=tracker_settings)
-        self.stage = tracker_stage(self.params.values)
+        p = self.params.values
+        self.template = tracker_stage(p)
+        self.people = PeopleTracker(self._new_stage, people_config(p))
         self.monitor = StageMonitor(self, 'tracker')
+        self.monitor.values.update(people=0, tracks_born=0, tracks_ended=0)
         self.camera = LatestIntrinsics(self, self.monitor)
+        self.pub_people = self.create_publisher(SkeletonArray, 'pose4d/parts/tracked/people',
+                                                qos.OUTPUT_QOS)
         self.pub = self.create_publisher(JointArray, 'pose4d/parts/tracked', qos.OUTPUT_QOS)
-        subscribe(self, JointArray, 'pose4d/parts', self.on_parts, qos.INPUT_QOS, self.monitor)
+        self.inputs = PeopleInputs(self, 'pose4d/parts/people', 'pose4d/parts', [],
+                                   self.process, self.monitor)
         self.get_logger().info(
-            f'tracking {self.resolve_topic_name("pose4d/parts")} -> '
-            f'{self.resolve_topic_name("pose4d/parts/tracked")} with {self.stage.kind}')
+            f'tracking {self.resolve_topic_name("pose4d/parts/people")} (or '
+            f'{self.resolve_topic_name("pose4d/parts")}) -> '
+            f'{self.resolve_topic_name("pose4d/parts/tracked")}(/people) with '
+            f'{self.template.kind}')
 
-    def on_parts(self, msg: JointArray) -> None:
+    def _new_stage(self) -> TrackerStage:
+        t = self.template
+        return TrackerStage(kind=t.kind, slqe=t.slqe_config, cv=t.cv_config,
+                            depth_std_m=t.depth_std_m)
+
+    def process(self, detections: list[JointSet], header: Any, _: tuple) -> None:
         if (p := self.params.changes()) is not None:
-            self.stage.configure(**tracker_settings(p))
+            self.template.configure(**tracker_settings(p))
+            for track in self.people.tracks:
+                track.stage.configure(**tracker_settings(p))
+            self.people.config = people_config(p)
         t0 = time.perf_counter()
-        stamp = stamp_to_ns(msg.header.stamp)
+        stamp = stamp_to_ns(header.stamp)
         if self.monitor.time_jumped(stamp):
-            self.stage.reset()
+            self.people.reset()
         try:
-            parts = joints_from_msg(msg)
-            tracked = self.stage.step(parts, stamp * 1e-9, self.camera.intrinsics)
+            tracked = self.people.step(detections, stamp * 1e-9, self.camera.intrinsics)
         except ValueError as exc:
             self.monitor.bad_input(f'pose4d/parts frame at {stamp} ns refused: {exc}')
             return
-        self.pub.publish(joints_to_cdr(tracked, msg.header))
+        values = self.monitor.values
+        values['people'] = len(tracked)
+        values['tracks_born'] += len(self.people.born)
+        values['tracks_ended'] += len(self.people.ended)
+        self.pub_people.publish(skeletons_to_msg(tracked, header))
+        primary = tracked[0] if tracked else JointSet.missing(
+            detections[0].names if detections else self.template.tree.names)
+        self.pub.publish(joints_to_cdr(primary, header))
         self.monitor.frame(stamp, time.perf_counter() - t0)
 
 
