@@ -44,7 +44,9 @@ scipy 1.17.1, pandas 3.1.1; it runs on numpy 2) fed the same distance matrices: 
 idp, idr, id_switches, fragmentations, misses, false_positives, matches, predictions,
 gt_objects, frames, mostly_tracked, partially_tracked and mostly_lost all equal to 1e-9 (largest
 difference 5e-15) on the nine hand-made sequences of test/test_tracking_metrics.py, on its
-`random_sequence` seeds 0-199 and on seeds 1000-1299 with skeleton ids that reuse the truth ids.
+`random_sequence` seeds 0-199 and on seeds 1000-1299 with skeleton ids that reuse the truth ids;
+`summarize_sequences` equal to motmetrics' pooled row (`compute_many(..., generate_overall=True)`)
+on 50 groups of four random sequences (seeds 2000-2199).
 Both subtleties matter there: without the kept correspondences the switches differ in 296 of
 those 300 sequences, and with IDTP counted on the matches only IDF1 differs in 269. motmetrics
 is not a dependency: the tests hold its numbers.
@@ -318,15 +320,35 @@ def summarize(frames: Sequence[FrameEvents]) -> dict[str, float]:
     skeletons per 1000 frames), 'mostly_tracked', 'partially_tracked', 'mostly_lost' (people),
     'idtp'}.
     """
+    return _rates(_counts(frames))
+
+
+def summarize_sequences(sequences: Sequence[Sequence[FrameEvents]]) -> dict[str, float]:
+    """`summarize` of several sequences pooled (as MOTChallenge's and motmetrics' overall row):
+    each sequence is matched and its trajectories paired on its own (an id in one sequence is
+    not the same person or track as in another), the counts are summed and the ratios taken of
+    the sums (MOTP weighted by the matches, IDF1 of the summed IDTP)."""
+    total: dict[str, float] = dict.fromkeys(_COUNTS, 0)
+    for frames in sequences:
+        for k, v in _counts(frames).items():
+            total[k] += v
+    return _rates(total)
+
+
+_COUNTS = ('id_switches', 'fragmentations', 'misses', 'false_positives', 'matches',
+           'gt_objects', 'predictions', 'frames', 'mostly_tracked', 'partially_tracked',
+           'mostly_lost', 'idtp', 'distance_sum')
+
+
+def _counts(frames: Sequence[FrameEvents]) -> dict[str, float]:
+    """The additive counts of one sequence (`_COUNTS`)."""
     last: dict[int, int] = {}
-    switches = misses = false_pos = n_truth = n_pred = 0
+    switches = misses = false_pos = n_truth = n_pred = n_match = 0
     dist_sum = 0.0
-    n_match = 0
     present: dict[int, int] = {}
     tracked: dict[int, int] = {}
     state: dict[int, list[bool]] = {}  # per truth: matched or not in each frame it is present
     agree: dict[tuple[int, int], int] = {}
-    pred_count: dict[int, int] = {}
     for f in frames:
         matched = {t: (p, d) for t, p, d in f.matches}
         for t, (p, d) in matched.items():
@@ -342,20 +364,11 @@ def summarize(frames: Sequence[FrameEvents]) -> dict[str, float]:
             present[t] = present.get(t, 0) + 1
             tracked[t] = tracked.get(t, 0) + (t in matched)
             state.setdefault(t, []).append(t in matched)
-        for p in f.pred_ids:
-            pred_count[p] = pred_count.get(p, 0) + 1
         pairs = f.within if f.within is not None else [(t, p) for t, p, _ in f.matches]
         for pair in pairs:
             agree[pair] = agree.get(pair, 0) + 1
-    idtp = _idtp(agree)
     ratios = [tracked[t] / present[t] for t in present]
-    n_frames = len(frames)
     return {
-        'mota': 1.0 - _ratio(misses + false_pos + switches, n_truth) if n_truth else float('nan'),
-        'motp': _ratio(dist_sum, n_match),
-        'idf1': _ratio(2 * idtp, n_truth + n_pred),
-        'idp': _ratio(idtp, n_pred),
-        'idr': _ratio(idtp, n_truth),
         'id_switches': switches,
         'fragmentations': sum(_fragments(s) for s in state.values()),
         'misses': misses,
@@ -363,14 +376,29 @@ def summarize(frames: Sequence[FrameEvents]) -> dict[str, float]:
         'matches': n_match,
         'gt_objects': n_truth,
         'predictions': n_pred,
-        'frames': n_frames,
-        'id_switches_per_1000': 1e3 * _ratio(switches, n_truth),
-        'missed_per_1000': 1e3 * _ratio(misses, n_truth),
-        'false_per_1000': 1e3 * _ratio(false_pos, n_frames),
+        'frames': len(frames),
         'mostly_tracked': sum(r >= MOSTLY_TRACKED for r in ratios),
         'partially_tracked': sum(MOSTLY_LOST <= r < MOSTLY_TRACKED for r in ratios),
         'mostly_lost': sum(r < MOSTLY_LOST for r in ratios),
-        'idtp': idtp,
+        'idtp': _idtp(agree),
+        'distance_sum': dist_sum,
+    }
+
+
+def _rates(c: Mapping[str, float]) -> dict[str, float]:
+    """The summary of `summarize` from the counts of `_counts`."""
+    errors = c['misses'] + c['false_positives'] + c['id_switches']
+    return {
+        'mota': 1.0 - _ratio(errors, c['gt_objects']) if c['gt_objects'] else float('nan'),
+        'motp': _ratio(c['distance_sum'], c['matches']),
+        'idf1': _ratio(2 * c['idtp'], c['gt_objects'] + c['predictions']),
+        'idp': _ratio(c['idtp'], c['predictions']),
+        'idr': _ratio(c['idtp'], c['gt_objects']),
+        **{k: c[k] for k in _COUNTS[:8]},
+        'id_switches_per_1000': 1e3 * _ratio(c['id_switches'], c['gt_objects']),
+        'missed_per_1000': 1e3 * _ratio(c['misses'], c['gt_objects']),
+        'false_per_1000': 1e3 * _ratio(c['false_positives'], c['frames']),
+        **{k: c[k] for k in ('mostly_tracked', 'partially_tracked', 'mostly_lost', 'idtp')},
     }
 
 
@@ -403,7 +431,8 @@ def _fragments(matched: Sequence[bool]) -> int:
 def score_people(frames_truths: Sequence[Sequence[JointSet]],
                  frames_preds: Sequence[Sequence[JointSet]], names: tuple[str, ...], *,
                  max_distance: float = MATCH_FRACTION,
-                 image_sizes: Sequence[tuple[int, int]] | None = None) -> dict:
+                 image_sizes: Sequence[tuple[int, int]] | None = None,
+                 videos: Sequence[str] | None = None) -> dict:
     """Several-person scores of one sequence: tracking metrics and the pooled joint table.
 
     Parameters
@@ -415,10 +444,13 @@ def score_people(frames_truths: Sequence[Sequence[JointSet]],
     names : the joints to score (predicted names, as `core.metrics.joint_arrays`).
     max_distance : the largest torso distance of a match, in reference sizes of the truth.
     image_sizes : (width, height) of each frame; ground truth outside the image is not scored.
+    videos : the video of each frame: each run of frames of one video is a sequence of its own
+        (a new `TrackingAccumulator`; ids are not carried over), pooled by
+        `summarize_sequences`. None: the frames are one sequence.
 
     Returns
     -------
-    {'tracking': `summarize` of the frames matched by `TrackingAccumulator` on
+    {'tracking': the summary of the frames matched by `TrackingAccumulator` on
     `torso_distances`, 'matched': (predictions, truths) over every person-frame in order (the
     matched skeleton, or None for a missed person: every joint wrong), 'table':
     `core.metrics.score_joint_sets` of them (PCK, APK, errors pooled over people)}.
@@ -426,17 +458,20 @@ def score_people(frames_truths: Sequence[Sequence[JointSet]],
     if len(frames_truths) != len(frames_preds):
         raise ValueError(f'{len(frames_preds)} frames of skeletons for {len(frames_truths)} '
                          f'frames of ground truth')
-    if image_sizes is not None and len(image_sizes) != len(frames_truths):
-        raise ValueError(f'{len(image_sizes)} image sizes for {len(frames_truths)} frames')
-    acc = TrackingAccumulator()
+    for what, per_frame in (('image sizes', image_sizes), ('videos', videos)):
+        if per_frame is not None and len(per_frame) != len(frames_truths):
+            raise ValueError(f'{len(per_frame)} {what} for {len(frames_truths)} frames')
+    accs: list[TrackingAccumulator] = []
     preds_out: list[JointSet | None] = []
     truths_out: list[JointSet] = []
     sizes_out: list[tuple[int, int]] = []
     for k, (truths, preds) in enumerate(zip(frames_truths, frames_preds, strict=True)):
+        if not accs or (videos is not None and videos[k] != videos[k - 1]):
+            accs.append(TrackingAccumulator())
         truths = [t for t in truths if _located(t, labelled=True).any()]
         preds = [p for p in preds if _located(p, labelled=False).any()]
         try:
-            events = acc.update([t.track_id for t in truths], [p.track_id for p in preds],
+            events = accs[-1].update([t.track_id for t in truths], [p.track_id for p in preds],
                                 torso_distances(truths, preds, max_distance=max_distance))
         except ValueError as err:
             raise ValueError(f'frame {k}: {err}') from None
@@ -449,4 +484,5 @@ def score_people(frames_truths: Sequence[Sequence[JointSet]],
                 sizes_out.append(image_sizes[k])
     table = score_joint_sets(preds_out, truths_out, names,
                              image_sizes=sizes_out if image_sizes is not None else None)
-    return {'tracking': acc.summary(), 'matched': (preds_out, truths_out), 'table': table}
+    tracking = summarize_sequences([acc.frames for acc in accs])
+    return {'tracking': tracking, 'matched': (preds_out, truths_out), 'table': table}
