@@ -377,6 +377,7 @@ def test_score_people_by_hand() -> None:
     found, labels = out['matched']
     assert [t.track_id for t in labels] == [1, 2, 1, 1, 2, 1, 2]
     assert [p.track_id if p is not None else None for p in found] == [5, 6, 5, 5, None, 5, 6]
+    assert out['frames'] == [0, 0, 1, 2, 2, 3, 3]
     # 3 px off against a 17 px PCK threshold: every joint right but those of the missed person
     assert out['table'] == score_joint_sets(found, labels, SKELETON_14)
     assert_allclose(out['table']['pck']['average'], 100.0 * 6 / 7)

@@ -54,7 +54,7 @@ is not a dependency: the tests hold its numbers.
 
 from __future__ import annotations
 
-from collections.abc import Mapping, Sequence
+from collections.abc import Hashable, Mapping, Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -432,7 +432,7 @@ def score_people(frames_truths: Sequence[Sequence[JointSet]],
                  frames_preds: Sequence[Sequence[JointSet]], names: tuple[str, ...], *,
                  max_distance: float = MATCH_FRACTION,
                  image_sizes: Sequence[tuple[int, int]] | None = None,
-                 videos: Sequence[str] | None = None) -> dict:
+                 videos: Sequence[Hashable] | None = None) -> dict:
     """Several-person scores of one sequence: tracking metrics and the pooled joint table.
 
     Parameters
@@ -444,8 +444,8 @@ def score_people(frames_truths: Sequence[Sequence[JointSet]],
     names : the joints to score (predicted names, as `core.metrics.joint_arrays`).
     max_distance : the largest torso distance of a match, in reference sizes of the truth.
     image_sizes : (width, height) of each frame; ground truth outside the image is not scored.
-    videos : the video of each frame: each run of frames of one video is a sequence of its own
-        (a new `TrackingAccumulator`; ids are not carried over), pooled by
+    videos : the video (any label) of each frame: each run of frames with one label is a
+        sequence of its own (a new `TrackingAccumulator`; ids are not carried over), pooled by
         `summarize_sequences`. None: the frames are one sequence.
 
     Returns
@@ -453,7 +453,8 @@ def score_people(frames_truths: Sequence[Sequence[JointSet]],
     {'tracking': the summary of the frames matched by `TrackingAccumulator` on
     `torso_distances`, 'matched': (predictions, truths) over every person-frame in order (the
     matched skeleton, or None for a missed person: every joint wrong), 'table':
-    `core.metrics.score_joint_sets` of them (PCK, APK, errors pooled over people)}.
+    `core.metrics.score_joint_sets` of them (PCK, APK, errors pooled over people), 'frames':
+    the frame index of each matched entry (to take other per-frame values along)}.
     """
     if len(frames_truths) != len(frames_preds):
         raise ValueError(f'{len(frames_preds)} frames of skeletons for {len(frames_truths)} '
@@ -464,7 +465,7 @@ def score_people(frames_truths: Sequence[Sequence[JointSet]],
     accs: list[TrackingAccumulator] = []
     preds_out: list[JointSet | None] = []
     truths_out: list[JointSet] = []
-    sizes_out: list[tuple[int, int]] = []
+    index_out: list[int] = []
     for k, (truths, preds) in enumerate(zip(frames_truths, frames_preds, strict=True)):
         if not accs or (videos is not None and videos[k] != videos[k - 1]):
             accs.append(TrackingAccumulator())
@@ -480,9 +481,9 @@ def score_people(frames_truths: Sequence[Sequence[JointSet]],
         for t in truths:
             preds_out.append(matched.get(t.track_id))
             truths_out.append(t)
-            if image_sizes is not None:
-                sizes_out.append(image_sizes[k])
-    table = score_joint_sets(preds_out, truths_out, names,
-                             image_sizes=sizes_out if image_sizes is not None else None)
+            index_out.append(k)
+    sizes = None if image_sizes is None else [image_sizes[k] for k in index_out]
+    table = score_joint_sets(preds_out, truths_out, names, image_sizes=sizes)
     tracking = summarize_sequences([acc.frames for acc in accs])
-    return {'tracking': tracking, 'matched': (preds_out, truths_out), 'table': table}
+    return {'tracking': tracking, 'matched': (preds_out, truths_out), 'table': table,
+            'frames': index_out}
