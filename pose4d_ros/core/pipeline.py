@@ -630,6 +630,8 @@ class FramePipeline:
         for stamp_s in (0.0, 1.0 / 30.0):
             self.step(color, depth, intrinsics, stamp_s)
         self.reset()
+        if self.multi is not None:  # the warm-up's person was nobody: ids start at 1
+            self.multi.tracker.next_id = 1
 
 
 class PeopleStages:
