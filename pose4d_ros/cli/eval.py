@@ -47,6 +47,7 @@ from pose4d_ros.core.dpm.infer import SearchConfig
 from pose4d_ros.core.dpm.model import PartModel
 from pose4d_ros.core.dpm.scale import ScaleConfig
 from pose4d_ros.core.files import write_atomic, write_json
+from pose4d_ros.core.people import TrackingConfig
 from pose4d_ros.core.threads import set_blas_threads
 from pose4d_ros.datasets.sources import load_frames, source_kind
 from pose4d_ros.evaluation import draw, plot
@@ -85,6 +86,10 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument('--photo-scales', type=factor_list, default=PHOTO_SCALES, metavar='F,F,...',
                    help="the photograph network's reading scales (core.convnet: maps read at "
                         'each, averaged)')
+    p.add_argument('--max-people', type=int, default=None, metavar='N',
+                   help='run the several-person pipeline the nodes run, searching at most N '
+                   'people a frame (default: on a set with several people, 4; else the '
+                   "single-person pipeline of the paper)")
     p.add_argument('--blas-threads', type=int, default=1)
     p.add_argument('--peer', choices=PEERS,
                    help='one more row: the peer on the same frames (needs `make peer`)')
@@ -138,6 +143,10 @@ def table_rows(args: argparse.Namespace, kind: str, models: list[PartModel | Con
     frames = load_frames([args.source], frame_range=args.frame_range, stride=args.stride,
                          max_frames=args.max_frames)
     sequence = kind in ('cad60', 'bag') and args.max_frames is None
+    max_people = args.max_people
+    if max_people is None and any(getattr(f, 'people', ()) for f in frames):
+        max_people = TrackingConfig.max_people
+    people = None if max_people is None else TrackingConfig(max_people=max_people)
     rows: dict[str, Row] = {}
     for m in models:
         if m.channels == 'rgbd' and any(f.depth_m is None for f in frames):
@@ -151,7 +160,8 @@ def table_rows(args: argparse.Namespace, kind: str, models: list[PartModel | Con
             continue
         rows.update(pipeline_rows(progress(frames, name), m, name=name, sequence=sequence,
                                   search=SearchConfig(n_levels=args.levels),
-                                  scale=ScaleConfig(factors=args.person_scales)))
+                                  scale=ScaleConfig(factors=args.person_scales),
+                                  people=people))
     if peer is not None:
         rows.update(peer_rows(progress(frames, peer.name), peer, sequence=sequence))
     for name, row in rows.items():

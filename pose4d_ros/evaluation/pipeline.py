@@ -30,10 +30,12 @@ from pose4d_ros.core.dpm.model import PartModel
 from pose4d_ros.core.dpm.scale import ScaleConfig
 from pose4d_ros.core.joints import MISSING, JointSet
 from pose4d_ros.core.metrics import curves, joint_arrays, score_groups
+from pose4d_ros.core.people import TrackingConfig
 from pose4d_ros.core.pipeline import STAGES, DetectorStage, FramePipeline
 from pose4d_ros.core.skeleton import SKELETON_14
 from pose4d_ros.core.slqe import SlqeConfig
 from pose4d_ros.datasets.frame import Frame
+from pose4d_ros.evaluation.tracking_metrics import score_people
 from pose4d_ros.peer import MediaPipePeer
 
 
@@ -56,10 +58,16 @@ class Row:
 
     preds: list[JointSet] = field(default_factory=list)
     cpu_ms: list[float] = field(default_factory=list)
+    people: list[tuple[JointSet, ...]] = field(default_factory=list)
 
-    def add(self, pred: JointSet, cpu_s: float) -> None:
+    def add(self, pred: JointSet, cpu_s: float,
+            people: tuple[JointSet, ...] | None = None) -> None:
+        """One frame: the prediction (the primary person's) and, from a several-person
+        pipeline, every person's skeleton."""
         self.preds.append(pred)
         self.cpu_ms.append(cpu_s * 1e3)
+        if people is not None:
+            self.people.append(people)
 
     @property
     def no_pose(self) -> int:
@@ -69,10 +77,13 @@ class Row:
 
 def pipeline_rows(frames: Iterable[Frame], model: PartModel, *, name: str | None = None,
                   search: SearchConfig | None = None, scale: ScaleConfig | None = None,
-                  sequence: bool = True) -> dict[str, Row]:
+                  sequence: bool = True, people: TrackingConfig | None = None
+                  ) -> dict[str, Row]:
     """The rows of a part model over the frames ({`name` (default: its channels) + suffix:
-    row}); `sequence` False puts each frame on its own."""
-    pipeline = FramePipeline(DetectorStage(model, search=search, scale=scale))
+    row}); `sequence` False puts each frame on its own. `people`: the several-person pipeline
+    (`FramePipeline(people=...)`, as the nodes run it), whose `_kf_ik` row also holds every
+    person's skeleton (`Row.people`)."""
+    pipeline = FramePipeline(DetectorStage(model, search=search, scale=scale), people=people)
     depth = model.channels == 'rgbd'
     suffixes = tuple(ROW_STAGES) if depth and sequence else ('',)
     rows = {s: Row() for s in suffixes}
@@ -84,7 +95,8 @@ def pipeline_rows(frames: Iterable[Frame], model: PartModel, *, name: str | None
         out = pipeline.step(f.color, f.depth_m if depth else None, f.intrinsics,
                             f.stamp_ns * 1e-9)
         for s, pred in zip(suffixes, (out.parts, out.tracked, out.skeleton), strict=False):
-            rows[s].add(pred, sum(out.cpu_s[stage] for stage in ROW_STAGES[s]))
+            rows[s].add(pred, sum(out.cpu_s[stage] for stage in ROW_STAGES[s]),
+                        out.people if people is not None and s == '_kf_ik' else None)
     return {(name or model.channels) + s: row for s, row in rows.items()}
 
 
@@ -125,14 +137,54 @@ def score_rows(rows: dict[str, Row], frames: Sequence[Frame]
     """The table of each row, with its CPU ms per frame (`cpu_ms`) when it has them (a row
     read from a recording has none). A row scores the joints of the 14-joint skeleton it
     predicts (an `_ik` row all 14, elbows and knees included); ground truth outside the image
-    is not scored."""
+    is not scored.
+
+    Frames with several people (`Frame.people`): each frame's people are matched to the row's
+    skeletons one to one by torso distance (`evaluation.tracking_metrics.score_people`), the
+    table is pooled over people (a person without a skeleton: every joint wrong) and the row
+    gets `tracking` (IDF1, MOTA, id switches, ...). A single-person row (the detector's, the
+    filter's, the peer's) is one skeleton a frame, scored the same way."""
     tables = {}
+    several = any(getattr(f, 'people', ()) for f in frames)
     for name, row in rows.items():
-        names, arrays = row_arrays(name, row, frames)
-        tables[name] = score_groups(names=names, **arrays)
+        names = row_names(name, row)
+        if several:
+            out = people_scores(row, frames, names)
+            tables[name] = {**out['table'], 'tracking': out['tracking']}
+        else:
+            tables[name] = score_groups(names=names, **row_arrays(name, row, frames)[1])
         if row.cpu_ms:
             tables[name]['cpu_ms'] = ms_stats(row.cpu_ms)
     return tables
+
+
+def frame_people(frame: Frame) -> tuple[JointSet, ...]:
+    """Every person's ground truth of a frame (`Frame.people`, or its one `truth`)."""
+    people = getattr(frame, 'people', ())
+    return tuple(people) if people else ((frame.truth,) if frame.truth is not None else ())
+
+
+def people_scores(row: Row, frames: Sequence[Frame], names: tuple[str, ...]) -> dict:
+    """`tracking_metrics.score_people` of a row (its several-person skeletons, or its one
+    prediction a frame) over the frames, each video a sequence of its own."""
+    preds = row.people if row.people else [(p,) for p in row.preds]
+    return score_people([frame_people(f) for f in frames], preds, names,
+                        image_sizes=[(f.color.shape[1], f.color.shape[0]) for f in frames],
+                        videos=sequence_labels(frames))
+
+
+def sequence_labels(frames: Sequence[Frame]) -> list[int]:
+    """A label per frame, new wherever the tracker starts a new track: a new video, a stamp
+    gap over `SlqeConfig.max_dt_s`, or a stamp going back."""
+    labels, label, last = [], 0, None
+    for f in frames:
+        stamp_s = f.stamp_ns * 1e-9
+        if last is not None and (f.video != last[1] or
+                                 not 0.0 <= stamp_s - last[0] <= SlqeConfig.max_dt_s):
+            label += 1
+        labels.append(label)
+        last = (stamp_s, f.video)
+    return labels
 
 
 def curve_rows(rows: dict[str, Row], frames: Sequence[Frame], alphas: Sequence[float]
@@ -145,8 +197,13 @@ def curve_rows(rows: dict[str, Row], frames: Sequence[Frame], alphas: Sequence[f
     return out
 
 
-def row_arrays(name: str, row: Row, frames: Sequence[Frame]) -> tuple[tuple[str, ...], dict]:
-    names = SKELETON_14 if name.endswith('_ik') else tuple(
+def row_names(name: str, row: Row) -> tuple[str, ...]:
+    """The joints a row is scored on: all 14 for an `_ik` row, else those it predicts."""
+    return SKELETON_14 if name.endswith('_ik') else tuple(
         n for n in SKELETON_14 if row.preds and n in row.preds[0].names)
+
+
+def row_arrays(name: str, row: Row, frames: Sequence[Frame]) -> tuple[tuple[str, ...], dict]:
+    names = row_names(name, row)
     sizes = [(f.color.shape[1], f.color.shape[0]) for f in frames]
     return names, joint_arrays(row.preds, [f.truth for f in frames], names, image_sizes=sizes)

@@ -32,6 +32,16 @@ def format_table(rows: dict[str, dict[str, dict[str, float]]], frames: int) -> s
             lines.append(f'{name:<{width}}' + ''.join(
                 f'{vals[c]:>10.1f}' if c in vals and not np.isnan(vals[c]) else f'{"-":>10}'
                 for c in shown))
+    if any('tracking' in row for row in rows.values()):
+        keys = ('idf1', 'mota', 'id_switches_per_1000', 'missed_per_1000', 'false_per_1000')
+        heads = ('IDF1 %', 'MOTA %', 'IDsw/1k', 'miss/1k', 'false/1k')
+        lines += ['', 'Tracking (several people; per 1000 person-frames, false per 1000 frames)',
+                  ' ' * width + ''.join(f'{h:>10}' for h in heads)]
+        for name, row in rows.items():
+            t = row.get('tracking', {})
+            lines.append(f'{name:<{width}}' + ''.join(
+                f'{t[k] * (100 if k in ("idf1", "mota") else 1):>10.1f}'
+                if k in t and np.isfinite(t[k]) else f'{"-":>10}' for k in keys))
     if any('cpu_ms' in row for row in rows.values()):
         lines += ['', 'CPU per frame (ms)', ' ' * width + f'{"p50":>10}{"p95":>10}']
         lines += [f'{name:<{width}}' + ''.join(
