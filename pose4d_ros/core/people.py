@@ -59,6 +59,11 @@ class TrackingConfig:
     max_speed_mps : how fast an unseen person may have gone, metres a second (the spread of an
         unseen track's position grows with it).
     gate_chi2 : largest squared Mahalanobis distance of an assigned pair (3 degrees of freedom).
+    birth_score : while another track is confirmed, a detection starts or grows a tentative
+        track only when its part model score (`JointSet.score`, the SVM's: 0 is its boundary)
+        is at least this; a confirmed track takes any. A region that passes the person-size
+        rules but is no person (a door jamb at the image's edge) scores low, and does not
+        become a second person.
     """
 
     max_people: int = 4
@@ -67,6 +72,7 @@ class TrackingConfig:
     torso_std_m: float = 0.15
     max_speed_mps: float = 1.5
     gate_chi2: float = 16.0
+    birth_score: float = 5.0
 
     def __post_init__(self) -> None:
         if self.max_people < 1 or self.confirm_frames < 1:
@@ -222,12 +228,16 @@ class PeopleTracker:
         points = [torso(d) for d in detections]
         pairs = assign(self._cost(points, stamp_s), cfg.gate_chi2)
         matched = {j: i for i, j in pairs}
+        any_confirmed = any(t.id for t in self.tracks)
+        # with nobody tracked, the first person in view is trusted (as a single-person tracker)
+        born = self._born if any_confirmed else (lambda det: True)
         for j, det in enumerate(detections):
-            if j not in matched and np.isfinite(points[j][0]).all():
+            if j in matched and not self.tracks[matched[j]].id and not born(det):
+                del matched[j]  # a tentative track's detection must be a person's
+            if j not in matched and np.isfinite(points[j][0]).all() and born(det):
                 self.tracks.append(_Track(self.make(), names=det.names))
                 matched[j] = len(self.tracks) - 1
         seen = {i: j for j, i in matched.items()}
-        any_confirmed = any(t.id for t in self.tracks)
         for i, track in enumerate(self.tracks):
             det = detections[seen[i]] if i in seen else JointSet.missing(track.names)
             out = track.stage.step(det, stamp_s, intrinsics)
@@ -247,6 +257,9 @@ class PeopleTracker:
                 keep.append(track)
         self.tracks = keep
         return [t.last for t in self._ordered(stamp_s)]
+
+    def _born(self, det: JointSet) -> bool:
+        return not det.score < self.config.birth_score  # NaN: no score to judge by
 
     def _cost(self, points: list[tuple[NDArray, NDArray]], stamp_s: float
               ) -> NDArray[np.float64]:
