@@ -38,7 +38,7 @@ from numpy.typing import NDArray
 from scipy.optimize import linear_sum_assignment
 
 from pose4d_ros.core import joints as cj
-from pose4d_ros.core.camera import Intrinsics, backproject
+from pose4d_ros.core.camera import Intrinsics, backproject, project
 from pose4d_ros.core.foreground import ForegroundResult, apply_mask
 from pose4d_ros.core.joints import JointSet
 
@@ -218,6 +218,24 @@ class PeopleTracker:
         """End every track (ids still count on)."""
         self.ended = [t.id for t in self.tracks if t.id]
         self.tracks = []
+
+    def warm_up(self, intrinsics: Intrinsics) -> None:
+        """Track two people for a few frames (the first frames' paths run once), then forget
+        them: ids start at 1."""
+        from pose4d_ros.core.skeleton import PARTS_10
+
+        base = np.array([[0.0, -0.7 + 0.17 * k, 2.8] for k in range(len(PARTS_10))])
+        for k in range(4):
+            people = []
+            for dx in (-0.6, 0.6):
+                xyz = base + [dx, 0.0, 0.0]
+                people.append(JointSet(PARTS_10.names, project(xyz, intrinsics), xyz,
+                                       source=np.full(len(xyz), cj.DETECTED, np.uint8),
+                                       confidence=np.full(len(xyz), 0.9), score=10.0))
+            self.step(people, k / 30, intrinsics)
+        self.reset()
+        self.next_id = 1
+        self.born, self.ended = [], []
 
     def step(self, detections: Sequence[JointSet], stamp_s: float,
              intrinsics: Intrinsics | None) -> list[JointSet]:

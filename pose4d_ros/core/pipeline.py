@@ -126,6 +126,7 @@ class ForegroundStage:
             color, depth, _ = warm_up_frame(k)
             for _ in range(2):
                 self.step(color, depth, k)
+                self.step_people(color, depth, k, 4)
             self.reset()
 
     def step(self, color: NDArray[np.uint8], depth_m: NDArray[np.floating],

@@ -45,6 +45,7 @@ from pose4d_ros.core.dpm.scale import ScaleConfig
 from pose4d_ros.core.joints import JointSet
 from pose4d_ros.core.people import PeopleDetector, TrackingConfig, people_from_labels
 from pose4d_ros.core.pipeline import DetectorStage
+from pose4d_ros.core.warm_up import warm_up_frame
 from pose4d_ros.models import model_path
 from pose4d_ros.nodes import qos
 from pose4d_ros.nodes.common import LatestIntrinsics, PairedInputs, StageMonitor, run
@@ -142,6 +143,12 @@ class DetectorNode(Node):
         self.template = detector_stage(p)
         self.template.warm_up(cad60_intrinsics())  # compile before the first camera frame
         self.people = PeopleDetector(self._new_stage, people_config(p))
+        color, depth, mask = warm_up_frame(cad60_intrinsics())  # the several-person path too
+        for stamp_s in (0.0, 1 / 30):
+            self.people.step(color, depth, cad60_intrinsics(),
+                             people_from_labels(mask.astype(np.uint8) * 255, depth),
+                             stamp_s=stamp_s)
+        self.people.reset()
         self.monitor = StageMonitor(self, 'detector')
         self.monitor.values.update(people=0, people_over_limit=0)
         self.camera = LatestIntrinsics(self, self.monitor)

@@ -29,6 +29,7 @@ from typing import Any
 from pose4d_msgs.msg import JointArray, SkeletonArray
 from rclpy.node import Node
 
+from pose4d_ros.core.camera import cad60_intrinsics
 from pose4d_ros.core.joints import JointSet
 from pose4d_ros.core.people import PeopleTracker, TrackingConfig
 from pose4d_ros.core.pipeline import TrackerStage
@@ -106,6 +107,7 @@ class TrackerNode(Node):
         p = self.params.values
         self.template = tracker_stage(p)
         self.people = PeopleTracker(self._new_stage, people_config(p))
+        self.people.warm_up(cad60_intrinsics())
         self.monitor = StageMonitor(self, 'tracker')
         self.monitor.values.update(people=0, tracks_born=0, tracks_ended=0)
         self.camera = LatestIntrinsics(self, self.monitor)
