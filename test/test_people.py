@@ -173,3 +173,29 @@ def test_one_person_the_several_person_path_gives_the_single_persons_skeleton():
         assert len(b.people) == 1
         np.testing.assert_array_equal(a.uv, b.skeleton.uv)
         np.testing.assert_array_equal(a.source, b.skeleton.source)
+
+
+def test_work_is_bounded_by_max_people():
+    """Ten person regions: the detector searches max_people of them, in their order."""
+    from pose4d_ros.core.foreground import ForegroundResult
+    from pose4d_ros.core.people import PeopleDetector
+
+    searched = []
+
+    class Counting:
+        def step(self, color, depth, intrinsics, *, mask, stamp_s, blanked):
+            searched.append(int(np.flatnonzero(mask.any(axis=0))[0]))
+            return JointSet.missing(PARTS_10.names)
+
+    color = np.zeros((INTR.height, INTR.width, 3), np.uint8)
+    depth = np.full((INTR.height, INTR.width), 3.0, np.float32)
+    people = []
+    for k in range(10):
+        mask = np.zeros(depth.shape, bool)
+        mask[50:200, 30 * k:30 * k + 20] = True
+        people.append(ForegroundResult(mask=mask, box=(30 * k, 50, 30 * k + 20, 200),
+                                       depth_m=3.0, found=True))
+    detector = PeopleDetector(Counting, TrackingConfig(max_people=4))
+    out = detector.step(color, depth, INTR, people, stamp_s=0.0)
+    assert len(out) == 4 and searched == [0, 30, 60, 90]
+    assert len(detector.slots) == 4
