@@ -1,4 +1,4 @@
-"""Elbow/knee inference (core/kinematics.py)."""
+"""Elbow/knee inference (core.kinematics)."""
 
 from __future__ import annotations
 

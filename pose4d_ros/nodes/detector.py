@@ -16,7 +16,7 @@ Publications
 Parameters (config/detector.yaml)
     detector.model, detector.n_levels, detector.margin, detector.person_scales,
     detector.scale_warm_up_frames, detector.scale_probe_every, detector.min_confidence
-    (a part's depth look-up is the model's: `core.pipeline.lift_parts`)
+    (a part's depth look-up is the model's: `core.lifting.lift_parts`)
 """
 
 from __future__ import annotations
