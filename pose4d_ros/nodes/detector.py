@@ -83,7 +83,8 @@ PARAMS = (
     Param('detector.scale_probe_every', _C.probe_every, 'After the warm-up, a neighbouring '
           'person scale is also searched every this many frames (0 = never).',
           range=(0, 100000), live=True),
-    Param('detector.min_confidence', 0.0, 'Parts less confident than this are MISSING.',
+    Param('detector.min_confidence', DetectorStage.MIN_CONFIDENCE,
+          'Parts less confident than this are MISSING.',
           range=(0.0, 1.0), live=True),
     Param('detector.arm_prior', _S.arm_prior, "Weight of the previous frame's elbows and "
           'wrists (at most 0.25 s old) when each arm is chosen among the few best the part model '

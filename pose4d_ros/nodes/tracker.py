@@ -51,7 +51,8 @@ PARAMS = (
           'detection before a part is dropped (MISSING).', range=(0, 100000), live=True),
     Param('tracker.max_dt_s', _D.max_dt_s, 'A longer gap between stamps restarts the track, '
           'seconds.', range=(0.001, 3600.0), live=True),
-    Param('tracker.depth_std_m', 0.05, "Standard deviation of a tracked part's depth in its "
+    Param('tracker.depth_std_m', TrackerStage.DEPTH_STD_M,
+          "Standard deviation of a tracked part's depth in its "
           'covariance, metres.', range=(0.0, 10.0), live=True),
 )
 
