@@ -4,7 +4,8 @@ step; see `core.slqe` for the gate and the restart hypotheses."""
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, replace
+from dataclasses import fields, replace
+from types import SimpleNamespace
 
 import numpy as np
 from numpy.typing import NDArray
@@ -76,24 +77,9 @@ def _keeps_length(z: NDArray[np.float64], before: TrackState, i: int, parent: in
     return abs(math.dist(z[i], z[parent]) - was) <= tolerance * was
 
 
-@dataclass
-class _Arrays:
-    """Working copies of a `TrackState`'s arrays, which the steps of `update` change in place."""
-
-    x: NDArray[np.float64]
-    cov: NDArray[np.float64]
-    active: NDArray[np.bool_]
-    missed: NDArray[np.int64]
-    rejected: NDArray[np.int64]
-    last_rejected: NDArray[np.float64]
-    confidence: NDArray[np.float64]
-    shadow_x: NDArray[np.float64]
-    shadow_cov: NDArray[np.float64]
-    shadow_left: NDArray[np.int64]
-
-    @classmethod
-    def of(cls, state: TrackState) -> _Arrays:
-        return cls(**{name: getattr(state, name).copy() for name in cls.__dataclass_fields__})
+# The arrays of a `TrackState`: `update` works on copies of them (a namespace `w`, which its
+# steps change in place) and returns a new state made of them
+_ARRAYS = tuple(f.name for f in fields(TrackState) if f.name not in ('stamp', 'dt'))
 
 
 def update(state: TrackState, uv: NDArray[np.floating], confidence: NDArray[np.floating] | None,
@@ -127,7 +113,7 @@ def update(state: TrackState, uv: NDArray[np.floating], confidence: NDArray[np.f
     # range once lifted to 3-D, which the next stage rightly refuses)
     safe_conf = np.where(valid, np.maximum(conf, MIN_WEIGHT), 1.0)
     r_var = (px_gain * config.measurement_noise_px) ** 2 / safe_conf
-    w = _Arrays.of(state)
+    w = SimpleNamespace(**{name: getattr(state, name).copy() for name in _ARRAYS})
     w.shadow_left = np.maximum(state.shadow_left - 1, 0)
     source = np.full(n_parts, Source.MISSING, np.uint8)
     source[w.active] = Source.TRACKED
@@ -144,9 +130,10 @@ def update(state: TrackState, uv: NDArray[np.floating], confidence: NDArray[np.f
     return replace(state, **vars(w)), UpdateInfo(source=source, nis=nis)
 
 
-def _gate(w: _Arrays, nis: NDArray[np.float64], state: TrackState, before: TrackState | None,
-          z: NDArray[np.float64], valid: NDArray[np.bool_], r_var: NDArray[np.float64],
-          config: SlqeConfig, tree: PartTree, px_gain: float) -> tuple[list[int], list[int]]:
+def _gate(w: SimpleNamespace, nis: NDArray[np.float64], state: TrackState,
+          before: TrackState | None, z: NDArray[np.float64], valid: NDArray[np.bool_],
+          r_var: NDArray[np.float64], config: SlqeConfig, tree: PartTree,
+          px_gain: float) -> tuple[list[int], list[int]]:
     """Eq. (16)'s choice for each active part's detection, on its own innovation: accepted
     within the gate; beyond it, restarted on (`_restarts`), back on its kept track
     (`_back_to_kept_track`, accepted) or rejected, counting towards the drift hypothesis.
@@ -201,7 +188,7 @@ def _restarts(i: int, z: NDArray[np.float64], r: float, state: TrackState,
         _keeps_length(z, before, i, tree.parents[i], b, config.limb_tolerance)
 
 
-def _back_to_kept_track(w: _Arrays, i: int, z: NDArray[np.float64], r: float,
+def _back_to_kept_track(w: SimpleNamespace, i: int, z: NDArray[np.float64], r: float,
                         config: SlqeConfig) -> bool:
     """The last restart of part i followed a wrong detection when detection `z` is within the
     gate of the track kept from before it: back to that track (True)."""
@@ -218,7 +205,7 @@ def _back_to_kept_track(w: _Arrays, i: int, z: NDArray[np.float64], r: float,
     return True
 
 
-def _kalman_update(w: _Arrays, z: NDArray[np.float64], r_var: NDArray[np.float64],
+def _kalman_update(w: SimpleNamespace, z: NDArray[np.float64], r_var: NDArray[np.float64],
                    accepted: list[int], b: int) -> None:
     """Eqs. (14)-(15) with the accepted parts' detections `z` (N, 2), variances `r_var` (N,)."""
     idx = np.concatenate([np.arange(i * b, i * b + 2) for i in accepted])
@@ -235,7 +222,7 @@ def _kalman_update(w: _Arrays, z: NDArray[np.float64], r_var: NDArray[np.float64
     w.cov = 0.5 * (cov + cov.T)
 
 
-def _start_parts(w: _Arrays, starts: list[int], restart: list[int], z: NDArray[np.float64],
+def _start_parts(w: SimpleNamespace, starts: list[int], restart: list[int], z: NDArray[np.float64],
                  conf: NDArray[np.float64], r_var: NDArray[np.float64],
                  source: NDArray[np.uint8], config: SlqeConfig, tree: PartTree,
                  px_gain: float) -> None:
@@ -257,7 +244,7 @@ def _start_parts(w: _Arrays, starts: list[int], restart: list[int], z: NDArray[n
         w.confidence[i] = conf[i]
 
 
-def _coast(w: _Arrays, source: NDArray[np.uint8], config: SlqeConfig) -> None:
+def _coast(w: SimpleNamespace, source: NDArray[np.uint8], config: SlqeConfig) -> None:
     """Parts only predicted this frame: one more frame missed, their confidence decayed; past
     `max_missed_frames` they are dropped (MISSING)."""
     coasting = w.active & (source == Source.TRACKED)
