@@ -12,10 +12,8 @@ from numpy.testing import assert_allclose, assert_array_equal
 
 from pose4d_ros.core.camera import cad60_intrinsics
 from pose4d_ros.core.dpm import Detector, PartModel, SearchConfig, load_model, save_model
-from pose4d_ros.core.dpm.dt import dt1d, dt2d
-from pose4d_ros.core.dpm.infer import (
+from pose4d_ros.core.dpm.dp import (
     LIMB_CANDIDATES,
-    arm_limbs,
     backtrack,
     best_roots,
     im2col,
@@ -24,6 +22,8 @@ from pose4d_ros.core.dpm.infer import (
     score_level,
     tree_dp,
 )
+from pose4d_ros.core.dpm.dt import dt1d, dt2d
+from pose4d_ros.core.dpm.infer import arm_limbs
 from pose4d_ros.core.dpm.samples import TrainConfig
 from pose4d_ros.core.dpm.solver import Examples, dcd, margins, rebuild_w
 from pose4d_ros.core.dpm.train import choose_depth_lookup, kmeans
@@ -559,7 +559,7 @@ def test_kmeans_is_deterministic_and_finds_separated_clusters() -> None:
 def test_labelled_pose_score_is_the_tree_dp_at_fixed_cells() -> None:
     """tools/lspet_diagnose's score of a given pose: at the DP's best pose it equals the best
     score, anywhere else it is no higher (the DP is the max over all poses)."""
-    from pose4d_ros.core.dpm.infer import backtrack, best_roots, model_arrays, score_level
+    from pose4d_ros.core.dpm.dp import backtrack, best_roots, model_arrays, score_level
     from pose4d_ros.core.hog import feature_pyramid
 
     tool = _diagnose_tool()

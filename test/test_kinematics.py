@@ -1,4 +1,4 @@
-"""Elbow/knee inference (core/kinematics.py)."""
+"""Elbow/knee inference (core.kinematics)."""
 
 from __future__ import annotations
 
@@ -10,16 +10,15 @@ from numpy.testing import assert_allclose
 
 from pose4d_ros.core.camera import cad60_intrinsics, lift_depth, robust_depth
 from pose4d_ros.core.kinematics import (
-    DEFAULT_LIMB_LENGTHS_M,
     IkConfig,
     IkFlag,
-    LimbLengths,
     body_frame,
     circle_points,
     infer_middle_joints,
     middle_joint_circle,
     solve_limb,
 )
+from pose4d_ros.core.limb_lengths import DEFAULT_LIMB_LENGTHS_M, LimbLengths
 from pose4d_ros.core.skeleton import PARTS_10
 from pose4d_ros.synth.render import capsule_depth
 

@@ -5,6 +5,7 @@ from __future__ import annotations
 import ast
 import graphlib
 import importlib
+import inspect
 import os
 import subprocess
 from importlib.metadata import distribution
@@ -256,6 +257,56 @@ def test_yaml_defaults_equal_code_defaults(exe):
         assert p.description, f'{exe}: parameter {p.name} has no description'
         assert p.validate(p.default) is None or p.name.endswith(('.bag', '.output')), \
             f'{exe}: default of {p.name} breaks its own rule'
+
+
+def core_defaults() -> dict[str, object]:
+    """{node parameter: its default as core holds it} (the stages' keywords, the configs'
+    fields), for every node parameter that core has a default for."""
+    from pose4d_ros.core.dpm.infer import SearchConfig
+    from pose4d_ros.core.dpm.scale import ScaleConfig
+    from pose4d_ros.core.foreground import ForegroundConfig
+    from pose4d_ros.core.limb_lengths import DEFAULT_LIMB_LENGTHS_M
+    from pose4d_ros.core.pipeline import DetectorStage, ForegroundStage, IkStage, TrackerStage
+    from pose4d_ros.core.slqe import SlqeConfig
+
+    def keyword(stage: type, name: str) -> object:
+        return inspect.signature(stage).parameters[name].default
+
+    def fields(group: str, config: object, names: str) -> dict[str, object]:
+        return {f'{group}.{n}': getattr(config, n) for n in names.split()}
+
+    scale = ScaleConfig()
+    (arm, forearm), (thigh, shin) = (DEFAULT_LIMB_LENGTHS_M[limb] for limb in ('left_arm',
+                                                                               'left_leg'))
+    return {
+        **fields('foreground', ForegroundConfig(), 'max_region_area_px mser_delta '
+                 'mser_max_variation depth_near_m depth_far_m floor_remove'),
+        'foreground.temporal': keyword(ForegroundStage, 'temporal'),
+        **fields('detector', SearchConfig(), 'n_levels margin arm_prior'),
+        'detector.person_scales': list(scale.factors),
+        'detector.scale_warm_up_frames': scale.warm_up_frames,
+        'detector.scale_probe_every': scale.probe_every,
+        'detector.min_confidence': keyword(DetectorStage, 'min_confidence'),
+        **fields('tracker', SlqeConfig(), 'coupling process_noise measurement_noise_px '
+                 'gate_chi2 max_missed_frames max_dt_s'),
+        'tracker.depth_std_m': keyword(TrackerStage, 'depth_std_m'),
+        'ik.use_depth': keyword(IkStage, 'use_depth'),
+        'ik.learn_lengths': keyword(IkStage, 'learn'),
+        'ik.upper_arm_length_m': arm, 'ik.forearm_length_m': forearm,
+        'ik.thigh_length_m': thigh, 'ik.shin_length_m': shin,
+    }
+
+
+@pytest.mark.parametrize('exe', sorted(NODE_MODULES))
+def test_node_defaults_equal_core_defaults(exe):
+    """A node parameter with a default in core takes it from there (every default in one
+    place): the `Param` tables and core agree, in value and type."""
+    core = core_defaults()
+    params = {p.name: p.default for p in importlib.import_module(NODE_MODULES[exe]).PARAMS}
+    shared = {name: (params[name], core[name]) for name in params.keys() & core.keys()}
+    assert all(a == b and type(a) is type(b) for a, b in shared.values()), shared
+    if exe in ('foreground', 'detector', 'tracker', 'ik', 'pipeline'):
+        assert shared, f'{exe}: no parameter checked against core'
 
 
 def published_topics() -> set[str]:

@@ -1,4 +1,4 @@
-"""SLQE tracker (core/slqe.py): model matrices, gating, coasting, resets, interface."""
+"""SLQE tracker (core.slqe): model matrices, gating, coasting, resets, interface."""
 
 from __future__ import annotations
 

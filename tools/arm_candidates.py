@@ -4,7 +4,7 @@
 
 Runs the foreground and the detector over a labelled CAD-60 set or bag, each frame on its own
 and at the depth-predicted person scale (no tracking prior). For the best pose, it lists each
-arm's `limb_candidates` (`core.dpm.infer`: the DP's own arm, then the best elbow cells given the
+arm's `limb_candidates` (`core.dpm.dp`: the DP's own arm, then the best elbow cells given the
 shoulder, each with its best wrists) and, for each elbow and wrist the pose misplaces (PCK@0.1,
 the table's rule), the rank of the first candidate cell of that part within the threshold of
 the truth: 0 = the next-best placement the model allows, -1 = none of them. What a prior over
@@ -22,15 +22,15 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # the source tree
 
-from pose4d_ros.core.dpm.infer import (  # noqa: E402
+from pose4d_ros.core.dpm.dp import (  # noqa: E402
     LIMB_CANDIDATES,
-    Detector,
     backtrack,
     best_roots,
     limb_candidates,
     model_arrays,
     score_level,
 )
+from pose4d_ros.core.dpm.infer import Detector  # noqa: E402
 from pose4d_ros.core.dpm.model import load_model  # noqa: E402
 from pose4d_ros.core.pipeline import ForegroundStage  # noqa: E402
 from pose4d_ros.core.threads import set_blas_threads  # noqa: E402

@@ -31,14 +31,13 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 from lspet_diagnose import labelled_score  # noqa: E402
 
-from pose4d_ros.core.dpm.infer import (  # noqa: E402
-    Detector,
-    SearchPlan,
+from pose4d_ros.core.dpm.dp import (  # noqa: E402
     backtrack,
     best_roots,
     model_arrays,
     score_level,
 )
+from pose4d_ros.core.dpm.infer import Detector, SearchPlan  # noqa: E402
 from pose4d_ros.core.dpm.model import load_model  # noqa: E402
 from pose4d_ros.core.dpm.negatives import build_negatives  # noqa: E402
 from pose4d_ros.core.dpm.samples import (  # noqa: E402

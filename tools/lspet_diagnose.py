@@ -32,7 +32,8 @@ from pathlib import Path
 
 import numpy as np
 
-from pose4d_ros.core.dpm.infer import Detector, SearchPlan, model_arrays, score_level
+from pose4d_ros.core.dpm.dp import model_arrays, score_level
+from pose4d_ros.core.dpm.infer import Detector, SearchPlan
 from pose4d_ros.core.dpm.model import PartModel, load_model
 from pose4d_ros.core.dpm.samples import TrainConfig, mirror_index, person_scale
 from pose4d_ros.core.files import write_json

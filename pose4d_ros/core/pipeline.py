@@ -99,15 +99,17 @@ class ForegroundStage:
     """
 
     HOLD_FRAMES = 2
+    TEMPORAL = True  # the default of `temporal` (and of the foreground node's parameter)
 
-    def __init__(self, config: ForegroundConfig | None = None, *, temporal: bool = True) -> None:
+    def __init__(self, config: ForegroundConfig | None = None, *,
+                 temporal: bool = TEMPORAL) -> None:
         self.configure(config, temporal=temporal)
         self.previous: ForegroundResult | None = None
         self.held = 0
         self.previous_people: list[ForegroundResult] = []
         self.held_people = 0
 
-    def configure(self, config: ForegroundConfig | None = None, *, temporal: bool = True
+    def configure(self, config: ForegroundConfig | None = None, *, temporal: bool = TEMPORAL
                   ) -> None:
         """New settings (as in the constructor), used from the next frame on."""
         self.config = config or ForegroundConfig()
@@ -189,8 +191,10 @@ class DetectorStage:
     min_confidence : parts less confident than this are reported MISSING.
     """
 
+    MIN_CONFIDENCE = 0.0  # the default of `min_confidence` (and of the detector node's)
+
     def __init__(self, model: PartModel, *, search: SearchConfig | None = None,
-                 scale: ScaleConfig | None = None, min_confidence: float = 0.0) -> None:
+                 scale: ScaleConfig | None = None, min_confidence: float = MIN_CONFIDENCE) -> None:
         self.model = model
         self.detector = Detector(model, search)
         self.person_scale = PersonScale(scale)
@@ -199,7 +203,7 @@ class DetectorStage:
         self.configure(search=search, scale=scale, min_confidence=min_confidence)
 
     def configure(self, *, search: SearchConfig | None = None, scale: ScaleConfig | None = None,
-                  min_confidence: float = 0.0) -> None:
+                  min_confidence: float = MIN_CONFIDENCE) -> None:
         """New settings (as in the constructor), used from the next frame on (new person scale
         settings start the choice of scale anew)."""
         if not 0.0 <= min_confidence <= 1.0:
@@ -305,9 +309,11 @@ class TrackerStage:
     depth_std_m : standard deviation put on a tracked part's depth in its covariance, metres.
     """
 
+    DEPTH_STD_M = 0.05  # the default of `depth_std_m` (and of the tracker node's)
+
     def __init__(self, *, kind: str = 'slqe', slqe: SlqeConfig | None = None,
                  cv: CvConfig | None = None, tree: PartTree | None = None,
-                 depth_std_m: float = 0.05) -> None:
+                 depth_std_m: float = DEPTH_STD_M) -> None:
         if kind not in ('slqe', 'cv'):
             raise ValueError(f"tracker kind must be 'slqe' or 'cv', got {kind!r}")
         self.kind = kind
@@ -317,7 +323,7 @@ class TrackerStage:
         self._use(tree or PARTS_10)
 
     def configure(self, *, slqe: SlqeConfig | None = None, cv: CvConfig | None = None,
-                  depth_std_m: float = 0.05) -> None:
+                  depth_std_m: float = DEPTH_STD_M) -> None:
         """New settings (as in the constructor), used from the next frame on; the track goes
         on under them."""
         if not depth_std_m >= 0:
@@ -413,16 +419,19 @@ class IkStage:
     use_depth : choose the swivel angle with the depth image (else the joint-limit prior).
     """
 
+    LEARN = True  # the defaults of `learn` and `use_depth` (and of the ik node's)
+    USE_DEPTH = True
+
     def __init__(self, config: IkConfig | None = None, *,
-                 lengths: Mapping[str, tuple[float, float]] | None = None, learn: bool = True,
-                 use_depth: bool = True) -> None:
+                 lengths: Mapping[str, tuple[float, float]] | None = None, learn: bool = LEARN,
+                 use_depth: bool = USE_DEPTH) -> None:
         self.config = config or IkConfig()
         self.use_depth = use_depth
         self.track_id: int | None = None
         self.configure(lengths=lengths, learn=learn)
 
     def configure(self, *, lengths: Mapping[str, tuple[float, float]] | None = None,
-                  learn: bool = True) -> None:
+                  learn: bool = LEARN) -> None:
         """New settings (as in the constructor), used from the next frame on; new `lengths`
         restart the learning from them."""
         defaults = dict(lengths) if lengths is not None else None

@@ -20,11 +20,11 @@ from pose4d_ros.core.camera import Intrinsics, cad60_intrinsics, depth_to_metres
 from pose4d_ros.core.kinematics import (
     IkConfig,
     IkFlag,
-    LimbLengths,
     body_frame,
     infer_middle_joints,
     middle_joint_circle,
 )
+from pose4d_ros.core.limb_lengths import LimbLengths
 from pose4d_ros.core.skeleton import LIMBS, PARTS_10
 from pose4d_ros.datasets.utkinect import UTKINECT_JOINTS
 from pose4d_ros.evaluation.tracking import Segment, part_indices, segment_rng

@@ -24,7 +24,7 @@ Parameters (config/detector.yaml)
     detector.model, detector.n_levels, detector.margin, detector.person_scales,
     detector.scale_warm_up_frames, detector.scale_probe_every, detector.min_confidence,
     detector.max_people
-    (a part's depth look-up is the model's: `core.pipeline.lift_parts`)
+    (a part's depth look-up is the model's: `core.lifting.lift_parts`)
 """
 
 from __future__ import annotations
@@ -96,7 +96,8 @@ PARAMS = (
     Param('detector.scale_probe_every', _C.probe_every, 'After the warm-up, a neighbouring '
           'person scale is also searched every this many frames (0 = never).',
           range=(0, 100000), live=True),
-    Param('detector.min_confidence', 0.0, 'Parts less confident than this are MISSING.',
+    Param('detector.min_confidence', DetectorStage.MIN_CONFIDENCE,
+          'Parts less confident than this are MISSING.',
           range=(0.0, 1.0), live=True),
     Param('detector.max_people', TrackingConfig.max_people, 'People searched per frame at '
           'most (the best regions of the mask first); more in view are counted on /diagnostics '

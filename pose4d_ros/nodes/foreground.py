@@ -70,7 +70,8 @@ PARAMS = (
           range=(0.1, 20.0), live=True),
     Param('foreground.floor_remove', _F.floor_remove, 'Fit the floor plane (RANSAC) and drop '
           'it before MSER.', live=True),
-    Param('foreground.temporal', True, "Prefer regions overlapping the previous frame's "
+    Param('foreground.temporal', ForegroundStage.TEMPORAL,
+          "Prefer regions overlapping the previous frame's "
           'person and reuse its floor plane.', live=True),
     Param('foreground.slop_s', 0.0, 'Largest stamp difference between colour and depth, '
           'seconds (0 = the same stamp).', range=(0.0, 1.0),

@@ -69,10 +69,11 @@ def _frame_prefix(value: str) -> str | None:
 
 _ARM, _LEG = DEFAULT_LIMB_LENGTHS_M['left_arm'], DEFAULT_LIMB_LENGTHS_M['left_leg']
 PARAMS = (
-    Param('ik.use_depth', True, 'Choose the elbow/knee swivel with the depth image '
+    Param('ik.use_depth', IkStage.USE_DEPTH, 'Choose the elbow/knee swivel with the depth image '
           '(pose4d/foreground/depth); false = joint-limit prior only, no depth subscription.',
           restart='it decides at start-up whether depth is subscribed to'),
-    Param('ik.learn_lengths', True, "Learn each track's bone lengths from the observed reach; "
+    Param('ik.learn_lengths', IkStage.LEARN,
+          "Learn each track's bone lengths from the observed reach; "
           'false = the fixed lengths below.', live=True),
     Param('ik.upper_arm_length_m', _ARM[0], 'Shoulder-elbow length, metres.',
           range=(0.05, 1.0), live=True),

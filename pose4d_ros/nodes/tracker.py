@@ -66,7 +66,8 @@ PARAMS = (
     Param('tracker.max_unseen_s', TrackingConfig.max_unseen_s, 'A person unseen this long '
           'ends their track (till then it is predicted), seconds.', range=(0.01, 60.0),
           live=True),
-    Param('tracker.depth_std_m', 0.05, "Standard deviation of a tracked part's depth in its "
+    Param('tracker.depth_std_m', TrackerStage.DEPTH_STD_M,
+          "Standard deviation of a tracked part's depth in its "
           'covariance, metres.', range=(0.0, 10.0), live=True),
 )
 

@@ -218,6 +218,44 @@ def random_scene(rng: np.random.Generator, intrinsics: Intrinsics, *,
     person_zone : room-frame (x0, x1, y0, y1) metres kept free for the person.
     """
     mb = tex.MaterialBuilder()
+    cam_h, room_to_cam = _random_camera(rng)
+    back = float(rng.uniform(3.7, 5.5)) + max(person_zone[3] - PERSON_ZONE[3], 0.0)
+    xl = -float(rng.uniform(1.7, 3.0))
+    xr = float(rng.uniform(1.7, 3.0))
+    ceil = float(rng.uniform(2.5, 2.9))
+    boxes = _room_shell(rng, mb, back, xl, xr, ceil)
+    taken: list[tuple[float, float, float, float]] = []  # furniture footprints
+    _wall_decor(rng, mb, back, xl, xr, boxes, taken)
+    for _ in range(int(rng.integers(2, 6))):
+        kind = str(rng.choice(['table', 'cabinet', 'shelf', 'chair', 'sofa', 'counter']))
+        for _attempt in range(12):
+            new = _furniture(rng, mb, kind, back, xl, xr)
+            if new is None:
+                break
+            rect, parts = new
+            if not _overlaps(rect, taken) and not _overlaps(rect, [person_zone], 0.0):
+                taken.append(rect)
+                boxes.extend(parts)
+                break
+    if rng.random() < occluder_prob:
+        kind = str(rng.choice(['table', 'chair', 'cabinet', 'boxes']))
+        x = float(rng.uniform(-0.45, 0.45))
+        y = float(rng.uniform(1.2, 1.65))
+        top = min(0.85, cam_h - 0.3) * float(rng.uniform(0.75, 1.0))
+        boxes.extend(_occluder(rng, mb, kind, x, y, top))
+    el = np.deg2rad(rng.uniform(25.0, 70.0))
+    az = np.deg2rad(rng.uniform(-80.0, 80.0) + (180.0 if rng.random() < 0.15 else 0.0))
+    light_room = np.array([np.sin(az) * np.cos(el), -np.cos(az) * np.cos(el), np.sin(el)])
+    warm = float(rng.uniform(-1.0, 1.0))
+    colour = np.array([1.0 + 0.08 * warm, 1.0, 1.0 - 0.12 * warm])
+    colour *= float(rng.uniform(0.85, 1.1))
+    return _build_scene(intrinsics, cam_h, room_to_cam, tuple(boxes), mb.build(), light_room,
+                        float(rng.uniform(0.3, 0.55)), float(rng.uniform(0.45, 0.75)), colour,
+                        floor_index=0)
+
+
+def _random_camera(rng: np.random.Generator) -> tuple[float, NDArray[np.float64]]:
+    """The camera's height, metres, and its room-to-optical rotation (see `random_scene`)."""
     cam_h = float(rng.uniform(0.85, 1.35))
     # aimed at 1.0-1.1 m high, 3 m away: a whole person fits from about 2.5 m on, and closer
     # people lose their feet rather than their heads
@@ -225,14 +263,14 @@ def random_scene(rng: np.random.Generator, intrinsics: Intrinsics, *,
     pitch = np.arctan2(cam_h - aim, 3.0) + np.deg2rad(rng.uniform(-1.5, 1.5))
     yaw = np.deg2rad(rng.uniform(-6.0, 6.0))
     roll = np.deg2rad(rng.normal(0.0, 0.8))
-    room_to_cam = camera_rotation(pitch, yaw, roll)
+    return cam_h, camera_rotation(pitch, yaw, roll)
 
-    back = float(rng.uniform(3.7, 5.5)) + max(person_zone[3] - PERSON_ZONE[3], 0.0)
-    xl = -float(rng.uniform(1.7, 3.0))
-    xr = float(rng.uniform(1.7, 3.0))
-    ceil = float(rng.uniform(2.5, 2.9))
+
+def _room_shell(rng: np.random.Generator, mb: tex.MaterialBuilder, back: float, xl: float,
+                xr: float, ceil: float) -> list[Box]:
+    """Floor, walls, ceiling and skirting of a room `back` metres deep between `xl` and `xr`;
+    the floor first (`Scene.floor_index` 0)."""
     t = 0.05  # half thickness of walls
-
     tile, scale, name = tex.floor_tile(rng)
     m_floor = mb.add(f'floor/{name}', tile, scale)
     tile, scale, name = tex.wall_tile(rng)
@@ -244,10 +282,9 @@ def random_scene(rng: np.random.Generator, intrinsics: Intrinsics, *,
     m_ceiling = mb.add('ceiling', tex.tint(tex.grain(rng, 'moon'), (0.9, 0.9, 0.88), 0.02),
                        1.0)
     m_skirting = mb.add('skirting', *tex.furniture_tile(rng, 'laminate')[:2])
-
     cy = back / 2 - 0.5
     hy = back / 2 + 1.0
-    boxes: list[Box] = [
+    return [
         Box((0.0, cy, -t), (8.0, hy, t), m_floor, kind='floor'),
         Box((0.0, back + t, ceil / 2), (8.0, t, ceil / 2 + 0.1), m_accent, kind='wall'),
         Box((xl - t, cy, ceil / 2), (t, hy, ceil / 2 + 0.1), m_wall, kind='wall'),
@@ -258,9 +295,12 @@ def random_scene(rng: np.random.Generator, intrinsics: Intrinsics, *,
         Box((xl + 0.008, cy, 0.045), (0.008, hy, 0.045), m_skirting, kind='decor'),
         Box((xr - 0.008, cy, 0.045), (0.008, hy, 0.045), m_skirting, kind='decor'),
     ]
-    taken: list[tuple[float, float, float, float]] = []  # furniture footprints
 
-    # a door and some pictures on the walls
+
+def _wall_decor(rng: np.random.Generator, mb: tex.MaterialBuilder, back: float, xl: float,
+                xr: float, boxes: list[Box], taken: list[tuple[float, float, float, float]]
+                ) -> None:
+    """A door (its footprint kept free in `taken`) and some pictures, added to `boxes`."""
     if rng.random() < 0.5:
         tile, scale, _ = tex.furniture_tile(rng, str(rng.choice(['wood', 'laminate'])))
         m_door = mb.add('door', tile, scale)
@@ -283,36 +323,6 @@ def random_scene(rng: np.random.Generator, intrinsics: Intrinsics, *,
             sign = 1.0 if side == xl else -1.0
             boxes.append(Box((side + sign * 0.012, y, z), (w / 2, 0.012, hgt / 2), m_pic,
                              yaw=float(sign * np.pi / 2), kind='decor'))
-
-    # furniture along the walls
-    for _ in range(int(rng.integers(2, 6))):
-        kind = str(rng.choice(['table', 'cabinet', 'shelf', 'chair', 'sofa', 'counter']))
-        for _attempt in range(12):
-            new = _furniture(rng, mb, kind, back, xl, xr)
-            if new is None:
-                break
-            rect, parts = new
-            if not _overlaps(rect, taken) and not _overlaps(rect, [person_zone], 0.0):
-                taken.append(rect)
-                boxes.extend(parts)
-                break
-
-    if rng.random() < occluder_prob:
-        kind = str(rng.choice(['table', 'chair', 'cabinet', 'boxes']))
-        x = float(rng.uniform(-0.45, 0.45))
-        y = float(rng.uniform(1.2, 1.65))
-        top = min(0.85, cam_h - 0.3) * float(rng.uniform(0.75, 1.0))
-        boxes.extend(_occluder(rng, mb, kind, x, y, top))
-
-    el = np.deg2rad(rng.uniform(25.0, 70.0))
-    az = np.deg2rad(rng.uniform(-80.0, 80.0) + (180.0 if rng.random() < 0.15 else 0.0))
-    light_room = np.array([np.sin(az) * np.cos(el), -np.cos(az) * np.cos(el), np.sin(el)])
-    warm = float(rng.uniform(-1.0, 1.0))
-    colour = np.array([1.0 + 0.08 * warm, 1.0, 1.0 - 0.12 * warm])
-    colour *= float(rng.uniform(0.85, 1.1))
-    return _build_scene(intrinsics, cam_h, room_to_cam, tuple(boxes), mb.build(), light_room,
-                        float(rng.uniform(0.3, 0.55)), float(rng.uniform(0.45, 0.75)), colour,
-                        floor_index=0)
 
 
 def table(center, half_top, height, mat, yaw=0.0, kind='furniture') -> list[Box]:

@@ -9,17 +9,16 @@ from collections.abc import Iterable, Iterator, Sequence
 import numpy as np
 from numpy.typing import NDArray
 
-from pose4d_ros.core.dpm.dt import NEG
-from pose4d_ros.core.dpm.infer import (
-    Detector,
+from pose4d_ros.core.dpm.dp import (
     LevelResult,
-    SearchPlan,
     backtrack,
     best_roots,
     model_arrays,
     score_level,
     tree_dp,
 )
+from pose4d_ros.core.dpm.dt import NEG
+from pose4d_ros.core.dpm.infer import Detector, SearchPlan
 from pose4d_ros.core.dpm.model import PartModel
 from pose4d_ros.core.dpm.samples import (
     Negative,

@@ -426,10 +426,7 @@ def train(samples: Sequence, negatives: Sequence[Negative], cfg: TrainConfig, *,
     t_start = time.perf_counter()
     say = log or (lambda _m: None)
     rng = np.random.default_rng(cfg.seed)
-    tree = cfg.tree
-    names = tree.names
-    fs = cfg.filter_cells
-    dim = fs * fs * N_FEATURES * (2 if cfg.channels == 'rgbd' else 1)
+    dim = cfg.filter_cells ** 2 * N_FEATURES * (2 if cfg.channels == 'rgbd' else 1)
     report = TrainReport(n_samples=len(samples), n_negative_images=len(negatives))
     if cfg.channels == 'rgbd' and not any(s.depth_m is not None for s in samples):
         raise ValueError('an rgbd model needs samples with depth (the source has none); '
@@ -437,8 +434,43 @@ def train(samples: Sequence, negatives: Sequence[Negative], cfg: TrainConfig, *,
     negs = list(negatives) if cfg.background_negatives else []
     if cfg.background_negatives and not negs:
         raise ValueError('no background images to mine negatives from')
+    pos, sc_arr = _positives(samples, cfg, progress)
+    report.n_positives = len(pos)
+    scale_range = scale_span(sc_arr, 1.0)
+    say(f'{len(pos)} positives from {len(samples)} frames; person scale '
+        f'{np.median(sc_arr):.1f} px (trained {scale_range[0]:.1f}-{scale_range[1]:.1f} px, '
+        'searched without depth {:.1f}-{:.1f} px)'.format(*scale_span(sc_arr,
+                                                                     cfg.search_percent)))
+    types, anchors, spring_var = _part_types(pos, cfg.tree, cfg.n_types, rng)
+    lay = Layout(len(cfg.tree), cfg.n_types, dim)
+    model, white = _lda_start(pos, types, samples, negs, lay, cfg, anchors, spring_var,
+                              scale_range, rng, say)
+    model = _structural_svm(model, pos, types, samples, negs, lay, cfg, white, anchors,
+                            scale_range, report, say, progress)
+    # 5. calibration on training frames (a deterministic subset), searched as at run time
+    model = replace(model, search_range_px=scale_span(sc_arr, cfg.search_percent))
+    usable = [s for s in samples if part_joints(s, cfg.tree.names)[1].sum() >= 2]
+    if len(usable) > cfg.calibration_samples:
+        idx = np.sort(rng.choice(len(usable), cfg.calibration_samples, replace=False))
+        usable = [usable[i] for i in idx]
+    model = calibrate(model, usable, use_depth=cfg.channels == 'rgbd', progress=progress)
+    report.seconds = time.perf_counter() - t_start
+    meta = dict(metadata or {})
+    meta.update({
+        'train_config': json.dumps(asdict(cfg), sort_keys=True),
+        'positives': str(report.n_positives), 'frames': str(report.n_samples),
+        'negative_images': str(len(negs)),
+        'rounds': json.dumps(report.rounds, sort_keys=True),
+        'train_seconds': f'{report.seconds:.1f}',
+    })
+    return replace(model, metadata=meta), report
 
-    # 1. positives at the canonical scale (+ mirror images)
+
+def _positives(samples: Sequence, cfg: TrainConfig, progress: Progress | None
+               ) -> tuple[list[Positive], NDArray[np.float64]]:
+    """1. The positives at the canonical scale (+ mirror images and jittered copies), and the
+    person scale of each frame they come from, pixels."""
+    tree = cfg.tree
     pos: list[Positive] = []
     scales = []
     jitter_rng = np.random.default_rng(cfg.seed + 7919)   # apart: jitter 0 keeps `rng` as was
@@ -446,7 +478,7 @@ def train(samples: Sequence, negatives: Sequence[Negative], cfg: TrainConfig, *,
     if progress is not None:
         it = progress(it, 'positives', len(samples))
     for idx, s in it:
-        sc = positive_scale(s, names, cfg)
+        sc = positive_scale(s, tree.names, cfg)
         if not sc > 2:
             continue
         scales.append(sc)
@@ -466,17 +498,14 @@ def train(samples: Sequence, negatives: Sequence[Negative], cfg: TrainConfig, *,
     need = max(2 * cfg.n_types, 10)
     if len(pos) < need:
         raise ValueError(f'only {len(pos)} usable positives (frames with every one of the '
-                         f'{len(names)} parts labelled); need at least {need}')
-    report.n_positives = len(pos)
-    sc_arr = np.asarray(scales)
-    scale_range = scale_span(sc_arr, 1.0)
-    say(f'{len(pos)} positives from {len(samples)} frames; person scale '
-        f'{np.median(sc_arr):.1f} px (trained {scale_range[0]:.1f}-{scale_range[1]:.1f} px, '
-        'searched without depth {:.1f}-{:.1f} px)'.format(*scale_span(sc_arr,
-                                                                     cfg.search_percent)))
+                         f'{len(tree)} parts labelled); need at least {need}')
+    return pos, np.asarray(scales)
 
-    # 2. part types by k-means on offsets; anchors from the quantised cells
-    k = cfg.n_types
+
+def _part_types(pos: list[Positive], tree: PartTree, k: int, rng: np.random.Generator
+                ) -> tuple[NDArray[np.int64], NDArray[np.int32], NDArray[np.float64]]:
+    """2. Part types by k-means on offsets (N, P), -1 = latent; the anchors (P, K, 2) (dx, dy
+    cells) and spring variances (P, K, 2) from the quantised cells."""
     types = np.zeros((len(pos), len(tree)), np.int64)
     offs = np.stack([p.offsets for p in pos])          # (N, P, 2)
     cells = np.stack([p.cells for p in pos])           # (N, P, 2) row, col
@@ -501,15 +530,22 @@ def train(samples: Sequence, negatives: Sequence[Negative], cfg: TrainConfig, *,
                 mean = d[sel].mean(0)
                 anchors[c, t] = (int(np.rint(mean[1])), int(np.rint(mean[0])))
                 spring_var[c, t] = (d[sel, 1].var() + 0.25, d[sel, 0].var() + 0.25)
-    lay = Layout(len(tree), k, dim)
+    return types, anchors, spring_var
 
-    # 3. per-part templates (LDA) against random windows -> the first model w0
+
+def _lda_start(pos: list[Positive], types: NDArray[np.int64], samples: Sequence,
+               negs: list[Negative], lay: Layout, cfg: TrainConfig, anchors: NDArray[np.int32],
+               spring_var: NDArray[np.float64], scale_range: tuple[float, float],
+               rng: np.random.Generator, say: Log) -> tuple[PartModel, Whitening]:
+    """3. Per-part templates (LDA) against random windows of positives' and background levels:
+    the first model w0 and the whitening."""
     want = 20000
+    fs = cfg.filter_cells
     sources: list[Level] = []
     sub = rng.choice(len(pos), min(len(pos), 400), replace=False)
     for i in np.sort(sub):
         p = pos[i]
-        color, depth, mask, _ = frame_of(samples[p.sample], names, cfg, p.flipped)
+        color, depth, mask, _ = frame_of(samples[p.sample], cfg.tree.names, cfg, p.flipped)
         sources.append(level_of(color, depth, mask, p.box, p.level_scale, cfg))
     lo, hi = scale_range
     for n in (negs[j] for j in np.sort(rng.choice(len(negs), min(len(negs), 400),
@@ -519,18 +555,29 @@ def train(samples: Sequence, negatives: Sequence[Negative], cfg: TrainConfig, *,
         sources.append(level_of(n.color, n.depth_m, None, (0, 0, w_, h), f, cfg))
     windows = _random_windows(sources, fs, max(want // max(len(sources), 1), 4), rng)
     del sources
-    model, white = _lda_model(pos, types, windows, lay, tree, cfg, anchors, spring_var,
+    model, white = _lda_model(pos, types, windows, lay, cfg.tree, cfg, anchors, spring_var,
                               scale_range)
     say(f'part templates by LDA on {len(windows)} random windows')
+    return model, white
 
-    # 4. structural SVM with mining
+
+def _structural_svm(model: PartModel, pos: list[Positive], types: NDArray[np.int64],
+                    samples: Sequence, negs: list[Negative], lay: Layout, cfg: TrainConfig,
+                    white: Whitening, anchors: NDArray[np.int32],
+                    scale_range: tuple[float, float], report: TrainReport, say: Log,
+                    progress: Progress | None) -> PartModel:
+    """4. The structural SVM of eq. (5), regularised towards w0 = the LDA model, over
+    `cfg.mining_rounds` rounds of relabelling and hard-negative mining; each round's figures
+    go to `report.rounds`."""
+    tree, k, fs = cfg.tree, cfg.n_types, cfg.filter_cells
+    par = np.asarray(tree.parents)
     cap = len(pos) + cfg.cache_limit
-    ex = Examples(cap, lay.n_parts, dim)
+    ex = Examples(cap, lay.n_parts, lay.dim)
     for i, p in enumerate(pos):
         # a latent type starts as type 0 (the first relabelling replaces it)
         parts = np.concatenate([np.maximum(types[i], 0)[:, None], p.cells], axis=1)
         blocks = pose_blocks(np.zeros((0, 0, 0), np.float32), parts, par, anchors, lay, fs,
-                              cfg.bias_feature, patches=p.patches)
+                             cfg.bias_feature, patches=p.patches)
         ex.add(whitened(blocks, white), 1.0, 1.0, -1, ('pos', i))
     n_pos = ex.n
     # the regulariser is |w - w0|^2 with w0 = the LDA model: the SVM corrects the whitened-HOG
@@ -560,29 +607,14 @@ def train(samples: Sequence, negatives: Sequence[Negative], cfg: TrainConfig, *,
         added_bg = 0
         if negs:
             added_bg = mine_background(model, negs, ex, lay, cfg, white,
-                                        max((cap - ex.n) // 2, 0), progress, rnd)
+                                       max((cap - ex.n) // 2, 0), progress, rnd)
         added_st = mine_structural(model, pos, samples, w, ex, lay, cfg, white, cap - ex.n,
                                    progress, rnd)
         t1 = time.perf_counter()
         arr = ex.arrays()
-        alpha = ex.alpha[:ex.n]
-        epochs = 0
-        gap = np.inf
-        obj = np.nan
-        marg = np.zeros(ex.n)
         cost = np.where(np.arange(ex.n) < n_pos, cfg.svm_c * cfg.positive_weight, cfg.svm_c)
-        while epochs < cfg.qp_epochs:
-            dcd(w, *arr[:9], alpha, cost, lb_idx, lb_val, beta, 10,
-                 cfg.seed + 1000 * rnd + epochs)
-            epochs += 10
-            marg = margins(w, *arr[:7], arr[8])
-            loss = float(cost @ np.maximum(0.0, arr[7] - marg))
-            u = w - w0
-            obj = 0.5 * float(u @ u) + loss
-            dual = float(alpha @ arr[7] + beta @ lb_val) - 0.5 * float(u @ u) - float(w0 @ u)
-            gap = (obj - dual) / max(abs(obj), 1e-12)
-            if gap < cfg.qp_tol:
-                break
+        epochs, gap, obj, marg = _solve_qp(w, w0, arr, ex.alpha[:ex.n], cost, lb_idx, lb_val,
+                                           beta, cfg, rnd)
         ok = marg >= arr[7] - 1e-9
         kind = np.where(np.arange(ex.n) < n_pos, 0, np.where(arr[8] >= 0, 2, 1))
         t2 = time.perf_counter()
@@ -598,21 +630,30 @@ def train(samples: Sequence, negatives: Sequence[Negative], cfg: TrainConfig, *,
         report.rounds.append(info)
         say(' '.join(f'{a}={b}' for a, b in info.items()))
         model = model_from_w(w, lay, tree, cfg, anchors, scale_range, white)
+    return model
 
-    # 5. calibration on training frames (a deterministic subset), searched as at run time
-    model = replace(model, search_range_px=scale_span(sc_arr, cfg.search_percent))
-    usable = [s for s in samples if part_joints(s, names)[1].sum() >= 2]
-    if len(usable) > cfg.calibration_samples:
-        idx = np.sort(rng.choice(len(usable), cfg.calibration_samples, replace=False))
-        usable = [usable[i] for i in idx]
-    model = calibrate(model, usable, use_depth=cfg.channels == 'rgbd', progress=progress)
-    report.seconds = time.perf_counter() - t_start
-    meta = dict(metadata or {})
-    meta.update({
-        'train_config': json.dumps(asdict(cfg), sort_keys=True),
-        'positives': str(report.n_positives), 'frames': str(report.n_samples),
-        'negative_images': str(len(negs)),
-        'rounds': json.dumps(report.rounds, sort_keys=True),
-        'train_seconds': f'{report.seconds:.1f}',
-    })
-    return replace(model, metadata=meta), report
+
+def _solve_qp(w: NDArray[np.float64], w0: NDArray[np.float64], arr: tuple,
+              alpha: NDArray[np.float64], cost: NDArray[np.float64], lb_idx: NDArray[np.int64],
+              lb_val: NDArray[np.float64], beta: NDArray[np.float64], cfg: TrainConfig,
+              rnd: int) -> tuple[int, float, float, NDArray[np.float64]]:
+    """Dual coordinate descent (`w`, `alpha`, `beta` updated in place) in steps of 10 epochs
+    until the relative duality gap is below `cfg.qp_tol` or `cfg.qp_epochs` are spent; returns
+    the epochs run, the gap, the primal objective and the margins."""
+    epochs = 0
+    gap = np.inf
+    obj = np.nan
+    marg = np.zeros(len(alpha))
+    while epochs < cfg.qp_epochs:
+        dcd(w, *arr[:9], alpha, cost, lb_idx, lb_val, beta, 10,
+            cfg.seed + 1000 * rnd + epochs)
+        epochs += 10
+        marg = margins(w, *arr[:7], arr[8])
+        loss = float(cost @ np.maximum(0.0, arr[7] - marg))
+        u = w - w0
+        obj = 0.5 * float(u @ u) + loss
+        dual = float(alpha @ arr[7] + beta @ lb_val) - 0.5 * float(u @ u) - float(w0 @ u)
+        gap = (obj - dual) / max(abs(obj), 1e-12)
+        if gap < cfg.qp_tol:
+            break
+    return epochs, gap, obj, marg
