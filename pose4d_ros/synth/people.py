@@ -119,7 +119,7 @@ def place_people(joints: Sequence[NDArray[np.float64]], scene: Scene, rng: np.ra
     (`GAP_M`, the upper end at most `VIEW_SPAN_M / (N - 1)`); a crossing video then replaces the
     nearer person's lateral place, in one random neighbouring pair, by a drift at
     `CROSS_SPEED_M_S` that puts it in line with the farther one about 35-65 % into the video,
-    where it stays for `CROSS_HOLD_S` before it walks on. A try
+    where it stays for `CROSS_HOLD_S` (at most 30 % of the video) before it walks on. A try
     costs a frame for each person whose hips leave `people_zone`, come within 0.35 m of
     furniture or 0.45 m behind an occluder, or whose body (`HALF_WIDTH_M`) leaves the view, and
     five for each pair closer than `MIN_APART_M` (or a crossing pair less than `CROSS_DEPTH_M`
@@ -164,7 +164,7 @@ def place_people(joints: Sequence[NDArray[np.float64]], scene: Scene, rng: np.ra
             i = int(rng.integers(n - 1))
             a, b = int(order[i]), int(order[i + 1])
             near, far = (a, b) if dist[a] < dist[b] else (b, a)
-            hold = rng.uniform(*CROSS_HOLD_S)
+            hold = min(rng.uniform(*CROSS_HOLD_S), 0.3 * t[-1])  # walks on in short videos
             tc = max(rng.uniform(0.35, 0.65) * t[-1] - hold / 2, 0.0)
             speed = rng.uniform(*CROSS_SPEED_M_S)
             # in line with the farther person (the same bearing from the camera) from tc for
