@@ -92,9 +92,7 @@ def companion_windows(plan: VideoPlan, motions: Sequence[TakeMotion], people: in
         subjects = {by_name[t].subject for t in used if t in by_name} | {plan.subject}
         fresh = [m for m in motions if m.name not in used]
         other_subject = [m for m in fresh if m.subject not in subjects]
-        pool = other_subject or fresh or [by_name.get(plan.take, motions[0])]
-        if not (other_subject or fresh):
-            pool = [m for m in motions if m.name in used]
+        pool = other_subject or fresh or [m for m in motions if m.name in used]
         motion = pool[int(r.integers(len(pool)))]
         free = max(len(motion.joints) - span, 0)
         starts = r.integers(0, free + 1, size=16)
