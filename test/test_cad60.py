@@ -11,6 +11,7 @@ import pytest
 from numpy.testing import assert_allclose, assert_array_equal
 
 from pose4d_ros.core.camera import cad60_intrinsics, depth_to_millimetres, project
+from pose4d_ros.core.joints import DETECTED, MISSING
 from pose4d_ros.core.skeleton import CAD60_JOINTS
 from pose4d_ros.datasets import cad60
 
@@ -271,3 +272,72 @@ def test_skeleton_shape_validation() -> None:
     with pytest.raises(ValueError, match='joints_mm has shape'):
         cad60.Skeleton(np.array([1]), np.zeros((1, 14, 3)), np.zeros((1, 15)),
                        np.zeros((1, 11, 3, 3)), np.zeros((1, 11)))
+
+
+def test_single_person_set_reads_exactly_as_before() -> None:
+    """No `<id>_p<k>.txt`: `people` stays empty and every other field is what the reader has
+    always given (the truth built from the one skeleton file, track 1)."""
+    skeleton = cad60.read_skeleton(FIXTURE / 'data1' / f'{VIDEO_ID}.txt')
+    for i, f in enumerate(cad60.read_frames(FIXTURE)):
+        assert f.people == ()
+        conf = skeleton.joint_conf[i]
+        uv = skeleton.pixels()[i]
+        t = f.truth
+        assert t.names == CAD60_JOINTS and t.track_id == 1 and t.score == 1.0
+        assert_array_equal(t.uv, uv)
+        assert_array_equal(t.xyz, skeleton.joints_optical()[i])
+        assert_array_equal(t.confidence, conf.astype(t.confidence.dtype))
+        assert_array_equal(t.source, np.where(conf > 0, DETECTED, MISSING))
+        assert f.mask is None and f.video == f'data1/{VIDEO_ID}'
+        assert f.key.endswith(f'RGB_{skeleton.frames[i]}.png')
+
+
+def _add_person(person_dir: Path, k: int, *, shift_mm: float = 700.0,
+                hidden_frame: int | None = None) -> cad60.Skeleton:
+    """Person k of the fixture's video: person 1 moved `shift_mm` to the right, all
+    confidences 0 in `hidden_frame`."""
+    s = cad60.read_skeleton(person_dir / f'{VIDEO_ID}.txt')
+    conf = np.ones_like(s.joint_conf)
+    rot_conf = np.ones_like(s.orientation_conf)
+    if hidden_frame is not None:
+        conf[hidden_frame] = 0.0
+        rot_conf[hidden_frame] = 0.0
+    other = cad60.Skeleton(s.frames, s.joints_mm + [shift_mm, 0.0, 0.0], conf,
+                           s.orientations, rot_conf)
+    cad60.write_skeleton(cad60.person_skeleton_path(person_dir, VIDEO_ID, k), other)
+    return other
+
+
+def test_several_people_read_into_frame_people(person_dir: Path) -> None:
+    p2 = _add_person(person_dir, 2, hidden_frame=1)
+    p3 = _add_person(person_dir, 3, shift_mm=-700.0)
+    video = cad60.list_videos(person_dir)[0]
+    assert [p.name for p in video.skeleton_paths()] == \
+        [f'{VIDEO_ID}.txt', f'{VIDEO_ID}_p2.txt', f'{VIDEO_ID}_p3.txt']
+    frames = list(cad60.read_frames(person_dir))
+    single = list(cad60.read_frames(FIXTURE))
+    for i, (f, g) in enumerate(zip(frames, single, strict=True)):
+        assert [p.track_id for p in f.people] == [1, 2, 3]
+        assert f.truth is f.people[0]
+        assert_array_equal(f.truth.uv, g.truth.uv)  # person 1 reads as in a one-person set
+        assert_allclose(f.people[1].uv, p2.pixels()[i])
+        assert_allclose(f.people[2].xyz, p3.joints_optical()[i])
+    # person 2 is not seen in frame 2: every joint MISSING
+    assert (frames[1].people[1].confidence == 0).all()
+    assert (frames[1].people[1].source == MISSING).all()
+    assert (frames[0].people[1].confidence == 1).all()
+
+
+def test_several_people_files_must_agree(person_dir: Path) -> None:
+    _add_person(person_dir, 3)
+    with pytest.raises(ValueError, match=r'persons \[3\]; expected 2..N without gaps'):
+        list(cad60.read_frames(person_dir))
+    cad60.person_skeleton_path(person_dir, VIDEO_ID, 3).unlink()
+    s = cad60.read_skeleton(person_dir / f'{VIDEO_ID}.txt')
+    cad60.write_skeleton(person_dir / f'{VIDEO_ID}_p2.txt', cad60.Skeleton(
+        s.frames[:1], s.joints_mm[:1], s.joint_conf[:1], s.orientations[:1],
+        s.orientation_conf[:1]))
+    with pytest.raises(ValueError, match='_p2.txt: its frame numbers differ'):
+        list(cad60.read_frames(person_dir))
+    with pytest.raises(ValueError, match='numbered from 1'):
+        cad60.person_skeleton_path(person_dir, VIDEO_ID, 0)

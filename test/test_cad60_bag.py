@@ -159,3 +159,47 @@ def test_existing_output_is_refused(tmp_path):
     (tmp_path / 'out').mkdir()
     run = _pose4d('cad60-to-bag', FIXTURE, tmp_path / 'out')
     assert run.returncode == 2 and 'exists already' in run.stderr
+
+
+@pytest.mark.parametrize('people', [1, 3])
+def test_every_persons_truth_goes_into_the_bag_and_back(tmp_path, people):
+    """A several-person set adds /cad60/skeletons (SkeletonArray, track_id = person) and reads
+    back into Frame.people; a one-person set's bag has no such topic and no people."""
+    from helpers import write_utkinect
+
+    from pose4d_ros.cli.main import main as pose4d_main
+    from pose4d_ros.datasets import sources
+
+    write_utkinect(tmp_path / 'ut', frames=40)
+    root = tmp_path / 'set'
+    assert pose4d_main(['synth', '--utkinect', str(tmp_path / 'ut'), '--out', str(root),
+                        '--takes', 's01-s02', '--frames', '2', '--people', str(people),
+                        '--quiet']) == 0
+    out = tmp_path / 'bag'
+    cad60_bag.convert(root, out)
+    info = bag.topics(out)
+    direct = list(cad60.read_frames(root))
+    if people == 1:
+        assert cad60_bag.SKELETONS_TOPIC not in info
+    else:
+        assert info[cad60_bag.SKELETONS_TOPIC].msgtype == 'pose4d_msgs/msg/SkeletonArray'
+        assert info[cad60_bag.SKELETONS_TOPIC].count == len(direct) == 4
+        msg = next(bag.deserialize(m) for m in bag.read_messages(out, [
+            cad60_bag.SKELETONS_TOPIC]))
+        assert [s.track_id for s in msg.skeletons] == [1, 2, 3]
+        assert all(s.header.stamp == msg.header.stamp for s in msg.skeletons)
+    for src in (cad60_bag.read_frames(out), sources.open_source(out)):
+        back = list(src)
+        assert len(back) == len(direct)
+        for f, g in zip(back, direct, strict=True):
+            assert f.stamp_ns == g.stamp_ns
+            assert len(f.people) == len(g.people) == (0 if people == 1 else 3)
+            assert f.truth.track_id == 1
+            assert_allclose(f.truth.uv, g.truth.uv, atol=1e-9)
+            for p, q in zip(f.people, g.people, strict=True):
+                assert p.track_id == q.track_id and p.names == q.names
+                assert_allclose(p.uv, q.uv, atol=1e-9)
+                assert_allclose(p.xyz, q.xyz, atol=1e-12)
+                assert np.array_equal(p.confidence, q.confidence)
+                assert np.array_equal(p.source, q.source)
+            assert np.array_equal(f.mask, g.mask)

@@ -7,6 +7,7 @@ real UTKinect takes runs when that data is present.
 
 from __future__ import annotations
 
+import hashlib
 import json
 from pathlib import Path
 
@@ -19,6 +20,7 @@ from pose4d_ros.cli.main import main as pose4d_main
 from pose4d_ros.core.camera import cad60_intrinsics, project
 from pose4d_ros.core.skeleton import CAD60_JOINTS
 from pose4d_ros.datasets import cad60
+from pose4d_ros.synth import people as synth_people
 from pose4d_ros.synth import render as synth
 from pose4d_ros.synth import scene as synth_scene
 from pose4d_ros.synth import video as synth_video
@@ -443,3 +445,165 @@ def test_capsule_depth() -> None:
     assert np.isnan(depth[5, 5])
     width = np.isfinite(depth[int(round(k.cy))]).sum()
     assert abs(width - 2 * k.fx * 0.05 / 2.0) <= 2
+
+
+# --------------------------------------------------------------------------------------------
+# Several people (`pose4d synth --people N`)
+# --------------------------------------------------------------------------------------------
+
+def _set_digest(root: Path) -> str:
+    """sha256 over every file of a synthetic set but synth.json (which names its paths)."""
+    h = hashlib.sha256()
+    for p in sorted(root.rglob('*')):
+        if p.is_file() and p.name != 'synth.json':
+            h.update(str(p.relative_to(root)).encode())
+            h.update(p.read_bytes())
+    return h.hexdigest()
+
+
+# The set below as the renderer wrote it before several people existed (main at ee88e58),
+# computed there: one person's output must stay byte for byte what it was.
+ONE_PERSON_DIGEST = '6f97d0342a6e3d2d4a0e6d86eec5d0710066c11ab4a32b525e40152b009a0770'
+
+
+@pytest.mark.parametrize('extra', [[], ['--people', '1']])
+def test_one_person_output_is_byte_for_byte_as_before(tmp_path: Path, extra: list[str]) -> None:
+    write_utkinect(tmp_path / 'ut')
+    out = tmp_path / 'set'
+    assert pose4d_main(['synth', '--utkinect', str(tmp_path / 'ut'), '--out', str(out),
+                        '--seed', '4', '--takes', 's01-s02', '--frames', '3', '--stride', '5',
+                        '--quiet', *extra]) == 0
+    assert not list(out.rglob('*_p*.txt')) and not list(out.rglob('People_*.png'))
+    info = json.loads((out / 'synth.json').read_text())
+    assert 'people' not in info and 'people' not in info['videos'][0]
+    assert _set_digest(out) == ONE_PERSON_DIGEST
+
+
+def _poses_side_by_side() -> list[np.ndarray]:
+    """Two people facing the camera: person 1 at 2.5 m, person 2 at 3.5 m half hidden behind."""
+    return [standing_pose(z=2.5, arm=0.4), standing_pose(z=3.5, arm=1.2) + [0.25, 0.0, 0.0]]
+
+
+def test_render_people_shows_the_nearest_surface_in_depth_and_colour() -> None:
+    poses = _poses_side_by_side()
+    bodies = [synth.random_body(np.random.default_rng(s)) for s in (1, 2)]
+    both = synth.render_people(poses, bodies, None, K, kinect_noise=False)
+    alone = [synth.render(p, b, None, K, kinect_noise=False) for p, b in zip(poses, bodies,
+                                                                             strict=True)]
+    d1, d2 = (a.depth_mm.astype(float) for a in alone)
+    d1[d1 == 0], d2[d2 == 0] = np.inf, np.inf
+    overlap = np.isfinite(d1) & np.isfinite(d2)
+    assert overlap.sum() > 500  # the test is about the overlap: there must be one
+    # the ray caster keeps the nearest surface over both bodies: person 1 (nearer) wins there
+    expected = np.where(d1 <= d2, 1, 2) * (np.isfinite(d1) | np.isfinite(d2))
+    assert_array_equal(both.labels, expected)
+    assert_array_equal(both.mask, expected > 0)
+    assert (both.labels[overlap] == 1).all()
+    assert_array_equal(both.depth_mm, np.where(np.isfinite(np.minimum(d1, d2)),
+                                               np.minimum(d1, d2), 0).astype(np.uint16))
+    # colour: each pixel is its own person's, as that person renders alone
+    for k, a in enumerate(alone, start=1):
+        assert_array_equal(both.rgb[both.labels == k], a.rgb[both.labels == k])
+    assert_allclose(both.joints[0], alone[0].joints)
+    assert_array_equal(both.visible_px(), [(expected == 1).sum(), (expected == 2).sum()])
+    # one person through render_people is render itself
+    one = synth.render_people(poses[:1], bodies[:1], None, K, kinect_noise=True,
+                              rng=np.random.default_rng(5))
+    ref = synth.render(poses[0], bodies[0], None, K, rng=np.random.default_rng(5))
+    assert_array_equal(one.rgb, ref.rgb)
+    assert_array_equal(one.depth_mm, ref.depth_mm)
+
+
+@pytest.mark.parametrize('people', [2, 3])
+def test_pose4d_synth_people_writes_every_persons_truth(tmp_path: Path, people: int) -> None:
+    ut = tmp_path / 'ut'
+    write_utkinect(ut)
+    out = tmp_path / 'set'
+    assert pose4d_main(['synth', '--utkinect', str(ut), '--out', str(out), '--seed', '2',
+                        '--takes', 's01-s02', '--frames', '4', '--stride', '3', '--people',
+                        str(people), '--crossing', '0.5', '--no-noise', '--quiet']) == 0
+    info = json.loads((out / 'synth.json').read_text())
+    assert info['people'] == people and info['crossing'] == 0.5
+    assert [v['crossing'] for v in info['videos']].count(True) == 1  # round(0.5 x 2 videos)
+    videos = cad60.list_videos(out)
+    assert len(videos) == 2
+    for video, record in zip(videos, info['videos'], strict=True):
+        paths = video.skeleton_paths()
+        assert [p.name for p in paths] == [f'{video.video_id}.txt'] + [
+            f'{video.video_id}_p{k}.txt' for k in range(2, people + 1)]
+        # other takes first: person 2 is the other subject's take
+        takes = [p['take'] for p in record['people']]
+        assert takes[0] == f's0{video.person[-1]}_e01' and takes[1] != takes[0]
+        assert len({p['stature_m'] for p in record['people']}) == people  # other bodies
+        distances = [p['distance_m'] for p in record['people']]
+        assert len(set(distances)) == people
+        frames = list(cad60.read_frames(video.person_dir, videos=[video.video_id]))
+        assert len(frames) == 4
+        skeletons = [cad60.read_skeleton(p) for p in paths]
+        for i, f in enumerate(frames):
+            assert [p.track_id for p in f.people] == list(range(1, people + 1))
+            assert f.truth is f.people[0]
+            labels = cad60.load_people(cad60.people_path(video.frame_dir, 1 + 3 * i))
+            assert set(np.unique(labels)) <= set(range(people + 1))
+            assert_array_equal(f.mask, labels > 0)  # the mask: every person's pixels
+            for k, (truth, skel) in enumerate(zip(f.people, skeletons, strict=True), start=1):
+                assert_allclose(truth.uv, skel.pixels()[i])
+                seen = (labels == k).sum() >= synth_video.MIN_SEEN_PX
+                assert_array_equal(truth.confidence, 1.0 if seen else 0.0)
+                if seen:
+                    # its pixels lie at its own depth (exact depth: --no-noise)
+                    z = np.nanmedian(f.depth_m[labels == k])
+                    assert abs(z - truth.xyz[cad60_torso(), 2]) < 0.35
+        # the people stand at the distances synth.json gives (depth order: see
+        # test_render_people_shows_the_nearest_surface_in_depth_and_colour)
+        by_z = np.argsort([f.people[k].xyz[cad60_torso(), 2] for k in range(people)])
+        assert by_z.tolist() == np.argsort(distances).tolist()
+
+
+def cad60_torso() -> int:
+    return CAD60_JOINTS.index('torso')
+
+
+@pytest.mark.parametrize(('extra', 'message'), [
+    (['--people', '0'], '--people must be 1, 2 or 3, got 0'),
+    (['--people', '4'], '--people must be 1, 2 or 3, got 4'),
+    (['--people', '-2'], '--people must be 1, 2 or 3, got -2'),
+    (['--crossing', '0.5'], '--crossing needs --people 2 or 3'),
+    (['--people', '2', '--crossing', '1.5'], '--crossing must be a fraction in [0, 1]'),
+])
+def test_pose4d_synth_refuses_bad_people(tmp_path: Path, capsys, extra: list[str],
+                                         message: str) -> None:
+    write_utkinect(tmp_path / 'ut', frames=40)
+    code = pose4d_main(['synth', '--utkinect', str(tmp_path / 'ut'), '--out',
+                        str(tmp_path / 'set'), '--quiet', *extra])
+    assert code == 2
+    assert message in capsys.readouterr().err
+    assert sorted(p.name for p in tmp_path.iterdir()) == ['ut']
+
+
+def test_crossing_person_passes_in_front_of_the_other() -> None:
+    """A crossing puts the nearer person on the far one's other side by the end, passing in
+    line with it; without a crossing both keep their sides."""
+    scene = synth_scene.random_scene(np.random.default_rng(0), K, occluder_prob=0.0,
+                                     person_zone=synth_people.people_zone(
+                                         synth_video.Staging(distance_m=(2.5, 4.0))))
+    standing = in_room(scene, standing_pose(z=3.0, cam_height=scene.cam_height_m))
+    still = [np.repeat(standing[None], 60, axis=0)] * 2
+    staging = synth_video.Staging(distance_m=(2.5, 4.0), turn_deg=(0.0, 0.0))
+    for seed in range(4):
+        for crossing in (False, True):
+            placed = synth_people.place_people(still, scene, np.random.default_rng(seed),
+                                               staging=staging, crossing=crossing)
+            hips = np.array([p[:, J['hip_center']] for p in placed])  # (2, F, 3) room
+            near = int(np.argmin(hips[:, 0, 1]))
+            far = 1 - near
+            assert hips[far, 0, 1] - hips[near, 0, 1] > (1.0 if crossing else 0.2)
+            # bearing of the near person relative to the far one (room X / Y ~ image column)
+            side = hips[near, :, 0] / hips[near, :, 1] - hips[far, :, 0] / hips[far, :, 1]
+            apart = np.abs(hips[0, :, 0] - hips[1, :, 0])
+            if crossing:
+                assert np.sign(side[0]) != np.sign(side[-1])
+                assert np.abs(side).min() < 0.02
+            else:
+                assert np.sign(side[0]) == np.sign(side[-1])
+                assert 1.0 <= apart[0] <= 4.0

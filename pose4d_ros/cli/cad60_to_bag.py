@@ -15,7 +15,8 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
         description='Convert a CAD-60 directory (dataN/ person dirs, real or synthetic) to a '
         'rosbag2 with camera/color/image_raw (rgb8), camera/depth/image_raw (16UC1), '
         'camera/color/camera_info and the ground truth on cad60/skeleton (JointArray), plus '
-        'cad60/mask for synthetic sets.')
+        'cad60/mask for synthetic sets and cad60/skeletons (SkeletonArray, every person, '
+        'track_id = person) for several-person sets (pose4d synth --people N).')
     p.add_argument('dir', type=Path, help='CAD-60 directory (a dataN/ or a folder of them)')
     p.add_argument('out', type=Path, help='new bag directory (must not exist)')
     p.add_argument('--storage', choices=('mcap', 'sqlite3'), default='mcap')

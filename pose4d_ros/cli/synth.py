@@ -7,6 +7,17 @@ per UTKinect subject N, each with `activityLabel.txt` and its videos (`<id>.txt`
 `synth.json` at the top recording the command's parameters and every video's source. The set
 is built in a temporary directory next to `--out` and renamed when complete, so a failed or
 interrupted run leaves nothing behind.
+
+With `--people N` (2-3) every video shows N people (`pose4d_ros.synth.people`): person 1 is the
+video's own window of motion, written as in a one-person set (`<id>.txt`); persons k = 2..N,
+each another UTKinect take (or another window of one) on another body, standing 1-4 m apart
+laterally at different distances, are written to `<id>_p<k>.txt` in the same line format, with
+all confidences 0 in the frames where that person is not seen (fewer than 40 pixels of it at
+320x240: out of the picture or hidden; person 1's too); `Mask_<k>.png` holds every person's
+pixels and `People_<k>.png` (8-bit) numbers them (k = person k, 0 = nobody). `--crossing` sets
+the share of videos in which one person walks past in front of another (hidden for up to about a
+second). The reader (`pose4d_ros.datasets.cad60`) gives every person's ground truth in
+`Frame.people`.
 """
 
 from __future__ import annotations
@@ -31,7 +42,7 @@ _RANGE = re.compile(r'^s(\d{2})-s(\d{2})$')
 def add_parser(subparsers: argparse._SubParsersAction) -> None:
     p = subparsers.add_parser(
         'synth', help='render synthetic RGB-D people in CAD-60 format',
-        description=__doc__.split('\n\n')[1].replace('\n', ' '),
+        description=' '.join(__doc__.split('\n\n')[i].replace('\n', ' ') for i in (1, 2)),
         formatter_class=argparse.ArgumentDefaultsHelpFormatter)
     p.add_argument('--utkinect', required=True, type=Path,
                    help='UTKinect directory (joints_sNN_eMM.txt, actionLabel.txt)')
@@ -64,6 +75,17 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
                    help='pose the arms away from the recorded motion by up to DEG degrees (at '
                         'the shoulder and the elbow, varying smoothly through each video): arm '
                         'poses the subjects never made, for training data')
+    p.add_argument('--people', type=int, default=1, metavar='N',
+                   help='people in every video, 1-3: person 1 in <id>.txt as in a one-person '
+                        'set, persons k = 2..N in <id>_p<k>.txt (same line format; confidences '
+                        '0 in frames where the person is out of view or hidden), each from '
+                        'another take (or window) on another body, 1-4 m apart laterally, at '
+                        'different distances (default --distance 2.5 4.0 for N > 1); with '
+                        '--body-per subject only person 1 keeps the subject\'s body')
+    p.add_argument('--crossing', type=float, default=None, metavar='FRACTION',
+                   help='share of the videos (N > 1) in which one person walks past in front '
+                        'of another, hiding it for up to about a second (default: 0.34 for '
+                        'N > 1)')
     p.add_argument('--occluders', type=float, default=0.3,
                    help='probability of furniture between camera and person')
     p.add_argument('--width', type=int, default=320, help='image width (CAD-60: 320)')
@@ -117,6 +139,13 @@ def _check(args: argparse.Namespace) -> None:
         raise ValueError(f'--occluders must be in [0, 1], got {args.occluders}')
     if args.start < 0:
         raise ValueError(f'--start must be >= 0 seconds, got {args.start}')
+    if not 1 <= args.people <= 3:
+        raise ValueError(f'--people must be 1, 2 or 3, got {args.people}')
+    if args.crossing is not None:
+        if args.people == 1:
+            raise ValueError('--crossing needs --people 2 or 3 (one person crosses no one)')
+        if not 0.0 <= args.crossing <= 1.0:
+            raise ValueError(f'--crossing must be a fraction in [0, 1], got {args.crossing}')
     if args.seed < 0:
         raise ValueError(f'--seed must be >= 0, got {args.seed}')
     if args.out.exists() and not args.force:
@@ -131,15 +160,17 @@ def run(args: argparse.Namespace) -> int:
 
     from pose4d_ros.datasets import cad60
     from pose4d_ros.datasets.utkinect import list_takes
-    from pose4d_ros.synth import video
+    from pose4d_ros.synth import people, video
     from pose4d_ros.synth.render import HC, Body
     from pose4d_ros.util.progress import progress
 
     _check(args)
     default = video.Staging()
+    several = args.people > 1
     staging = video.Staging(
         stature_m=tuple(args.stature or default.stature_m),
-        distance_m=tuple(args.distance or default.distance_m),
+        distance_m=tuple(args.distance or (people.PEOPLE_DISTANCE_M if several
+                                           else default.distance_m)),
         turn_deg=tuple(args.turn or default.turn_deg), arm_jitter_deg=args.arm_jitter)
     available = [p.name[len('joints_'):-len('.txt')] for p in list_takes(args.utkinect)]
     names = parse_takes(args.takes, available)
@@ -152,6 +183,8 @@ def run(args: argparse.Namespace) -> int:
         raise ValueError(f'--actions {args.actions}: none of the takes has any of them')
     by_take = {m.name: m for m in motions}
     total = sum(p.n_frames for p in plans)
+    crossing = 0.34 if args.crossing is None else args.crossing
+    crossings = people.crossing_videos(plans, crossing) if several else [False] * len(plans)
 
     out = args.out.resolve()
     tmp = Path(tempfile.mkdtemp(prefix=f'.{out.name}.', suffix='.partial', dir=out.parent))
@@ -162,21 +195,27 @@ def run(args: argparse.Namespace) -> int:
         bodies: dict[int, Body] = {}
         records = []
         with progress(desc='pose4d synth', total=total, disable=args.quiet) as bar:
-            for plan in plans:
+            for plan, crosses in zip(plans, crossings, strict=True):
                 body = None
                 if args.body_per == 'subject':
                     if plan.subject not in bodies:
                         bodies[plan.subject] = video.subject_body(
                             args.seed, plan.subject, stature_m=staging.stature_m)
                     body = bodies[plan.subject]
-                job = video.prepare_video(plan, by_take[plan.take], intrinsics,
-                                          body=body, occluder_prob=args.occluders,
-                                          kinect_noise=not args.no_noise, staging=staging)
+                if several:
+                    job = people.prepare_people_video(
+                        plan, motions, intrinsics, people=args.people, crossing=crosses,
+                        body=body, occluder_prob=args.occluders,
+                        kinect_noise=not args.no_noise, staging=staging)
+                else:
+                    job = video.prepare_video(plan, by_take[plan.take], intrinsics,
+                                              body=body, occluder_prob=args.occluders,
+                                              kinect_noise=not args.no_noise, staging=staging)
                 person_dir = tmp / f'data{plan.subject}'
                 person_dir.mkdir(exist_ok=True)
                 n_bytes += video.write_video(job, person_dir, progress=bar.update)
                 labels.setdefault(plan.subject, {})[plan.video_id] = plan.activity
-                records.append({
+                record = {
                     'video': f'data{plan.subject}/{plan.video_id}', 'take': plan.take,
                     'activity': plan.activity, 'start_frame_30fps': plan.start,
                     'stride': plan.stride, 'frames': plan.n_frames,
@@ -184,7 +223,10 @@ def run(args: argparse.Namespace) -> int:
                     'distance_m': round(float(np.median(job.poses[:, HC, 2])), 3),
                     'occluder': any(b.kind == 'occluder' for b in job.scene.boxes),
                     'camera_height_m': round(job.scene.cam_height_m, 3),
-                })
+                }
+                if several:
+                    record.update(_people_record(job, person_dir))
+                records.append(record)
         for subject, videos in labels.items():
             cad60.write_activity_labels(tmp / f'data{subject}' / 'activityLabel.txt', videos)
         info = {
@@ -199,6 +241,9 @@ def run(args: argparse.Namespace) -> int:
             'size': [args.width, args.height], 'kinect_noise': not args.no_noise,
             'videos': records,
         }
+        if several:  # a one-person set's synth.json stays as it always was
+            info = {**{k: v for k, v in info.items() if k != 'videos'},
+                    'people': args.people, 'crossing': crossing, 'videos': records}
         (tmp / 'synth.json').write_text(json.dumps(info, indent=1) + '\n')
         _replace_dir(tmp, out)
     except BaseException:
@@ -209,6 +254,27 @@ def run(args: argparse.Namespace) -> int:
           f'({n_bytes / max(total, 1) / 1e3:.1f} kB/frame) in {elapsed:.1f} s '
           f'({total / elapsed:.1f} frames/s incl. PNG writing) -> {out}')
     return 0
+
+
+def _people_record(job, person_dir: Path) -> dict:
+    """synth.json's account of a several-person video: the crossing, and per person its take,
+    window, body, distance and the frames in which it is not seen."""
+    import numpy as np
+
+    from pose4d_ros.datasets import cad60
+    from pose4d_ros.synth.render import HC
+
+    persons = [(job.plan.take, job.plan.start, job.body, job.poses)] + [
+        (c.take, c.start, c.body, c.poses) for c in job.companions]
+    out = []
+    for k, (take, start, body, poses) in enumerate(persons, start=1):
+        skeleton = cad60.read_skeleton(
+            cad60.person_skeleton_path(person_dir, job.plan.video_id, k))
+        out.append({'person': k, 'take': take, 'start_frame_30fps': int(start),
+                    'stature_m': round(body.stature_m, 3),
+                    'distance_m': round(float(np.median(poses[:, HC, 2])), 3),
+                    'unseen_frames': int((skeleton.joint_conf[:, 0] == 0).sum())})
+    return {'crossing': job.crossing, 'people': out}
 
 
 def _replace_dir(tmp: Path, out: Path) -> None:

@@ -41,7 +41,7 @@ from rosbags.typesys.store import Typestore
 from pose4d_ros.datasets import bag_damage
 
 MSG_PACKAGE = 'pose4d_msgs'
-MSG_NAMES = ('Joint', 'JointArray')
+MSG_NAMES = ('Joint', 'JointArray', 'SkeletonArray')
 
 _INFINITE = QosTime(0x7FFFFFFF, 0xFFFFFFFF)
 # Hidden staging directory of a bag being written: .NAME.partial-PID

@@ -10,7 +10,23 @@ Layout (see docs DATA.md), per person directory `dataN/`:
 - `<id>/RGB_<k>.png` (8-bit, 3 channels) and `<id>/Depth_<k>.png` (single-channel 16-bit,
   millimetres, 0 = no reading, registered to the RGB grid), k = frame number of the skeleton
   line. The synthetic sets written by `pose4d synth` add `<id>/Mask_<k>.png` (8-bit, 255 =
-  person), which the reader ignores unless asked (`load_mask`).
+  person), which `read_frames` reads into `Frame.mask` when present (`load_mask`).
+
+Several people (the synthetic sets of `pose4d synth --people N`, N = 2-3; an extension of the
+layout, which real CAD-60 never has). Person 1 of a video stays in `<id>.txt`, exactly as in a
+single-person set; persons k = 2..N are in `<id>_p<k>.txt` beside it (k consecutive from 2), in
+the same line format, with the same frame numbers, one line per frame. In a several-person video
+every person's confidences (person 1's too) (position and orientation, all 15 joints) are 0 in a
+frame where that person is not seen (out of the picture, or hidden behind another person or
+furniture: `pose4d synth` counts fewer than 40 visible pixels at 320x240 as not seen) and 1
+otherwise; the positions are written all the same (the rendered skeleton). `<id>/Mask_<k>.png`
+holds every person's pixels, and `<id>/People_<k>.png` (8-bit, single channel) says whose they
+are: k where person k is the visible surface, 0 elsewhere (`load_people`). `read_frames` gives
+every person's ground truth in `Frame.people` (person k with `track_id` k), `Frame.truth` =
+person 1's, and `Frame.mask` = every person's pixels: the foreground stage is to find all
+people, so its ground truth holds all of them (person 1's alone would score the others' pixels
+as false positives). A single-person video (no `_p<k>` files) reads exactly as before, with
+`Frame.people` empty.
 
 Frames. Joint positions in the files are millimetres in the OpenNI world frame: x to the image
 right, y up, z away from the camera. The OpenNI perspective model at 320x240 (the dataset's
@@ -149,6 +165,19 @@ class Video:
     def person(self) -> str:
         """The person directory's name, e.g. `data1`."""
         return self.person_dir.name
+
+    def skeleton_paths(self) -> list[Path]:
+        """Every person's skeleton file: `<id>.txt`, then `<id>_p2.txt`, `<id>_p3.txt`, ...
+        of a several-person video (see the module docstring). Raises `ValueError` when the
+        person numbers have a gap."""
+        pattern = re.compile(rf'^{re.escape(self.video_id)}_p(\d+)\.txt$')
+        extra = {int(m.group(1)): path for path in self.person_dir.glob(f'{self.video_id}_p*.txt')
+                 if (m := pattern.match(path.name))}
+        numbers = sorted(extra)
+        if numbers != list(range(2, 2 + len(numbers))):
+            raise ValueError(f'{self.person_dir}: video {self.video_id} has person skeleton '
+                             f'files for persons {numbers}; expected 2..N without gaps')
+        return [self.skeleton_path] + [extra[k] for k in numbers]
 
 
 # --------------------------------------------------------------------------------------------
@@ -386,6 +415,30 @@ def load_depth(path: str | Path) -> NDArray[np.uint16]:
     return img
 
 
+def load_people(path: str | Path) -> NDArray[np.uint8]:
+    """Read a several-person set's `People_<k>.png` -> (H, W) uint8: k where person k is the
+    visible surface, 0 elsewhere."""
+    path = Path(path)
+    img = _imread(path)
+    if img.dtype != np.uint8 or img.ndim != 2:
+        raise ValueError(f'{path}: person labels must be a single-channel 8-bit image, got '
+                         f'{img.dtype} {img.shape}')
+    return img
+
+
+def person_skeleton_path(person_dir: str | Path, video_id: str, person: int) -> Path:
+    """The skeleton file of person 1, 2, ... of a video: `<id>.txt`, `<id>_p<k>.txt`."""
+    if person < 1:
+        raise ValueError(f'persons are numbered from 1, got {person}')
+    name = f'{video_id}.txt' if person == 1 else f'{video_id}_p{person}.txt'
+    return Path(person_dir) / name
+
+
+def people_path(frame_dir: str | Path, k: int) -> Path:
+    """The person-label PNG of frame k of a several-person video."""
+    return Path(frame_dir) / f'People_{k}.png'
+
+
 def load_mask(path: str | Path) -> NDArray[np.bool_]:
     """Read a synthetic set's `Mask_<k>.png` (8-bit, 255 = person) -> (H, W) bool."""
     path = Path(path)
@@ -435,7 +488,9 @@ def read_frames(root: str | Path, *, stride: int = 1, videos: Sequence[str] | No
     Each frame has its RGB, its depth in metres, the OpenNI perspective intrinsics at its size,
     the video's skeleton as ground truth (the 15 joints' pixels by `projection`, 'perspective' or
     the README's 'affine' fit; 3-D in the optical frame; the file's confidence, MISSING where it
-    is 0) and, in the synthetic sets, the person mask (`Mask_<k>.png`). Stamps keep the videos'
+    is 0) and, in the synthetic sets, the person mask (`Mask_<k>.png`). A several-person video
+    (`<id>_p<k>.txt` files, see the module docstring) also gives every person's ground truth in
+    `Frame.people` (`track_id` = person number; `truth` is person 1's). Stamps keep the videos'
     30 fps clock from `t0_s`, with a one-second gap between videos.
 
     Parameters
@@ -457,8 +512,12 @@ def read_frames(root: str | Path, *, stride: int = 1, videos: Sequence[str] | No
         selected = [v for v in selected if v.video_id in set(videos)]
     stamp_ns = int(round(t0_s * 1e9))
     for video in selected:
-        skeleton = read_skeleton(video.skeleton_path)
-        optical = skeleton.joints_optical()
+        paths = video.skeleton_paths()
+        skeletons = [read_skeleton(path) for path in paths]
+        skeleton = skeletons[0]
+        for other, path in zip(skeletons[1:], paths[1:], strict=True):
+            if not np.array_equal(other.frames, skeleton.frames):
+                raise ValueError(f'{path}: its frame numbers differ from {paths[0].name}\'s')
         with_mask = len(skeleton) > 0 and \
             frame_paths(video.frame_dir, int(skeleton.frames[0]))[2].is_file()
         for i, k in enumerate(skeleton.frames[:max_frames]):
@@ -473,14 +532,22 @@ def read_frames(root: str | Path, *, stride: int = 1, videos: Sequence[str] | No
                 raise ValueError(f'{mask_path}: mask size {mask.shape} differs from the depth '
                                  f'image {depth.shape}')
             intrinsics = cad60_intrinsics(depth.shape[1], depth.shape[0])
-            conf = skeleton.joint_conf[i]
-            uv = project_joints(skeleton.joints_mm[i], intrinsics, model=projection)
-            truth = JointSet(CAD60_JOINTS, uv, optical[i], confidence=conf,
-                             source=np.where(conf > 0, DETECTED, MISSING), score=1.0,
-                             track_id=1)
-            yield Frame(stamp_ns, rgb, depth_to_metres(depth), intrinsics, truth, mask,
-                        key=str(rgb_path), video=f'{video.person}/{video.video_id}')
+            truths = tuple(_truth(s, i, intrinsics, projection, track_id=p + 1)
+                           for p, s in enumerate(skeletons))
+            yield Frame(stamp_ns, rgb, depth_to_metres(depth), intrinsics, truths[0], mask,
+                        key=str(rgb_path), video=f'{video.person}/{video.video_id}',
+                        people=truths if len(truths) > 1 else ())
         stamp_ns += VIDEO_GAP_NS
+
+
+def _truth(skeleton: Skeleton, i: int, intrinsics: Intrinsics, projection: str, *,
+           track_id: int) -> JointSet:
+    """Frame i of a skeleton as ground truth: pixels by `projection`, 3-D in the optical frame,
+    the file's confidence (MISSING where it is 0)."""
+    conf = skeleton.joint_conf[i]
+    uv = project_joints(skeleton.joints_mm[i], intrinsics, model=projection)
+    return JointSet(CAD60_JOINTS, uv, world_to_optical(skeleton.joints_mm[i]), confidence=conf,
+                    source=np.where(conf > 0, DETECTED, MISSING), score=1.0, track_id=track_id)
 
 
 # --------------------------------------------------------------------------------------------
@@ -564,6 +631,15 @@ def write_mask(path: str | Path, mask: NDArray[np.bool_], *, compression: int = 
     if mask.ndim != 2:
         raise ValueError(f'{path}: mask must be 2-D, got shape {mask.shape}')
     _encode_png(Path(path), np.where(mask, 255, 0).astype(np.uint8), compression)
+
+
+def write_people(path: str | Path, labels: NDArray[np.uint8], *, compression: int = 1) -> None:
+    """Write an (H, W) uint8 person-label image (k = person k, 0 = nobody) as an 8-bit PNG."""
+    labels = np.asarray(labels)
+    if labels.dtype != np.uint8 or labels.ndim != 2:
+        raise ValueError(f'{path}: person labels must be (H, W) uint8, got {labels.dtype} '
+                         f'{labels.shape}')
+    _encode_png(Path(path), labels, compression)
 
 
 def write_frame(frame_dir: str | Path, k: int, rgb: NDArray[np.uint8],

@@ -9,8 +9,12 @@ and recorded at that time:
 - `/cad60/skeleton` (pose4d_msgs/JointArray: the dataset's 15 joints as ground truth: u, v in
   the colour image by the chosen projection model, 3-D position in the optical frame, the
   file's confidence; a joint with confidence 0 is MISSING)
+- `/cad60/skeletons` (pose4d_msgs/SkeletonArray) only when the set has several-person videos
+  (`pose4d synth --people N`, see `cad60`): every person's ground truth, person k with
+  `track_id` k, person 1 (the one on `/cad60/skeleton`) first; a single-person video of such
+  a set gets an empty array (so that every frame has one).
 - `/cad60/mask` (sensor_msgs/Image, mono8, 255 = person) when the set has `Mask_<k>.png`
-  (the synthetic sets do): the ground truth of the foreground stage.
+  (the synthetic sets do): the ground truth of the foreground stage (every person's pixels).
 
 The bag is written atomically (see `bag.BagWriter`), mcap with zstd chunk compression unless
 asked otherwise. `read_frames` reads such a bag (or any bag with these topics) back as frames.
@@ -36,6 +40,7 @@ from pose4d_ros.datasets.messages import (
     image_to_array,
     intrinsics_from_msg,
     joints_from_msg,
+    skeletons_from_msg,
     stamp_to_ns,
 )
 
@@ -43,6 +48,7 @@ COLOR_TOPIC = '/camera/color/image_raw'
 DEPTH_TOPIC = '/camera/depth/image_raw'
 INFO_TOPIC = '/camera/color/camera_info'
 SKELETON_TOPIC = '/cad60/skeleton'
+SKELETONS_TOPIC = '/cad60/skeletons'
 MASK_TOPIC = '/cad60/mask'
 FRAME_ID = 'camera_color_optical_frame'
 
@@ -75,12 +81,16 @@ def convert(root: str | Path, out: str | Path, *, storage: str = 'mcap', compres
     """
     types = bag.typestore().types
     frames, seen, first_ns, last_ns = 0, set(), None, None
+    chosen = [v for v in cad60.list_videos(root) if videos is None or v.video_id in videos]
+    several = any(len(v.skeleton_paths()) > 1 for v in chosen)
     with bag.BagWriter(out, storage=storage, compress=compress) as writer:
         for topic, msgtype in ((COLOR_TOPIC, 'sensor_msgs/msg/Image'),
                                (DEPTH_TOPIC, 'sensor_msgs/msg/Image'),
                                (INFO_TOPIC, 'sensor_msgs/msg/CameraInfo'),
                                (SKELETON_TOPIC, 'pose4d_msgs/msg/JointArray')):
             writer.add_topic(topic, msgtype)
+        if several:
+            writer.add_topic(SKELETONS_TOPIC, 'pose4d_msgs/msg/SkeletonArray')
         for frame in cad60.read_frames(root, videos=videos, max_frames=max_frames,
                                        projection=projection, t0_s=t0_s):
             stamp_ns = frame.stamp_ns
@@ -90,6 +100,10 @@ def convert(root: str | Path, out: str | Path, *, storage: str = 'mcap', compres
                          _image(types, header, depth_to_millimetres(frame.depth_m), '16UC1'))
             writer.write(INFO_TOPIC, stamp_ns, _camera_info(types, header, frame.intrinsics))
             writer.write(SKELETON_TOPIC, stamp_ns, _joint_array(types, header, frame.truth))
+            if several:
+                writer.write(SKELETONS_TOPIC, stamp_ns, types['pose4d_msgs/msg/SkeletonArray'](
+                    header=header,
+                    skeletons=[_joint_array(types, header, p) for p in frame.people]))
             if frame.mask is not None:
                 if MASK_TOPIC not in writer.counts:
                     writer.add_topic(MASK_TOPIC, 'sensor_msgs/msg/Image')
@@ -147,8 +161,9 @@ def _joint_array(types: dict, header: Any, joints: JointSet) -> Any:
 
 def read_frames(path: str | Path) -> Iterator[Frame]:
     """The RGB-D frames of a bag in stamp order: colour, depth and camera_info of the same
-    header stamp (`core.sync.StampSync`), with the ground truth (`/cad60/skeleton`) and the mask
-    (`/cad60/mask`) of that stamp when the bag has those topics.
+    header stamp (`core.sync.StampSync`), with the ground truth (`/cad60/skeleton`), every
+    person's ground truth (`/cad60/skeletons`, into `Frame.people`) and the mask (`/cad60/mask`)
+    of that stamp when the bag has those topics.
 
     Raises ValueError naming the bag and topic when a needed topic is missing; a frame without
     a message of every topic at its stamp is skipped.
@@ -158,7 +173,7 @@ def read_frames(path: str | Path) -> Iterator[Frame]:
         if topic not in infos:
             raise ValueError(f'{path}: no {topic} topic (has {", ".join(sorted(infos))})')
     topics = [COLOR_TOPIC, DEPTH_TOPIC, INFO_TOPIC]
-    topics += [t for t in (SKELETON_TOPIC, MASK_TOPIC) if t in infos]
+    topics += [t for t in (SKELETON_TOPIC, SKELETONS_TOPIC, MASK_TOPIC) if t in infos]
     stream = {t: k for k, t in enumerate(topics)}
     sync = StampSync(len(topics))
     for m in bag.read_messages(path, topics):
@@ -169,4 +184,6 @@ def read_frames(path: str | Path) -> Iterator[Frame]:
                         depth_from_msg(got[DEPTH_TOPIC]), intrinsics_from_msg(got[INFO_TOPIC]),
                         joints_from_msg(got[SKELETON_TOPIC]) if SKELETON_TOPIC in got else None,
                         image_to_array(got[MASK_TOPIC]) > 127 if MASK_TOPIC in got else None,
-                        key=f'{path}@{stamp}')
+                        key=f'{path}@{stamp}',
+                        people=skeletons_from_msg(got[SKELETONS_TOPIC])
+                        if SKELETONS_TOPIC in got else ())

@@ -27,9 +27,13 @@ class Frame:
     truth : the ground-truth joints in skeleton names (`core.skeleton`): pixels, 3-D positions
         in the optical frame (NaN where unknown), confidence > 0 where labelled (and, where the
         source says so, visible); None for a source without ground truth.
-    mask : (H, W) bool ground-truth person mask (synthetic sets), else None.
+    mask : (H, W) bool ground-truth person mask (synthetic sets; in a several-person set the
+        pixels of every person), else None.
     key : where the frame comes from (file, or bag@stamp), for messages.
     video : the video the frame belongs to ('' if unknown).
+    people : every person's ground truth in a several-person source (a CAD-60 set with
+        `<id>_p<k>.txt` files, a bag with `/cad60/skeletons`), person k with `track_id` = k,
+        person 1 first (`truth` is person 1's); empty for a single-person source.
     """
 
     stamp_ns: int
@@ -40,3 +44,4 @@ class Frame:
     mask: NDArray[np.bool_] | None = None
     key: str = ''
     video: str = ''
+    people: tuple[JointSet, ...] = ()

@@ -7,7 +7,8 @@ bag readers) carry the same fields, so this module reads both without importing 
   as RGB uint8; depth per REP-118: `16UC1`/`mono16` millimetres or `32FC1` metres, 0/NaN = no
   reading, returned in the core's convention (float32 metres, NaN = no reading);
 - `sensor_msgs/CameraInfo` -> `core.camera.Intrinsics`;
-- `pose4d_msgs/JointArray` -> `core.joints.JointSet`;
+- `pose4d_msgs/JointArray` -> `core.joints.JointSet`; `pose4d_msgs/SkeletonArray` -> a tuple
+  of them;
 - `builtin_interfaces/Time` -> integer nanoseconds.
 
 Messages are built from arrays in `nodes/convert.py` (rclpy) and `cad60_bag.py` (rosbags).
@@ -120,3 +121,8 @@ def joints_from_msg(msg: Any) -> JointSet:
                     confidence=np.array([j.confidence for j in js], dtype=np.float32),
                     source=np.array([j.source for j in js], dtype=np.uint8), covariance=cov,
                     score=float(msg.score), track_id=int(msg.track_id))
+
+
+def skeletons_from_msg(msg: Any) -> tuple[JointSet, ...]:
+    """A `pose4d_msgs/SkeletonArray` as JointSets, in the message's order."""
+    return tuple(joints_from_msg(m) for m in msg.skeletons)

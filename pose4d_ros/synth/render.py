@@ -23,6 +23,7 @@ ankle, `skeleton.GROUND_TRUTH_ALIASES`), orientation matrices from bone directio
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import cv2
@@ -376,6 +377,35 @@ class Rendered:
     joints: NDArray[np.float64]
 
 
+@dataclass(frozen=True, eq=False)
+class RenderedPeople:
+    """One rendered RGB-D frame of several people.
+
+    Attributes
+    ----------
+    rgb : (H, W, 3) uint8, RGB order.
+    depth_mm : (H, W) uint16 millimetres, 0 = no reading, registered to `rgb`.
+    labels : (H, W) uint8, k where person k (1..N, the order of the poses) is the visible
+        surface (the nearest over the room and all bodies), 0 elsewhere.
+    joints : (N, 20, 3) float64 metres, optical frame: each person's retargeted joints,
+        `UTKINECT_JOINTS` order.
+    """
+
+    rgb: NDArray[np.uint8]
+    depth_mm: NDArray[np.uint16]
+    labels: NDArray[np.uint8]
+    joints: NDArray[np.float64]
+
+    @property
+    def mask(self) -> NDArray[np.bool_]:
+        """(H, W) bool, True where any person is the visible surface."""
+        return self.labels > 0
+
+    def visible_px(self) -> NDArray[np.int64]:
+        """(N,) int64 pixels on which each person is the visible surface."""
+        return np.bincount(self.labels.ravel(), minlength=len(self.joints) + 1)[1:]
+
+
 def _empty_background(intrinsics: Intrinsics) -> tuple[NDArray, ...]:
     h, w = intrinsics.height, intrinsics.width
     return (np.full((h, w), np.inf, np.float32), np.zeros((h, w, 3), np.float32),
@@ -417,6 +447,39 @@ def render(pose: NDArray[np.floating], body: Body, scene: Scene | None,
     -------
     Rendered (rgb, depth_mm, mask, joints).
     """
+    out = render_people([pose], [body], scene, intrinsics, rng=rng, kinect_noise=kinect_noise,
+                        sensor=sensor)
+    return Rendered(rgb=out.rgb, depth_mm=out.depth_mm, mask=out.mask, joints=out.joints[0])
+
+
+def render_people(poses: Sequence[NDArray[np.floating]], bodies: Sequence[Body],
+                  scene: Scene | None, intrinsics: Intrinsics, *,
+                  rng: np.random.Generator | None = None, kinect_noise: bool = True,
+                  sensor: KinectModel | None = None) -> RenderedPeople:
+    """Render several people, each in its pose, in one room, as a Kinect v1 would see them.
+
+    All bodies' primitives are ray-cast in one pass against one depth buffer holding the room
+    (`raycast.raycast_body`), so every pixel shows the nearest surface over the room and all
+    bodies, in depth and in colour alike; the Kinect model then sees the composed depth (its
+    projector shadows and edge holes fall between people as between a person and the room).
+    With one person this is exactly `render` (the same arrays, the same random draws).
+
+    Parameters
+    ----------
+    poses : N (20, 3) float metres, optical frame, `UTKINECT_JOINTS` order; each is
+        retargeted to its body (`retarget`).
+    bodies : N bodies from `random_body`, in the order of `poses`.
+    scene, intrinsics, rng, kinect_noise, sensor : as in `render`.
+
+    Returns
+    -------
+    RenderedPeople (rgb, depth_mm, labels: person k = k, joints (N, 20, 3)).
+    """
+    if len(poses) != len(bodies) or len(poses) == 0:
+        raise ValueError(f'need one body per pose and at least one person, got {len(poses)} '
+                         f'poses and {len(bodies)} bodies')
+    if len(poses) > 255:
+        raise ValueError(f'at most 255 people, got {len(poses)}')
     rng = rng if rng is not None else np.random.default_rng(0)
     if scene is not None:
         scene = scene.for_intrinsics(intrinsics)
@@ -425,8 +488,9 @@ def render(pose: NDArray[np.floating], body: Body, scene: Scene | None,
     else:
         bg = _empty_background(intrinsics)
         up = None
-    joints = retarget(pose, body, up=up)
-    prims = body_primitives(joints, body)
+    joints = np.array([retarget(p, b, up=up) for p, b in zip(poses, bodies, strict=True)])
+    prims, owner, tiles, scale, ir_dropout = _merge_bodies(
+        [body_primitives(j, b) for j, b in zip(joints, bodies, strict=True)], bodies)
     h, w = intrinsics.height, intrinsics.width
     zbuf = bg[0].copy()
     ids = np.full((h, w), -1, np.int32)
@@ -436,32 +500,70 @@ def render(pose: NDArray[np.floating], body: Body, scene: Scene | None,
                  prims.cap_a, prims.cap_b, prims.cap_r, prims.cap_e1, prims.ell_c,
                  prims.ell_rot, prims.ell_r, ids, normal, st)
     mask = ids >= 0
+    labels = np.where(mask, owner[np.maximum(ids, 0)], 0).astype(np.uint8)
 
     if scene is not None:
         light = scene.light_optical
         ambient, diffuse, colour = scene.ambient, scene.diffuse, scene.light_colour
         floor_id = scene.floor_index
-        blobs = _contact_shadows(joints, body, scene)
+        blobs = np.concatenate([_contact_shadows(j, b, scene)
+                                for j, b in zip(joints, bodies, strict=True)])
     else:
         light = np.array([0.3, -0.5, -0.8]) / np.linalg.norm([0.3, -0.5, -0.8])
         ambient, diffuse, colour, floor_id = 0.45, 0.6, np.ones(3), -2
         blobs = np.zeros((0, 5))  # no floor
     img = np.empty((h, w, 3), np.float32)
-    shade(bg[2], bg[1], bg[3], zbuf, ids, normal, st, prims.mat, body.materials.tiles,
-          body.materials.scale, light, ambient, diffuse, colour, floor_id, blobs,
-          intrinsics.fx, intrinsics.fy, intrinsics.cx, intrinsics.cy, img)
+    shade(bg[2], bg[1], bg[3], zbuf, ids, normal, st, prims.mat, tiles, scale, light, ambient,
+          diffuse, colour, floor_id, blobs, intrinsics.fx, intrinsics.fy, intrinsics.cx,
+          intrinsics.cy, img)
     all_normal = np.where(mask[:, :, None], normal, bg[1])
     if kinect_noise:
         img *= _vignette(intrinsics)
         img = cv2.GaussianBlur(img, (0, 0), 0.65)
         img += rng.normal(0.0, 0.012, img.shape).astype(np.float32)
-        dropout = np.where(mask, body.materials.ir_dropout[prims.mat[np.maximum(ids, 0)]],
+        dropout = np.where(mask, ir_dropout[prims.mat[np.maximum(ids, 0)]],
                            bg[4]).astype(np.float32)
         depth = kinect_depth(zbuf, all_normal, intrinsics, rng, dropout=dropout, model=sensor)
     else:
         depth = ideal_depth(zbuf)
     rgb = np.clip(img * 255.0 + 0.5, 0, 255).astype(np.uint8)
-    return Rendered(rgb=rgb, depth_mm=depth, mask=mask, joints=joints)
+    return RenderedPeople(rgb=rgb, depth_mm=depth, labels=labels, joints=joints)
+
+
+def _merge_bodies(prims: list[Primitives], bodies: Sequence[Body]
+                  ) -> tuple[Primitives, NDArray[np.int64], NDArray[np.float32],
+                             NDArray[np.float32], NDArray[np.float32]]:
+    """Several bodies' primitives as one set for one ray-casting pass.
+
+    The kernel numbers capsules first, then ellipsoids, so the merged set holds every body's
+    capsules, then every body's ellipsoids; each body's materials follow the previous bodies'
+    (its primitives' material indices are offset accordingly). Returns the merged primitives,
+    the person (1..N) of each merged primitive index, and the merged materials' tiles, scales
+    and infrared dropouts. One body comes back as it is.
+    """
+    if len(prims) == 1:
+        m = bodies[0].materials
+        return (prims[0], np.ones(len(prims[0].mat), np.int64), m.tiles, m.scale,
+                m.ir_dropout)
+    offsets = np.cumsum([0] + [len(b.materials) for b in bodies])
+    n_caps = [len(p.cap_r) for p in prims]
+    cap_mat = [p.mat[:n] + o for p, n, o in zip(prims, n_caps, offsets, strict=False)]
+    ell_mat = [p.mat[n:] + o for p, n, o in zip(prims, n_caps, offsets, strict=False)]
+    merged = Primitives(
+        cap_a=np.concatenate([p.cap_a for p in prims]),
+        cap_b=np.concatenate([p.cap_b for p in prims]),
+        cap_r=np.concatenate([p.cap_r for p in prims]),
+        cap_e1=np.concatenate([p.cap_e1 for p in prims]),
+        ell_c=np.concatenate([p.ell_c for p in prims]),
+        ell_rot=np.concatenate([p.ell_rot for p in prims]),
+        ell_r=np.concatenate([p.ell_r for p in prims]),
+        mat=np.concatenate(cap_mat + ell_mat).astype(np.int64))
+    owner = np.concatenate([np.full(n, k + 1) for k, n in enumerate(n_caps)]
+                           + [np.full(len(p.ell_r), k + 1) for k, p in enumerate(prims)])
+    return (merged, owner.astype(np.int64),
+            np.concatenate([b.materials.tiles for b in bodies]),
+            np.concatenate([b.materials.scale for b in bodies]),
+            np.concatenate([b.materials.ir_dropout for b in bodies]))
 
 
 def _contact_shadows(joints: NDArray[np.float64], body: Body, scene: Scene

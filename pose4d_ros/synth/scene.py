@@ -203,7 +203,8 @@ def random_scene(rng: np.random.Generator, intrinsics: Intrinsics, *,
     The camera stands 0.85-1.35 m high, aimed at a point 1.0-1.1 m high 3 m away (pitch about
     -6 to +8 degrees), looking at a back wall
     3.7-5.5 m away (partly beyond the sensor's range, as in real rooms; further by as much as
-    `person_zone` reaches beyond `PERSON_ZONE`); side walls are 1.7-3 m to either side.
+    `person_zone` reaches beyond `PERSON_ZONE`); side walls are 1.7-3 m to either side (at
+    least 0.6 m beside `person_zone`).
     Furniture (tables, cabinets, shelves, chairs, sofas, counters) stands along the walls
     outside `person_zone`; with probability `occluder_prob` a low object stands
     between the camera and that zone (1.2-1.65 m away), hiding a person's legs. Walls, floor and
@@ -220,8 +221,9 @@ def random_scene(rng: np.random.Generator, intrinsics: Intrinsics, *,
     mb = tex.MaterialBuilder()
     cam_h, room_to_cam = _random_camera(rng)
     back = float(rng.uniform(3.7, 5.5)) + max(person_zone[3] - PERSON_ZONE[3], 0.0)
-    xl = -float(rng.uniform(1.7, 3.0))
-    xr = float(rng.uniform(1.7, 3.0))
+    # side walls at least 0.6 m beside a person zone wider than `PERSON_ZONE` (several people)
+    xl = -max(float(rng.uniform(1.7, 3.0)), 0.6 - person_zone[0])
+    xr = max(float(rng.uniform(1.7, 3.0)), person_zone[1] + 0.6)
     ceil = float(rng.uniform(2.5, 2.9))
     boxes = _room_shell(rng, mb, back, xl, xr, ceil)
     taken: list[tuple[float, float, float, float]] = []  # furniture footprints

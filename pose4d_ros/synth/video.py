@@ -32,12 +32,24 @@ from pose4d_ros.datasets.utkinect import read_actions, read_take, resample, to_o
 from pose4d_ros.synth import render
 from pose4d_ros.synth import scene as rooms
 from pose4d_ros.synth import textures as tex
-from pose4d_ros.synth.render import HC, LAN, LFT, RAN, RFT, Body, Rendered
+from pose4d_ros.synth.render import (
+    HC,
+    LAN,
+    LFT,
+    RAN,
+    RFT,
+    Body,
+    Rendered,
+    RenderedPeople,
+)
 from pose4d_ros.synth.scene import Scene
 
 FPS = 30.0
 SIT_ACTIONS = ('sitDown', 'standUp')
 SEAT_HIP_FRACTION = 0.88  # sitting: hip centre below this fraction of its standing height
+# Several people: a person of whom fewer pixels than this (at 320x240, scaled with the image
+# area; a hand at 3 m is about 80) are seen counts as unseen in that frame (confidences 0).
+MIN_SEEN_PX = 40
 
 
 @dataclass(frozen=True)
@@ -257,8 +269,30 @@ def subject_body(seed: int, subject: int, *,
 
 
 @dataclass(frozen=True, eq=False)
+class Companion:
+    """Person k >= 2 of a several-person video (`synth.people`): another window of real motion
+    on another body, in the same room as person 1 (`VideoJob.body`, `VideoJob.poses`).
+
+    Attributes
+    ----------
+    take : 'sNN_eMM' the motion comes from; start : its first frame index (30 fps) in the take.
+    body : the person's body.
+    poses : (F, 20, 3) float64 metres, the scene camera's optical frame.
+    """
+
+    take: str
+    start: int
+    body: Body
+    poses: NDArray[np.float64]
+
+
+@dataclass(frozen=True, eq=False)
 class VideoJob:
-    """Everything needed to render a planned video."""
+    """Everything needed to render a planned video.
+
+    `companions` are persons 2..N of a several-person video (`synth.people`), none for a video
+    of one person; `crossing` marks a video in which one person walks past in front of another.
+    """
 
     plan: VideoPlan
     body: Body
@@ -267,6 +301,8 @@ class VideoJob:
     gains: NDArray[np.float64]  # (F,) light gain per frame
     intrinsics: Intrinsics
     kinect_noise: bool
+    companions: tuple[Companion, ...] = ()
+    crossing: bool = False
 
 
 def prepare_video(plan: VideoPlan, motion: TakeMotion, intrinsics: Intrinsics, *,
@@ -435,38 +471,66 @@ def _add_seat(scene: Scene, room: NDArray[np.float64], body: Body, standing_hip:
     return scene.with_boxes(parts, (('seat', tile, scale),))
 
 
-def render_video(job: VideoJob) -> Iterator[tuple[int, Rendered]]:
-    """Yield (frame number k, rendered frame) for every frame of a prepared video."""
+def render_video(job: VideoJob) -> Iterator[tuple[int, Rendered | RenderedPeople]]:
+    """Yield (frame number k, rendered frame) for every frame of a prepared video: `Rendered`
+    for one person, `RenderedPeople` (person 1 = `job.body`, then the companions) for several."""
     rng = video_rng(job.plan, 3)
-    for k, pose, gain in zip(job.plan.frame_numbers, job.poses, job.gains, strict=True):
+    bodies = [job.body] + [c.body for c in job.companions]
+    poses = np.stack([job.poses] + [c.poses for c in job.companions], axis=1)  # (F, N, 20, 3)
+    for k, pose, gain in zip(job.plan.frame_numbers, poses, job.gains, strict=True):
         scene = job.scene.with_light(gain=float(gain))
-        yield int(k), render.render(pose, job.body, scene, job.intrinsics, rng=rng,
-                                   kinect_noise=job.kinect_noise)
+        if job.companions:
+            yield int(k), render.render_people(pose, bodies, scene, job.intrinsics, rng=rng,
+                                               kinect_noise=job.kinect_noise)
+        else:
+            yield int(k), render.render(pose[0], job.body, scene, job.intrinsics, rng=rng,
+                                       kinect_noise=job.kinect_noise)
 
 
 def write_video(job: VideoJob, person_dir: str | Path, *,
                 progress: Callable[[int], object] | None = None) -> int:
     """Render a video into `person_dir` as `<id>.txt` and `<id>/{RGB,Depth,Mask}_<k>.png`.
 
-    `progress(1)` is called after each frame. Returns the bytes written. The skeleton file is
-    written last, so a video without one is incomplete.
+    A several-person video adds `<id>_p<k>.txt` for persons k = 2..N and `<id>/People_<k>.png`
+    (`cad60.write_people`); its `Mask_<k>.png` is every person's pixels, and a person's
+    confidences are 0 in the frames where fewer than `MIN_SEEN_PX` pixels of it are seen (out
+    of view or hidden), 1 elsewhere.
+    `progress(1)` is called after each frame. Returns the bytes written. The skeleton files are
+    written last (person 1's after the others), so a video without `<id>.txt` is incomplete.
     """
     person_dir = Path(person_dir)
     frame_dir = person_dir / job.plan.video_id
     frame_dir.mkdir(parents=True, exist_ok=False)
-    joints_mm, rots = [], []
+    n_people = 1 + len(job.companions)
+    joints_mm: list[list[NDArray]] = [[] for _ in range(n_people)]
+    rots: list[list[NDArray]] = [[] for _ in range(n_people)]
+    seen: list[NDArray[np.bool_]] = []
     for k, frame in render_video(job):
         cad60.write_frame(frame_dir, k, frame.rgb, frame.depth_mm, frame.mask)
-        jm, rot = render.cad60_ground_truth(frame.joints)
-        joints_mm.append(jm)
-        rots.append(rot)
+        if isinstance(frame, RenderedPeople):
+            cad60.write_people(cad60.people_path(frame_dir, k), frame.labels)
+            area = frame.labels.size / (320 * 240)
+            seen.append(frame.visible_px() >= MIN_SEEN_PX * area)
+            all_joints = frame.joints
+        else:
+            all_joints = frame.joints[None]
+        for p, joints in enumerate(all_joints):
+            jm, rot = render.cad60_ground_truth(joints)
+            joints_mm[p].append(jm)
+            rots[p].append(rot)
         if progress is not None:
             progress(1)
-    n = len(joints_mm)
-    skeleton = cad60.Skeleton(
-        frames=job.plan.frame_numbers.astype(np.int64), joints_mm=np.array(joints_mm),
-        joint_conf=np.ones((n, 15)), orientations=np.array(rots),
-        orientation_conf=np.ones((n, 11)))
-    cad60.write_skeleton(person_dir / f'{job.plan.video_id}.txt', skeleton)
+    n = len(joints_mm[0])
+    # one person: always confident, as the single-person sets have always been written
+    conf = np.array(seen, dtype=np.float64).T if job.companions else np.ones((1, n))
+    paths = [cad60.person_skeleton_path(person_dir, job.plan.video_id, p + 1)
+             for p in range(n_people)]
+    for p in reversed(range(n_people)):
+        skeleton = cad60.Skeleton(
+            frames=job.plan.frame_numbers.astype(np.int64), joints_mm=np.array(joints_mm[p]),
+            joint_conf=np.repeat(conf[p][:, None], 15, axis=1),
+            orientations=np.array(rots[p]),
+            orientation_conf=np.repeat(conf[p][:, None], 11, axis=1))
+        cad60.write_skeleton(paths[p], skeleton)
     return sum(p.stat().st_size for p in frame_dir.iterdir()) + \
-        (person_dir / f'{job.plan.video_id}.txt').stat().st_size
+        sum(path.stat().st_size for path in paths)
