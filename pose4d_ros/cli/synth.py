@@ -82,6 +82,10 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
                         'another take (or window) on another body, 1-4 m apart laterally, at '
                         'different distances (default --distance 2.5 4.0 for N > 1); with '
                         '--body-per subject only person 1 keeps the subject\'s body')
+    p.add_argument('--alone', type=int, default=None, metavar='K',
+                   help='with --people N: the same videos (the same room, placement and motion) '
+                   'with person K (1..N) alone in them, as a one-person set: the baseline a '
+                   'several-person set is compared with')
     p.add_argument('--crossing', type=float, default=None, metavar='FRACTION',
                    help='share of the videos (N > 1) in which one person walks past in front '
                         'of another, hiding it for up to about a second (default: 0.34 for '
@@ -141,6 +145,9 @@ def _check(args: argparse.Namespace) -> None:
         raise ValueError(f'--start must be >= 0 seconds, got {args.start}')
     if not 1 <= args.people <= 3:
         raise ValueError(f'--people must be 1, 2 or 3, got {args.people}')
+    if args.alone is not None and not 1 <= args.alone <= args.people or \
+            args.alone is not None and args.people == 1:
+        raise ValueError(f'--alone {args.alone}: needs --people N (2-3) and 1 <= K <= N')
     if args.crossing is not None:
         if args.people == 1:
             raise ValueError('--crossing needs --people 2 or 3 (one person crosses no one)')
@@ -207,6 +214,8 @@ def run(args: argparse.Namespace) -> int:
                         plan, motions, intrinsics, people=args.people, crossing=crosses,
                         body=body, occluder_prob=args.occluders,
                         kinect_noise=not args.no_noise, staging=staging)
+                    if args.alone is not None:
+                        job = video.alone(job, args.alone)
                 else:
                     job = video.prepare_video(plan, by_take[plan.take], intrinsics,
                                               body=body, occluder_prob=args.occluders,
@@ -224,7 +233,7 @@ def run(args: argparse.Namespace) -> int:
                     'occluder': any(b.kind == 'occluder' for b in job.scene.boxes),
                     'camera_height_m': round(job.scene.cam_height_m, 3),
                 }
-                if several:
+                if several and job.companions:
                     record.update(_people_record(job, person_dir))
                 records.append(record)
         for subject, videos in labels.items():

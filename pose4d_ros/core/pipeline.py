@@ -52,6 +52,7 @@ from pose4d_ros.core.lifting import lift_parts, medoid_parts, person_scale_px, v
 from pose4d_ros.core.people import PeopleDetector, PeopleIk, PeopleTracker, TrackingConfig
 from pose4d_ros.core.skeleton import LIMBS, PARTS_10, SKELETON_14, PartTree, tree_for
 from pose4d_ros.core.slqe import ConstantVelocityTracker, CvConfig, SlqeConfig, SlqeTracker
+from pose4d_ros.core.sync import TIME_JUMP_S, StampJumps
 from pose4d_ros.core.warm_up import warm_up_frame
 
 # The previous frame's parts guide the detector's arms (`SearchConfig.arm_prior`) when it is
@@ -570,6 +571,8 @@ class FramePipeline:
         self.people = people
         self.multi = None if people is None else PeopleStages(
             self.detector, self.tracker, self.ik, people)
+        # several people: stamps that jump start every stage anew, as the nodes do
+        self._jumps = StampJumps(TIME_JUMP_S)
 
     def reset(self) -> None:
         """Forget the previous frames (the next one starts a new track)."""
@@ -610,6 +613,8 @@ class FramePipeline:
     def _step_people(self, color: NDArray[np.uint8], depth_m: NDArray[np.floating],
                      intrinsics: Intrinsics, stamp_s: float) -> FrameResult:
         multi = self.multi
+        if self._jumps.jump_s(round(stamp_s * 1e9)) is not None:
+            self.reset()
         clock = [(time.process_time(), time.perf_counter())]
         found, n, color_m, depth_mm = self.foreground.step_people(
             color, depth_m, intrinsics, multi.config.max_people)

@@ -97,6 +97,11 @@ class StampSync:
         return out
 
 
+# Stamps that go back, or forward by more than this, seconds: the stages start anew (the nodes'
+# `StageMonitor.time_jumped`, the several-person `FramePipeline`)
+TIME_JUMP_S = 1.0
+
+
 class StampJumps:
     """Tells when a stream's stamps jump: back in time (a looping replay, a restarted driver or
     bag) or forward by more than `max_gap_s` (a paused replay, a camera that was away).

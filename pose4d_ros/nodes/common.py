@@ -36,7 +36,7 @@ from sensor_msgs.msg import CameraInfo
 from std_msgs.msg import Header
 
 from pose4d_ros.core.camera import Intrinsics
-from pose4d_ros.core.sync import StampJumps, StampSync
+from pose4d_ros.core.sync import TIME_JUMP_S, StampJumps, StampSync
 from pose4d_ros.core.threads import set_blas_threads
 from pose4d_ros.nodes import qos
 from pose4d_ros.nodes.convert import intrinsics_from_msg, stamp_to_ns
@@ -45,8 +45,6 @@ from pose4d_ros.nodes.params import ParameterError
 DIAGNOSTICS_TOPIC = '/diagnostics'
 # A stamp farther than this from the node's clock was taken on another clock, seconds
 CLOCK_MISMATCH_S = 10.0
-# Stamps that go back, or forward by more than this, seconds: the stage starts anew
-TIME_JUMP_S = 1.0
 
 
 class InputFailure(Exception):

@@ -20,7 +20,7 @@ Video ids (10 digits): subject (2), take (2), window (2), seed modulo 10000 (4).
 from __future__ import annotations
 
 from collections.abc import Callable, Iterator, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
@@ -303,6 +303,17 @@ class VideoJob:
     kinect_noise: bool
     companions: tuple[Companion, ...] = ()
     crossing: bool = False
+
+
+def alone(job: VideoJob, k: int) -> VideoJob:
+    """The several-person video `job` with person `k` (1 = `job.body`, 2.. the companions)
+    alone in it: the same room, light, placement and motion, the others left out."""
+    if not 1 <= k <= 1 + len(job.companions):
+        raise ValueError(f'person {k} of a video of {1 + len(job.companions)}')
+    if k == 1:
+        return replace(job, companions=(), crossing=False)
+    other = job.companions[k - 2]
+    return replace(job, body=other.body, poses=other.poses, companions=(), crossing=False)
 
 
 def prepare_video(plan: VideoPlan, motion: TakeMotion, intrinsics: Intrinsics, *,
