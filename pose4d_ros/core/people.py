@@ -248,6 +248,11 @@ class PeopleTracker:
         """Track one frame: the tracked parts of every confirmed track (its `track_id` set),
         primary first, then by id."""
         cfg = self.config
+        # every detection checked before anything changes: a frame with one the SLQE would
+        # refuse is refused whole (ValueError), and the tracks are untouched
+        checker = self.tracks[0].stage if self.tracks else self.make()
+        for det in detections:
+            checker.check(det, intrinsics)
         self.born, self.ended = [], []
         points = [torso(d) for d in detections]
         pairs = assign(self._cost(points, stamp_s), cfg.gate_chi2)
@@ -259,7 +264,8 @@ class PeopleTracker:
             if j in matched and not self.tracks[matched[j]].id and not born(det):
                 del matched[j]  # a tentative track's detection must be a person's
             if j not in matched and np.isfinite(points[j][0]).all() and born(det):
-                self.tracks.append(_Track(self.make(), names=det.names))
+                stage = self.make()
+                self.tracks.append(_Track(stage, names=stage.check(det, intrinsics).names))
                 matched[j] = len(self.tracks) - 1
         seen = {i: j for j, i in matched.items()}
         for i, track in enumerate(self.tracks):

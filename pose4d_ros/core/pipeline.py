@@ -347,6 +347,12 @@ class TrackerStage:
         self.filter.reset()
         self.depth[:] = np.nan
 
+    def check(self, parts: JointSet, intrinsics: Intrinsics | None) -> PartTree:
+        """The tree `step` would track `parts` on; ValueError for parts it would refuse."""
+        tree = self.fixed_tree or tree_for(parts.names)
+        check_known(parts, tree.names, intrinsics)
+        return tree
+
     def step(self, parts: JointSet, stamp_s: float, intrinsics: Intrinsics | None) -> JointSet:
         """Track one frame of detected parts; returns the tracked parts in the tree's order.
 
@@ -357,8 +363,7 @@ class TrackerStage:
         ValueError (and the track untouched) for parts no camera could have seen
         (`joints.check_joints`) or none of which the tree has.
         """
-        tree = self.fixed_tree or tree_for(parts.names)
-        check_known(parts, tree.names, intrinsics)
+        tree = self.check(parts, intrinsics)
         if tree is not self.tree:
             self._use(tree)
         parts = reorder(parts, self.tree.names)
