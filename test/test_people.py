@@ -199,3 +199,12 @@ def test_work_is_bounded_by_max_people():
     out = detector.step(color, depth, INTR, people, stamp_s=0.0)
     assert len(out) == 4 and searched == [0, 30, 60, 90]
     assert len(detector.slots) == 4
+
+
+def test_without_camera_info_people_are_told_apart_in_the_image():
+    """No intrinsics (no camera_info yet): no 3-D out of the tracker, the association works
+    on the torso's pixel; two people keep their two tracks."""
+    tr = tracker()
+    for k in range(30):
+        out = tr.step([person(-0.6 + 0.005 * k), person(0.6)], k * DT, None)
+    assert sorted(t.track_id for t in out) == [1, 2] and len(tr.tracks) == 2

@@ -99,6 +99,19 @@ def torso(joints: JointSet) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
     return joints.xyz[idx].mean(axis=0), joints.covariance[idx].mean(axis=0)
 
 
+def torso_px(joints: JointSet) -> tuple[NDArray[np.float64], float]:
+    """A person's torso point in the image (the mean pixel of the located `TORSO` joints, NaN
+    if none) and their size in pixels (the height of their located joints' box, NaN if under
+    two): the association's fallback when there is no 3-D (no camera_info yet)."""
+    located = (joints.source != cj.MISSING) & np.isfinite(joints.uv).all(axis=1)
+    idx = [k for name in TORSO if (k := joints.get(name)) is not None and located[k]]
+    if not idx:
+        return np.full(2, np.nan), math.nan
+    v = joints.uv[located, 1]
+    size = float(v.max() - v.min()) if v.size >= 2 else math.nan
+    return joints.uv[idx].mean(axis=0), size
+
+
 def assign(cost: NDArray[np.float64], gate: float) -> list[tuple[int, int]]:
     """The pairs (row, column) of the least-cost one-to-one assignment whose cost is at most
     `gate` (NaN = never). A single row and a single column are always paired when finite."""
@@ -192,6 +205,8 @@ class _Track:
     seen_s: float = -math.inf
     point: NDArray[np.float64] = field(default_factory=lambda: np.full(3, np.nan))
     cov: NDArray[np.float64] = field(default_factory=lambda: np.zeros((3, 3)))
+    pixel: NDArray[np.float64] = field(default_factory=lambda: np.full(2, np.nan))
+    size_px: float = math.nan
     velocity: NDArray[np.float64] = field(default_factory=lambda: np.zeros(3))
     names: tuple[str, ...] = ()
     last: JointSet | None = None
@@ -255,7 +270,7 @@ class PeopleTracker:
             checker.check(det, intrinsics)
         self.born, self.ended = [], []
         points = [torso(d) for d in detections]
-        pairs = assign(self._cost(points, stamp_s), cfg.gate_chi2)
+        pairs = assign(self._cost(detections, points, stamp_s), cfg.gate_chi2)
         matched = {j: i for i, j in pairs}
         any_confirmed = any(t.id for t in self.tracks)
         # with nobody tracked, the first person in view is trusted (as a single-person tracker)
@@ -263,7 +278,8 @@ class PeopleTracker:
         for j, det in enumerate(detections):
             if j in matched and not self.tracks[matched[j]].id and not born(det):
                 del matched[j]  # a tentative track's detection must be a person's
-            if j not in matched and np.isfinite(points[j][0]).all() and born(det):
+            if j not in matched and (np.isfinite(points[j][0]).all() or
+                                     np.isfinite(torso_px(det)[0]).all()) and born(det):
                 stage = self.make()
                 self.tracks.append(_Track(stage, names=stage.check(det, intrinsics).names))
                 matched[j] = len(self.tracks) - 1
@@ -291,22 +307,34 @@ class PeopleTracker:
     def _born(self, det: JointSet) -> bool:
         return not det.score < self.config.birth_score  # NaN: no score to judge by
 
-    def _cost(self, points: list[tuple[NDArray, NDArray]], stamp_s: float
-              ) -> NDArray[np.float64]:
+    def _cost(self, detections: Sequence[JointSet], points: list[tuple[NDArray, NDArray]],
+              stamp_s: float) -> NDArray[np.float64]:
+        """Squared Mahalanobis torso distances (tracks x detections) in 3-D; where a track or a
+        detection has no 3-D torso, in the image, the spread a quarter of the person's height
+        growing as in 3-D (at 2.5 m)."""
         cfg = self.config
         cost = np.full((len(self.tracks), len(points)), np.nan)
+        pixels = [torso_px(d) for d in detections]
         for i, t in enumerate(self.tracks):
-            if not np.isfinite(t.point).all():
-                continue
             dt = max(stamp_s - t.seen_s, 0.0)
-            predicted = t.point + t.velocity * min(dt, cfg.max_unseen_s)
+            drift = min(dt, cfg.max_unseen_s)
             spread = (cfg.torso_std_m ** 2 + (cfg.max_speed_mps * dt) ** 2) * np.eye(3)
             for j, (p, c) in enumerate(points):
-                if np.isfinite(p).all():
-                    cost[i, j] = _mahalanobis2(p - predicted, t.cov + c + spread)
+                if np.isfinite(p).all() and np.isfinite(t.point).all():
+                    cost[i, j] = _mahalanobis2(p - t.point - t.velocity * drift,
+                                               t.cov + c + spread)
+                    continue
+                uv, ref = pixels[j][0], t.size_px
+                if np.isfinite(uv).all() and np.isfinite(t.pixel).all() and ref > 0:
+                    sigma = 0.25 * ref * (1.0 + cfg.max_speed_mps * dt / 0.5)
+                    cost[i, j] = float(np.sum((uv - t.pixel) ** 2)) / sigma ** 2
         return cost
 
     def _seen(self, track: _Track, out: JointSet, stamp_s: float) -> None:
+        pixel, size = torso_px(out)
+        if np.isfinite(pixel).all():
+            track.pixel = pixel
+            track.size_px = size if size > 0 else track.size_px
         point, cov = torso(out)
         if np.isfinite(point).all():
             dt = stamp_s - track.seen_s
