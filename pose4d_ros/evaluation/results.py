@@ -68,9 +68,12 @@ SETS: dict[str, DataSet] = {s.name: s for s in (
     DataSet('test30_people2', 'test', _synth(4, 's07-s08', 2, 45, 1, '--people', '2')),
 )}
 
-# Validation sweeps: the values tried (the shipped default among them)
+# Validation sweeps: the values tried (the shipped default among them); another value is chosen
+# only when it beats the default by more than TIE (points of average7, or of MOTA %)
 MARGINS = (0.3, 0.4, 0.5, 0.6)
 BIRTH_SCORES = (2.5, 5.0, 7.5)
+DEFAULT_MARGIN, DEFAULT_BIRTH_SCORE = 0.4, 5.0
+TIE = 0.1
 
 
 @dataclass
@@ -270,8 +273,8 @@ def summarize_validation() -> dict:
                           'within_10cm': r.get('within_10cm', {}).get('average'),
                           'rgbd_t_average7': rows['rgbd_t']['pck']['average7']}
     out['margin'] = margin
-    out['margin_chosen'] = float(max(margin, key=lambda k: (margin[k]['average7'],
-                                                           margin[k]['within_10cm'] or 0)))
+    out['margin_chosen'] = choose({k: v['average7'] for k, v in margin.items()},
+                                  DEFAULT_MARGIN)
     birth = {}
     for b in BIRTH_SCORES:
         r = json.loads((WORK / f'birth_{b}.json').read_text())['rows']['rgbd_kf_ik']
@@ -281,6 +284,13 @@ def summarize_validation() -> dict:
                          t.get('id_switches_per_1000'), 'false_per_1000':
                          t.get('false_per_1000')}
     out['birth_score'] = birth
-    out['birth_score_chosen'] = float(max(birth, key=lambda k: (birth[k]['mota'] or 0,
-                                                              birth[k]['idf1'] or 0)))
+    out['birth_score_chosen'] = choose({k: 100 * (v['mota'] or 0) for k, v in birth.items()},
+                                       DEFAULT_BIRTH_SCORE)
+    out['tie'] = TIE
     return out
+
+
+def choose(scores: dict[str, float], default: float) -> float:
+    """The best-scoring value, unless the default is within `TIE` of it."""
+    best = max(scores, key=scores.get)
+    return default if scores[str(default)] >= scores[best] - TIE else float(best)

@@ -181,7 +181,9 @@ def validation_section(results: Path, jobs: dict) -> list[str]:
            '|---|---|---|---|']
     out += [f"| {k} | {fmt(r['average7'])} | {fmt(r['within_10cm'])} | "
             f"{fmt(r['rgbd_t_average7'])} |" for k, r in v['margin'].items()]
-    out += ['', f"Best on validation: {v['margin_chosen']}.", '',
+    tie = v.get('tie', 0.1)
+    out += ['', f"Chosen on validation: {v['margin_chosen']} (another value only when it beats "
+            f"the shipped one by more than {tie} points of average7).", '',
             f"Birth score (`TrackingConfig.birth_score`) on `{v['set_birth_score']}` "
             '(`rgbd_kf_ik`, several-person pipeline):', '',
             '| birth score | average7 | MOTA | IDF1 | id switches /1000 | false /1000 |',
@@ -189,6 +191,7 @@ def validation_section(results: Path, jobs: dict) -> list[str]:
     out += [f"| {k} | {fmt(r['average7'])} | {fmt(r['mota'] and 100 * r['mota'])} | "
             f"{fmt(r['idf1'] and 100 * r['idf1'])} | {fmt(r['id_switches_per_1000'])} | "
             f"{fmt(r['false_per_1000'])} |" for k, r in v['birth_score'].items()]
-    out += ['', f"Best on validation: {v['birth_score_chosen']}.", '',
+    out += ['', f"Chosen on validation: {v['birth_score_chosen']} (another value only when it "
+            f"beats the shipped one by more than {tie} points of MOTA).", '',
             *commands(jobs.get('validation'))]
     return out
