@@ -5,6 +5,7 @@
 #   make test    lint + the whole test suite
 #   make setup   only the set-up (.venv, pose4d_msgs built into it, pose4d_ros installed)
 #   make peer    MediaPipe Pose 0.10.21 in its own venv (.venv-peer), for `--peer mediapipe`
+#   make results every table and figure of the READMEs (docs/results, docs/RESULTS.md)
 
 SHELL := /bin/bash
 .SHELLFLAGS := -eu -o pipefail -c
@@ -31,10 +32,10 @@ MSG_SOURCES := pose4d_msgs/CMakeLists.txt pose4d_msgs/package.xml pose4d_msgs/cm
 	$(wildcard pose4d_msgs/msg/*.msg)
 TF2_SOURCES := $(wildcard ros_wheels/tf2_msgs/*.* ros_wheels/tf2_msgs/msg/*.msg) pose4d_msgs/cmake/wheel_include_dirs.cmake
 
-.PHONY: fuzz soak help setup test lint demo bench peer train-env sample-bag clean
+.PHONY: fuzz soak help setup test lint demo bench results peer train-env sample-bag clean
 
 help:
-	@echo 'make demo | make test | make setup | make lint | make bench | make fuzz | make soak | make peer | make train-env | make sample-bag | make clean'
+	@echo 'make demo | make test | make setup | make lint | make bench | make results | make fuzz | make soak | make peer | make train-env | make sample-bag | make clean'
 
 setup: $(VENV)/.stamp-pkg
 
@@ -102,6 +103,12 @@ soak: setup
 
 bench: setup
 	$(BIN)/pose4d bench bags/sample --json out/bench.json --graph
+
+# Every set, table and figure the READMEs report (`pose4d results`; RESULTS_ONLY=job,job for a
+# part). With the peer venv (make peer) MediaPipe's rows too; without it they are skipped, and said.
+RESULTS_ONLY ?=
+results: setup
+	$(BIN)/pose4d results $(if $(RESULTS_ONLY),--only $(RESULTS_ONLY))
 
 # The peer: MediaPipe Pose in a venv of its own (its numpy<2 and opencv-contrib-python clash with
 # ours); `pose4d eval/bench --peer mediapipe` run its worker there. Nodes and tests never need it.

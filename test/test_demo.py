@@ -32,7 +32,7 @@ def test_demo_runs_the_graph_and_scores_it(tmp_path):
     assert set(results['graph']) == scores
     for table in results['offline'].values():
         assert set(table) == scores | {'cpu_ms'}
-    assert set(results['offline']) == {'rgbd', 'rgbd_kf', 'rgbd_kf_ik'}
+    assert set(results['offline']) == {'rgbd', 'rgbd_t', 'rgbd_kf', 'rgbd_kf_ik'}
     assert {'elbow', 'knee'} <= set(results['graph']['pck'])  # IK completes them
     overlay = cv2.imread(str(tmp_path / 'overlay.png'))
     assert overlay is not None and overlay.shape[1] == 4 * 640

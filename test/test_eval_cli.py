@@ -60,12 +60,13 @@ def test_eval_writes_the_table_json(tiny_set: Path, tmp_path: Path, capsys) -> N
     figure = cv2.imread(str(plot))
     assert figure is not None and figure.shape[1] == 3 * _plot.PANEL[0]
     panels = figure[100:]  # below the title and the legend
-    for colour in _plot.COLOURS[:4]:  # a curve for every row (4 rows)
+    for colour in _plot.COLOURS[:5]:  # a curve for every row (5 rows)
         assert (panels == colour).all(axis=2).any(), colour
-    assert not (panels == _plot.COLOURS[4]).all(axis=2).any()  # and no other
+    assert not (panels == _plot.COLOURS[6]).all(axis=2).any()  # and no other (5: the grey)
     assert not list(plot.parent.glob('.*'))  # no temporary file left
-    # the rgbd model runs as the graph does: detector, + Kalman filter, + IK (elbows, knees)
-    assert list(table['rows']) == ['rgbd', 'rgbd_kf', 'rgbd_kf_ik', 'rgb']
+    # the paper's ablation: the detector on each frame alone, then as the graph runs it:
+    # the detector with earlier frames, + Kalman filter, + IK (elbows, knees)
+    assert list(table['rows']) == ['rgbd', 'rgbd_t', 'rgbd_kf', 'rgbd_kf_ik', 'rgb']
     for name, row in table['rows'].items():
         metrics = METRICS if name == 'rgb' else METRICS_3D
         assert list(row) == metrics + ['cpu_ms']
@@ -127,7 +128,7 @@ def test_train_then_eval_and_bench(tiny_set: Path, tmp_path: Path, capsys) -> No
     assert pose4d_main(['eval', str(tiny_set), '--json', str(out), '--model', str(model),
                         '--draw', str(drawn)]) == 0
     table = json.loads(out.read_text())
-    assert list(table['rows']) == ['rgbd', 'rgbd_kf', 'rgbd_kf_ik']
+    assert list(table['rows']) == ['rgbd', 'rgbd_t', 'rgbd_kf', 'rgbd_kf_ik']
     for row in table['rows']:  # every frame drawn, and the worst and best 8 of 8 as a grid
         assert len(list((drawn / row).glob('*_pck*.jpg'))) == 8
         grid = cv2.imread(str(drawn / f'{row}_worst_best.jpg'))
@@ -206,7 +207,7 @@ def test_eval_and_bench_with_the_peer_score_it_on_the_same_frames(tiny_set: Path
                         '--peer', 'mediapipe']) == 0
     table = json.loads(out.read_text())
     assert table['frames'] == 8 and table['peer'] == 'fake 1.0'
-    assert list(table['rows']) == ['rgbd', 'rgbd_kf', 'rgbd_kf_ik', 'mediapipe']
+    assert list(table['rows']) == ['rgbd', 'rgbd_t', 'rgbd_kf', 'rgbd_kf_ik', 'mediapipe']
     for row in table['rows'].values():
         assert list(row) == METRICS_3D + ['cpu_ms']
         assert 0 <= row['cpu_ms']['p50'] <= row['cpu_ms']['p95']
@@ -221,6 +222,23 @@ def test_eval_and_bench_with_the_peer_score_it_on_the_same_frames(tiny_set: Path
     assert 0 < timings['peer_wall_ms']['p50']
     assert timings['ratio_to_peer'] == pytest.approx(
         timings['stages_ms']['total']['p50'] / timings['peer_ms']['p50'], rel=1e-2)
+
+
+def test_the_peers_depth_offsets_are_fitted_on_one_set_and_give_a_fitted_row(
+        tiny_set: Path, tmp_path: Path, fake_peer) -> None:
+    offsets, out = tmp_path / 'offsets.json', tmp_path / 'fit.json'
+    assert pose4d_main(['eval', str(tiny_set), '--json', str(out), '--peer', 'mediapipe',
+                        '--fit-peer-depth', str(offsets)]) == 0
+    fitted = json.loads(offsets.read_text())
+    assert fitted['peer'] == 'fake 1.0' and set(fitted['joints']) >= {'head', 'left_wrist'}
+    assert list(json.loads(out.read_text())['rows']) == ['mediapipe']  # the peer alone
+    table = tmp_path / 'table.json'
+    assert pose4d_main(['eval', str(tiny_set), '--json', str(table), '--peer', 'mediapipe',
+                        '--peer-depth', str(offsets), '--no-single-frame', '--model',
+                        'rgbd_10', '--margin', '0.5']) == 0
+    rows = json.loads(table.read_text())['rows']
+    assert list(rows) == ['rgbd_t', 'rgbd_kf', 'rgbd_kf_ik', 'mediapipe', 'mediapipe_fit']
+    assert rows['mediapipe_fit']['pck'] == rows['mediapipe']['pck']  # 3-D only moves
 
 
 def test_the_peer_starts_a_new_video_where_the_tracker_starts_a_new_track(tiny_set: Path,

@@ -1,18 +1,22 @@
 """`pose4d eval`: run the perception core over a labelled set and print the paper's table.
 
-    pose4d eval SOURCE --json FILE [--model M ...] [--range A-B] [--peer mediapipe]
-                [--plot FILE.png] [--draw DIR]
+    pose4d eval SOURCE --json FILE [--model M ...] [--range A-B] [--peer mediapipe
+                [--peer-depth OFFSETS.json | --fit-peer-depth OFFSETS.json]]
+                [--margin M] [--birth-score S] [--plot FILE.png] [--draw DIR]
 
 SOURCE is a CAD-60 directory (real or synthetic), a rosbag2 with ground truth (`pose4d
 cad60-to-bag`) or an LSPET root (with --range). Every row runs the live pipeline's own stages
 (`core.pipeline.FramePipeline`, what the nodes run) over every frame
 (`evaluation.pipeline`):
 
-- `rgbd`, `rgbd_kf`, `rgbd_kf_ik`: frame after frame, each video a new track: the foreground
-  stage (`core.foreground`) masks the person on the depth image, the RGB-D part model searches
-  the levels that the person's depth gives inside the mask's box (`rgbd`); the SLQE Kalman
-  filter tracks the parts (`rgbd_kf`); inverse kinematics adds elbows and knees (`rgbd_kf_ik`,
-  which scores them too). With --max-frames (a subset, no longer a sequence) each frame is on
+- `rgbd`, `rgbd_t`, `rgbd_kf`, `rgbd_kf_ik`, the paper's ablation: the foreground stage
+  (`core.foreground`) masks the person on the depth image and the RGB-D part model searches the
+  levels that the person's depth gives inside the mask's box, each frame on its own (`rgbd`:
+  the 4D-DPM alone, no state from earlier frames); then frame after frame, each video a new
+  track, as the nodes run it: the detector with its temporal aids (`rgbd_t`: the previous
+  frame's arms, the track's person scale), the SLQE Kalman filter (`rgbd_kf`), inverse
+  kinematics for elbows and knees (`rgbd_kf_ik`, which scores them too). `--no-single-frame`
+  skips the `rgbd` pass. With --max-frames (a subset, no longer a sequence) each frame is on
   its own and only `rgbd` is given.
 - `rgb`: the Yang & Ramanan baseline: the RGB-only part model over the whole colour image and
   the whole trained scale range, no depth at all.
@@ -20,7 +24,10 @@ cad60-to-bag`) or an LSPET root (with --range). Every row runs the live pipeline
 - `mediapipe` (`--peer mediapipe`): MediaPipe Pose 0.10.21 (`pose4d_ros.peer`, installed by
   `make peer`) on the same frames, its joints lifted to 3-D by the detector's depth look-up; in
   video mode, a new video where the tracker starts a new track (each photo or subset frame on
-  its own).
+  its own). `--peer-depth OFFSETS.json` adds `mediapipe_fit`: the same joints moved along
+  their rays by a per-joint depth offset fitted on training renders, as our detector's parts
+  are (`evaluation.peer_depth`); `--fit-peer-depth OFFSETS.json` fits those offsets on SOURCE
+  (labelled training renders) and runs the peer alone.
 
 - `rgb` on LSPET: the photograph network (`core.convnet`, `lspet_convnet`): each joint's heat
   map over the photograph, read at `--photo-scales`, no part model (`--model lspet_rgb_14` gives
@@ -51,6 +58,12 @@ from pose4d_ros.core.people import TrackingConfig
 from pose4d_ros.core.threads import set_blas_threads
 from pose4d_ros.datasets.sources import load_frames, source_kind
 from pose4d_ros.evaluation import draw, plot
+from pose4d_ros.evaluation.peer_depth import (
+    fit_depth_offsets,
+    offset_row,
+    read_offsets,
+    write_offsets,
+)
 from pose4d_ros.evaluation.pipeline import (
     Row,
     convnet_rows,
@@ -90,9 +103,22 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
                    help='run the several-person pipeline the nodes run, searching at most N '
                    'people a frame (default: on a set with several people, 4; else the '
                    "single-person pipeline of the paper)")
+    p.add_argument('--margin', type=float, default=SearchConfig.margin,
+                   help="the search box's margin around the foreground box, person scales")
+    p.add_argument('--birth-score', type=float, default=TrackingConfig.birth_score,
+                   help="several-person pipeline: a tentative track's least part model score "
+                        'while another track is confirmed (core.people.TrackingConfig)')
+    p.add_argument('--no-single-frame', action='store_true',
+                   help='skip the single-frame `rgbd` pass (the temporal rows only)')
     p.add_argument('--blas-threads', type=int, default=1)
     p.add_argument('--peer', choices=PEERS,
                    help='one more row: the peer on the same frames (needs `make peer`)')
+    p.add_argument('--peer-depth', type=Path, metavar='OFFSETS.json',
+                   help="with --peer: also the row `<peer>_fit`, the peer's 3-D joints moved "
+                        'by these fitted depth offsets')
+    p.add_argument('--fit-peer-depth', type=Path, metavar='OFFSETS.json',
+                   help="with --peer: fit the peer's per-joint depth offsets on SOURCE "
+                        '(training renders) and write them here; no model is run')
     p.add_argument('--plot', type=Path, metavar='FILE.png',
                    help='also draw PCK against the threshold (0 to 0.5) per joint group, one '
                         'curve per row, and the 3-D error distribution')
@@ -108,7 +134,11 @@ def run(args: argparse.Namespace) -> int:
 
     set_blas_threads(args.blas_threads)
     kind = source_kind(args.source)
-    models = [load_any(m) for m in (args.model or default_models(kind))]
+    if (args.peer_depth or args.fit_peer_depth) and not args.peer:
+        raise ValueError('--peer-depth and --fit-peer-depth need --peer')
+    offsets = read_offsets(args.peer_depth) if args.peer_depth else None
+    models = ([] if args.fit_peer_depth else
+              [load_any(m) for m in (args.model or default_models(kind))])
     if not valid_scales(args.photo_scales):
         raise ValueError(f'--photo-scales {args.photo_scales}: must include 1 and lie within '
                          f'0.25..4')
@@ -117,7 +147,7 @@ def run(args: argparse.Namespace) -> int:
     if args.plot is not None and args.plot.suffix.lower() != '.png':
         raise ValueError(f'--plot {args.plot}: the figure is a PNG file (.png)')
     try:
-        rows, frames, curves = table_rows(args, kind, models, peer)
+        rows, frames, curves = table_rows(args, kind, models, peer, offsets)
     finally:
         if peer is not None:
             peer.close()
@@ -137,16 +167,20 @@ def run(args: argparse.Namespace) -> int:
 
 
 def table_rows(args: argparse.Namespace, kind: str, models: list[PartModel | ConvNet],
-               peer: MediaPipePeer | None) -> tuple[dict[str, dict], int, dict[str, dict]]:
+               peer: MediaPipePeer | None, offsets: dict[str, float] | None = None
+               ) -> tuple[dict[str, dict], int, dict[str, dict]]:
     """Every model's rows and the peer's ({row name: table}), the number of frames, and the
-    rows' accuracy curves (`evaluation.pipeline.curve_rows` at `evaluation.plot.ALPHAS`)."""
+    rows' accuracy curves (`evaluation.pipeline.curve_rows` at `evaluation.plot.ALPHAS`).
+    `offsets`: the peer's fitted depth offsets (the `<peer>_fit` row); with
+    `args.fit_peer_depth` the offsets are fitted on these frames and written there."""
     frames = load_frames([args.source], frame_range=args.frame_range, stride=args.stride,
                          max_frames=args.max_frames)
     sequence = kind in ('cad60', 'bag') and args.max_frames is None
     max_people = args.max_people
     if max_people is None and any(getattr(f, 'people', ()) for f in frames):
         max_people = TrackingConfig.max_people
-    people = None if max_people is None else TrackingConfig(max_people=max_people)
+    people = None if max_people is None else TrackingConfig(max_people=max_people,
+                                                            birth_score=args.birth_score)
     rows: dict[str, Row] = {}
     for m in models:
         if m.channels == 'rgbd' and any(f.depth_m is None for f in frames):
@@ -158,12 +192,21 @@ def table_rows(args: argparse.Namespace, kind: str, models: list[PartModel | Con
             rows.update(convnet_rows(progress(frames, name), m, name=name,
                                      scales=args.photo_scales))
             continue
-        rows.update(pipeline_rows(progress(frames, name), m, name=name, sequence=sequence,
-                                  search=SearchConfig(n_levels=args.levels),
+        rows.update(pipeline_rows(frames, m, name=name, sequence=sequence, show=progress,
+                                  single_frame=not args.no_single_frame,
+                                  search=SearchConfig(n_levels=args.levels, margin=args.margin),
                                   scale=ScaleConfig(factors=args.person_scales),
                                   people=people))
     if peer is not None:
         rows.update(peer_rows(progress(frames, peer.name), peer, sequence=sequence))
+        if args.fit_peer_depth is not None:
+            fitted = fit_depth_offsets(rows[peer.name], frames)
+            write_offsets(args.fit_peer_depth, fitted, source=str(args.source),
+                          peer=peer.description)
+            log(f'wrote {args.fit_peer_depth}: ' + ', '.join(
+                f'{k} {v["offset_m"] * 1e3:.0f} mm' for k, v in fitted.items()))
+        if offsets is not None:
+            rows[f'{peer.name}_fit'] = offset_row(rows[peer.name], offsets)
     for name, row in rows.items():
         if row.no_pose:
             log(f'{name}: no pose in {row.no_pose} of {len(frames)} frames')

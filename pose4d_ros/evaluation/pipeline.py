@@ -1,8 +1,13 @@
 """The core pipeline over labelled frames, scored like the paper's tables (`pose4d eval`, `demo`).
 
-A part model's rows come from one pass of `core.pipeline.FramePipeline` (the stages the ROS graph
-runs) over the frames: an RGB-D model gives `rgbd` (the detector's parts), `rgbd_kf` (after the
-SLQE tracker) and `rgbd_kf_ik` (the 14-joint skeleton, elbows and knees by IK); an RGB model
+A part model's rows come from `core.pipeline.FramePipeline` (the stages the ROS graph runs) over
+the frames. An RGB-D model gives the paper's ablation: `rgbd`, the 4D-DPM on each frame alone (the
+pipeline reset before every frame: no arm prior, no per-track person scale, the foreground
+without its previous frame), then, from one pass over each video as the nodes run it, `rgbd_t`
+(the detector with its temporal aids: the previous frame's arms, the track's person scale),
+`rgbd_kf` (after the SLQE tracker) and `rgbd_kf_ik` (the 14-joint skeleton, elbows and knees by
+IK). Each addition is thus measured on its own: `rgbd` -> `rgbd_t` the detector's use of
+earlier frames, `rgbd_t` -> `rgbd_kf` the filter, `rgbd_kf` -> `rgbd_kf_ik` the IK. An RGB model
 gets no depth (no foreground: the whole colour image, Yang & Ramanan) and gives `rgb`, as does
 the photograph network (`core.convnet`, `convnet_rows`). Frames
 that are no sequence (LSPET photos, an evenly spread subset) are each on their own: the pipeline
@@ -10,7 +15,7 @@ forgets the previous frame, and only the detector's row is given. `peer_rows` ru
 (MediaPipe, `pose4d_ros.peer`) over the same frames; `score_rows` scores every row the same way.
 
 Each row records its CPU time per frame (`cpu_ms`: p50, p95 of this process's CPU time,
-`time.process_time`): the detector's row the foreground and the detector, `_kf` also the
+`time.process_time`): the detector's rows the foreground and the detector, `_kf` also the
 tracker, `_kf_ik` all four stages; the peer's is the CPU time of its worker process plus the
 3-D look-up here.
 """
@@ -18,7 +23,7 @@ tracker, `_kf_ik` all four stages; the peer's is the CPU time of its worker proc
 from __future__ import annotations
 
 import time
-from collections.abc import Iterable, Sequence
+from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -49,7 +54,7 @@ def ms_stats(ms: Iterable[float]) -> dict[str, float | None]:
             'p95': round(float(np.percentile(a, 95)), 3)}
 
 
-ROW_STAGES = {'': STAGES[:2], '_kf': STAGES[:3], '_kf_ik': STAGES}
+ROW_STAGES = {'': STAGES[:2], '_t': STAGES[:2], '_kf': STAGES[:3], '_kf_ik': STAGES}
 
 
 @dataclass
@@ -77,27 +82,53 @@ class Row:
 
 def pipeline_rows(frames: Iterable[Frame], model: PartModel, *, name: str | None = None,
                   search: SearchConfig | None = None, scale: ScaleConfig | None = None,
-                  sequence: bool = True, people: TrackingConfig | None = None
+                  sequence: bool = True, people: TrackingConfig | None = None,
+                  single_frame: bool = True,
+                  show: Callable[[Sequence[Frame], str], Iterable[Frame]] | None = None
                   ) -> dict[str, Row]:
     """The rows of a part model over the frames ({`name` (default: its channels) + suffix:
-    row}); `sequence` False puts each frame on its own. `people`: the several-person pipeline
-    (`FramePipeline(people=...)`, as the nodes run it), whose `_kf_ik` row also holds every
-    person's skeleton (`Row.people`)."""
+    row}); `sequence` False puts each frame on its own (the detector's row alone). In a
+    sequence, an RGB-D model gives `_t`, `_kf` and `_kf_ik` from one pass as the nodes run it
+    and, unless `single_frame` is False, the paper's single-frame detector row (no suffix) from
+    a second pass that resets the pipeline before every frame. `people`: the several-person
+    pipeline (`FramePipeline(people=...)`, as the nodes run it), whose `_kf_ik` row also holds
+    every person's skeleton (`Row.people`); `show(frames, label)` wraps each pass's frames
+    (a progress bar)."""
+    frames = list(frames)
+    name = name or model.channels
+    show = show or (lambda fs, _label: fs)
+    depth = model.channels == 'rgbd'
+    if not (depth and sequence):
+        return {name: _pass(show(frames, name), model, ('',), search, scale, people,
+                            reset=True)['']}
+    rows = {}
+    if single_frame:
+        rows.update(_pass(show(frames, f'{name} (single frame)'), model, ('',), search, scale,
+                          people, reset=True))
+    rows.update(_pass(show(frames, name), model, ('_t', '_kf', '_kf_ik'), search, scale,
+                      people, reset=False))
+    return {name + s: row for s, row in rows.items()}
+
+
+def _pass(frames: Iterable[Frame], model: PartModel, suffixes: tuple[str, ...],
+          search: SearchConfig | None, scale: ScaleConfig | None,
+          people: TrackingConfig | None, *, reset: bool) -> dict[str, Row]:
+    """One pass of the pipeline over the frames, the rows `suffixes` (the detector's, the
+    filter's, the skeleton's, in that order); `reset`: before every frame."""
     pipeline = FramePipeline(DetectorStage(model, search=search, scale=scale), people=people)
     depth = model.channels == 'rgbd'
-    suffixes = tuple(ROW_STAGES) if depth and sequence else ('',)
     rows = {s: Row() for s in suffixes}
     for f in frames:
         if depth and f.depth_m is None:
             raise ValueError(f'{f.key}: no depth image for the rgbd model')
-        if not sequence:
+        if reset:
             pipeline.reset()
         out = pipeline.step(f.color, f.depth_m if depth else None, f.intrinsics,
                             f.stamp_ns * 1e-9)
         for s, pred in zip(suffixes, (out.parts, out.tracked, out.skeleton), strict=False):
             rows[s].add(pred, sum(out.cpu_s[stage] for stage in ROW_STAGES[s]),
                         out.people if people is not None and s == '_kf_ik' else None)
-    return {(name or model.channels) + s: row for s, row in rows.items()}
+    return rows
 
 
 def convnet_rows(frames: Iterable[Frame], net: ConvNet, *, name: str | None = None,

@@ -1,0 +1,296 @@
+"""Every figure the READMEs report, from one command (`pose4d results`, `make results`).
+
+The protocol (`pose4d_ros/models/README.md`, first section): training, validation and test sets
+are disjoint by subject and seed; settings are chosen on validation sets; the test sets are run
+once per shipped model, to report. This module holds that protocol's sets (`SETS`: each a
+`pose4d synth` command, made into `data/synth/NAME` unless a set made by the same command is
+there) and its jobs (`JOBS`: `pose4d eval` and `pose4d bench` commands, each writing JSON under
+`docs/results/`), runs them as the user would type them (subprocesses of the `pose4d` beside
+this Python, their progress lines passed through), and writes `docs/results/index.json` (per
+job: the commands, when, how long, done or skipped and why; the machine; the commit) and the
+generated `docs/RESULTS.md` and README summary (`evaluation.results_doc`).
+"""
+
+from __future__ import annotations
+
+import json
+import shlex
+import subprocess
+import sys
+import time
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from pose4d_ros.core.files import write_json
+from pose4d_ros.peer import peer_python
+from pose4d_ros.util.machine import git_commit, machine
+from pose4d_ros.util.progress import log
+
+RESULTS = Path('docs/results')
+DATA = Path('data/synth')
+WORK = Path('build/results')
+STAMP = '.pose4d_command'
+
+
+@dataclass(frozen=True)
+class DataSet:
+    """A rendered set: its role in the protocol and its `pose4d synth` options (after
+    `--utkinect U --out DIR`)."""
+
+    name: str
+    role: str  # 'training', 'validation' or 'test'
+    options: tuple[str, ...]
+
+    def command(self, utkinect: str) -> list[str]:
+        return ['pose4d', 'synth', '--utkinect', utkinect, '--out', str(DATA / self.name),
+                *self.options, '--quiet']
+
+
+def _synth(seed: int, takes: str, per_take: int, frames: int, stride: int,
+           *more: str) -> tuple[str, ...]:
+    return ('--seed', str(seed), '--takes', takes, '--videos-per-take', str(per_take),
+            '--frames', str(frames), '--stride', str(stride), *more)
+
+
+ARMS = ('--actions', 'waveHands,clapHands,throw', '--stature', '1.7', '2.0',
+        '--distance', '1.8', '3.2')
+SETS: dict[str, DataSet] = {s.name: s for s in (
+    # training renders (subjects s01-s06): the peer's depth offsets are fitted here
+    DataSet('train', 'training', _synth(1, 's01-s06', 8, 16, 3)),
+    # validation: the training subjects, new bodies and rooms (seeds no model was trained on)
+    DataSet('valid30', 'validation', _synth(97, 's01-s06', 1, 45, 1)),
+    DataSet('valid30_people2', 'validation', _synth(98, 's01-s06', 1, 45, 1, '--people', '2')),
+    # test: the held-out subjects s07-s08, run once per shipped model
+    DataSet('test', 'test', _synth(2, 's07-s08', 5, 20, 3)),
+    DataSet('test30', 'test', _synth(3, 's07-s08', 4, 45, 1)),
+    DataSet('test30_arms', 'test', _synth(96, 's07-s08', 2, 45, 1, *ARMS)),
+    DataSet('test30_people2', 'test', _synth(4, 's07-s08', 2, 45, 1, '--people', '2')),
+)}
+
+# Validation sweeps: the values tried (the shipped default among them); another value is chosen
+# only when it beats the default by more than TIE (points of average7, or of MOTA %)
+MARGINS = (0.3, 0.4, 0.5, 0.6)
+BIRTH_SCORES = (2.5, 5.0, 7.5)
+DEFAULT_MARGIN, DEFAULT_BIRTH_SCORE = 0.4, 5.0
+TIE = 0.1
+
+
+@dataclass
+class Context:
+    utkinect: str
+    lspet: str
+    peer: bool
+    dry: bool = False
+    commands: list[str] = field(default_factory=list)
+
+
+def _eval(ctx: Context, source: str, out: Path, *options: str, peer: bool = True) -> list[str]:
+    cmd = ['pose4d', 'eval', source, '--json', str(out), *options]
+    if peer and ctx.peer:
+        cmd += ['--peer', 'mediapipe']
+        if (RESULTS / 'peer_depth.json').exists() or ctx.dry:
+            cmd += ['--peer-depth', str(RESULTS / 'peer_depth.json')]
+    return cmd
+
+
+@dataclass(frozen=True)
+class Job:
+    """One table's worth of work: the sets it needs and its commands (given the context)."""
+
+    name: str
+    what: str
+    sets: tuple[str, ...]
+    commands: Callable[[Context], list[list[str]]]
+    needs_peer: bool = False
+    needs: str = ''  # 'lspet' or 'utkinect': the shared data it reads
+
+
+def _validation(ctx: Context) -> list[list[str]]:
+    cmds = [_eval(ctx, str(DATA / 'valid30'), WORK / f'margin_{m}.json', '--model', 'rgbd_14',
+                  '--margin', str(m), '--no-single-frame', peer=False) for m in MARGINS]
+    cmds += [_eval(ctx, str(DATA / 'valid30_people2'), WORK / f'birth_{b}.json', '--model',
+                   'rgbd_14', '--birth-score', str(b), '--no-single-frame', peer=False)
+             for b in BIRTH_SCORES]
+    return cmds
+
+
+JOBS: tuple[Job, ...] = (
+    Job('peer_depth', "MediaPipe's per-joint depth offsets, fitted on the training renders",
+        ('train',), lambda c: [[
+            'pose4d', 'eval', str(DATA / 'train'), '--json', str(WORK / 'peer_depth_train.json'),
+            '--peer', 'mediapipe', '--fit-peer-depth', str(RESULTS / 'peer_depth.json')]],
+        needs_peer=True),
+    Job('validation', 'the search margin and the birth score, swept on validation renders',
+        ('valid30', 'valid30_people2'), _validation),
+    Job('test', 'held-out test (s07-s08, 400 frames 0.1 s apart): rgbd_14 and rgb_10',
+        ('test',), lambda c: [_eval(c, str(DATA / 'test'), RESULTS / 'test.json')]),
+    Job('test30', 'held-out test30 (720 frames at 30 fps), with the PCK curves',
+        ('test30',), lambda c: [_eval(c, str(DATA / 'test30'), RESULTS / 'test30.json',
+                                      '--model', 'rgbd_14', '--plot',
+                                      str(RESULTS / 'pck_test30.png'))]),
+    Job('test30_arms', 'held-out test30_arms (1064 frames of waving, clapping, throwing)',
+        ('test30_arms',), lambda c: [_eval(c, str(DATA / 'test30_arms'),
+                                           RESULTS / 'test30_arms.json', '--model', 'rgbd_14')]),
+    Job('sample', 'the demo bag (bags/sample, 45 frames)', (),
+        lambda c: [_eval(c, 'bags/sample', RESULTS / 'sample.json', '--model', 'rgbd_14')]),
+    Job('test30_people2', 'held-out two-person renders (several-person pipeline)',
+        ('test30_people2',), lambda c: [_eval(c, str(DATA / 'test30_people2'),
+                                              RESULTS / 'test30_people2.json', '--model',
+                                              'rgbd_14', peer=False)]),
+    Job('lspet', 'LSPET photographs 2501-3000: the photograph network and the part model', (),
+        lambda c: [_eval(c, c.lspet, RESULTS / 'lspet.json', '--range', '2501-3000',
+                         '--model', 'lspet_convnet', '--model', 'lspet_rgb_14')],
+        needs='lspet'),
+    Job('bench', 'CPU per stage on the demo bag, and MediaPipe in the same run', (),
+        lambda c: [['pose4d', 'bench', 'bags/sample', '--json', str(RESULTS / 'bench.json'),
+                    *(['--peer', 'mediapipe'] if c.peer else [])]]),
+    Job('bench_graph', 'the node graph on the demo bag: frames in and out, latency', (),
+        lambda c: [['pose4d', 'bench', 'bags/sample', '--json',
+                    str(RESULTS / 'bench_graph.json'), '--frames', '20', '--graph']]),
+)
+JOB_NAMES = tuple(j.name for j in JOBS)
+
+
+def pose4d_executable() -> str:
+    """The `pose4d` of this Python's environment."""
+    exe = Path(sys.executable).parent / 'pose4d'
+    return str(exe) if exe.exists() else 'pose4d'
+
+
+def _run(cmd: Sequence[str]) -> float:
+    """Run a `pose4d ...` command, its output passed through; its wall time, seconds.
+    RuntimeError when it fails."""
+    log('$ ' + shlex.join(cmd))
+    t0 = time.monotonic()
+    done = subprocess.run([pose4d_executable(), *cmd[1:]], check=False)
+    if done.returncode != 0:
+        raise RuntimeError(f'{shlex.join(cmd)}: exit status {done.returncode}')
+    return time.monotonic() - t0
+
+
+def make_set(ds: DataSet, utkinect: str) -> str:
+    """Make `ds` unless a set made by the same command is there; what was done."""
+    cmd = ds.command(utkinect)
+    out = DATA / ds.name
+    stamp = out / STAMP
+    if stamp.exists() and stamp.read_text().strip() == shlex.join(cmd):
+        return 'reused'
+    if out.exists():
+        import shutil
+        shutil.rmtree(out)
+    _run(cmd)
+    stamp.write_text(shlex.join(cmd) + '\n')
+    return 'made'
+
+
+def peer_available() -> bool:
+    """MediaPipe is there: `make peer` finished (its stamp), or $POSE4D_PEER_PYTHON is set."""
+    import os
+
+    python = peer_python()
+    return python.exists() and (bool(os.environ.get('POSE4D_PEER_PYTHON'))
+                                or (python.parent.parent / '.stamp').exists())
+
+
+def run(only: Sequence[str] | None = None, *, utkinect: str, lspet: str,
+        peer: bool | None = None) -> dict:
+    """Run the jobs (`only`: those named, in `JOBS` order), write their JSON, the index,
+    `docs/RESULTS.md` and the README summary; the index."""
+    from pose4d_ros.evaluation import results_doc
+
+    selected = [j for j in JOBS if only is None or j.name in only]
+    ctx = Context(utkinect, lspet, peer_available() if peer is None else peer)
+    for d in (RESULTS, WORK, DATA):
+        d.mkdir(parents=True, exist_ok=True)
+    index_path = RESULTS / 'index.json'
+    index = json.loads(index_path.read_text()) if index_path.exists() else {}
+    jobs = index.get('jobs', {})
+    run_skipped = []
+    for n, job in enumerate(selected, 1):
+        log(f'[{n}/{len(selected)}] {job.name}: {job.what}')
+        reason = _missing(job, ctx)
+        if reason:
+            log(f'{job.name}: skipped ({reason})')
+            run_skipped.append({'job': job.name, 'why': reason})
+            jobs[job.name] = {**jobs.get(job.name, {}), 'what': job.what,
+                              'skipped_last_run': reason}
+            continue
+        t0 = time.monotonic()
+        commands = [shlex.join(c) for c in job.commands(ctx)]
+        try:
+            sets = {s: make_set(SETS[s], utkinect) for s in job.sets}
+            for c in job.commands(ctx):
+                _run(c)
+            if job.name == 'validation':
+                write_json(RESULTS / 'validation.json', summarize_validation(), indent=1)
+        except (RuntimeError, OSError, ValueError, KeyError) as e:
+            log(f'{job.name}: failed ({e})')
+            run_skipped.append({'job': job.name, 'why': f'failed: {e}'})
+            jobs[job.name] = {**jobs.get(job.name, {}), 'what': job.what,
+                              'skipped_last_run': f'failed: {e}'}
+            continue
+        jobs[job.name] = {
+            'what': job.what, 'sets': {s: shlex.join(SETS[s].command(utkinect)) for s in sets},
+            'commands': commands, 'seconds': round(time.monotonic() - t0, 1),
+            'when': time.strftime('%Y-%m-%d %H:%M:%S'), 'commit': git_commit(),
+            'peer': ctx.peer and (job.needs_peer or 'mediapipe' in ' '.join(commands)),
+        }
+        if not ctx.peer and not job.needs_peer and any(
+                c[1] in ('eval', 'bench') for c in job.commands(ctx)):
+            jobs[job.name]['note'] = 'run without the peer (no .venv-peer: `make peer`)'
+    index = {'machine': machine(), 'commit': git_commit(), 'jobs': jobs,
+             'sets': {k: {'role': v.role, 'command': shlex.join(v.command(utkinect))}
+                      for k, v in SETS.items()},
+             'last_run': {'jobs': [j.name for j in selected], 'skipped': run_skipped,
+                          'when': time.strftime('%Y-%m-%d %H:%M:%S')}}
+    write_json(index_path, index, indent=1)
+    results_doc.write_all(RESULTS, index)
+    for s in run_skipped:
+        log(f"skipped {s['job']}: {s['why']}")
+    return index
+
+
+def _missing(job: Job, ctx: Context) -> str:
+    """Why the job cannot run here ('' if it can)."""
+    if job.needs_peer and not ctx.peer:
+        return f'needs MediaPipe: no {peer_python()} (`make peer`)'
+    if job.needs == 'lspet' and not (Path(ctx.lspet) / 'joints.mat').exists():
+        return f'no LSPET at {ctx.lspet}'
+    if job.sets and not Path(ctx.utkinect).is_dir():
+        return f'no UTKinect motion at {ctx.utkinect} to render its sets'
+    return ''
+
+
+def summarize_validation() -> dict:
+    """The validation sweeps' figures and the value each chooses."""
+    out: dict = {'set_margin': 'valid30', 'set_birth_score': 'valid30_people2'}
+    margin = {}
+    for m in MARGINS:
+        rows = json.loads((WORK / f'margin_{m}.json').read_text())['rows']
+        r = rows['rgbd_kf_ik']
+        margin[str(m)] = {'average7': r['pck']['average7'],
+                          'within_10cm': r.get('within_10cm', {}).get('average'),
+                          'rgbd_t_average7': rows['rgbd_t']['pck']['average7']}
+    out['margin'] = margin
+    out['margin_chosen'] = choose({k: v['average7'] for k, v in margin.items()},
+                                  DEFAULT_MARGIN)
+    birth = {}
+    for b in BIRTH_SCORES:
+        r = json.loads((WORK / f'birth_{b}.json').read_text())['rows']['rgbd_kf_ik']
+        t = r.get('tracking', {})
+        birth[str(b)] = {'average7': r['pck']['average7'], 'mota': t.get('mota'),
+                         'idf1': t.get('idf1'), 'id_switches_per_1000':
+                         t.get('id_switches_per_1000'), 'false_per_1000':
+                         t.get('false_per_1000')}
+    out['birth_score'] = birth
+    out['birth_score_chosen'] = choose({k: 100 * (v['mota'] or 0) for k, v in birth.items()},
+                                       DEFAULT_BIRTH_SCORE)
+    out['tie'] = TIE
+    return out
+
+
+def choose(scores: dict[str, float], default: float) -> float:
+    """The best-scoring value, unless the default is within `TIE` of it."""
+    best = max(scores, key=scores.get)
+    return default if scores[str(default)] >= scores[best] - TIE else float(best)

@@ -1,0 +1,77 @@
+"""The README's results summary is what `pose4d results` wrote to docs/results: every figure in
+its table is checked against the JSON, so none can drift from what the code produced."""
+
+from __future__ import annotations
+
+import json
+import re
+from pathlib import Path
+
+import pytest
+
+from pose4d_ros.evaluation import results_doc as doc
+
+ROOT = Path(__file__).resolve().parents[1]
+RESULTS = ROOT / 'docs' / 'results'
+
+
+def summary_block(text: str) -> str:
+    assert doc.SUMMARY_BEGIN in text and doc.SUMMARY_END in text, 'README has no results summary'
+    return text.split(doc.SUMMARY_BEGIN, 1)[1].split(doc.SUMMARY_END, 1)[0]
+
+
+def parse_table(block: str) -> tuple[list[str], dict[str, list[str]]]:
+    """The summary table's set titles and, per row key, its cells."""
+    lines = [ln for ln in block.splitlines() if ln.startswith('|')]
+    head = [c.strip() for c in lines[0].strip('|').split('|')][1:]
+    rows = {}
+    for ln in lines[2:]:
+        cells = [c.strip() for c in ln.strip('|').split('|')]
+        key = re.match(r'`([^`]+)`', cells[0])
+        assert key, f'a summary row without its key: {ln}'
+        rows[key.group(1)] = cells[1:]
+    return head, rows
+
+
+def test_every_figure_of_the_readme_summary_is_the_jsons() -> None:
+    block = summary_block((ROOT / 'README.md').read_text())
+    titles, rows = parse_table(block)
+    sets = [s for s, t in doc.SUMMARY_SETS if (RESULTS / f'{s}.json').exists()]
+    assert sets, 'no docs/results/*.json for the summary (run `make results`)'
+    tables = {s: json.loads((RESULTS / f'{s}.json').read_text()) for s in sets}
+    title = dict(doc.SUMMARY_SETS)
+    assert titles == [f'{title[s]} ({tables[s]["frames"]})' for s in sets]
+    assert rows, 'the summary has no rows'
+    for key, cells in rows.items():
+        for s, c in zip(sets, cells, strict=True):
+            row = tables[s]['rows'].get(key)
+            assert c == (doc.cell(row) if row else '-'), f'{key} on {s}: README {c!r}'
+    # and every row the JSON has for the summary is shown
+    for key, _ in doc.SUMMARY_ROWS:
+        if any(key in tables[s]['rows'] for s in sets):
+            assert key in rows, f'{key} is in docs/results but not in the README summary'
+    bench = RESULTS / 'bench.json'
+    ratio = re.search(r'MediaPipe \(p50, same run, demo bag\): ([0-9]+\.[0-9]+)', block)
+    if bench.exists() and 'ratio_to_peer' in json.loads(bench.read_text()):
+        assert ratio and float(ratio.group(1)) == pytest.approx(
+            json.loads(bench.read_text())['ratio_to_peer'], abs=5e-4)
+    else:
+        assert ratio is None
+
+
+def test_the_summary_is_what_the_generator_writes() -> None:
+    block = summary_block((ROOT / 'README.md').read_text())
+    assert block.strip() == doc.summary(RESULTS).strip()
+
+
+def test_a_drifted_figure_fails(tmp_path: Path) -> None:
+    results = tmp_path / 'results'
+    results.mkdir()
+    row = {'pck': {'average7': 96.04}, 'within_10cm': {'average': 90.46}}
+    (results / 'test.json').write_text(json.dumps({'frames': 400, 'rows': {'rgbd_kf': row}}))
+    readme = tmp_path / 'README.md'
+    readme.write_text(f'x\n{doc.SUMMARY_BEGIN}\nold\n{doc.SUMMARY_END}\ny\n')
+    assert doc.update_readme(readme, results)
+    titles, rows = parse_table(summary_block(readme.read_text()))
+    assert titles == ['test (400)'] and rows == {'rgbd_kf': ['96.0 / 90.5']}
+    assert readme.read_text().startswith('x\n') and readme.read_text().endswith('y\n')

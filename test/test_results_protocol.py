@@ -1,0 +1,44 @@
+"""`pose4d results` follows the protocol: sets disjoint by subject and seed, choices swept on
+validation sets only, reported tables from test sets only (nothing is run here)."""
+
+from __future__ import annotations
+
+import pytest
+
+from pose4d_ros.cli.main import main as pose4d_main
+from pose4d_ros.evaluation import results as r
+
+
+def option(ds: r.DataSet, name: str) -> str:
+    return ds.options[ds.options.index(name) + 1]
+
+
+def test_sets_are_disjoint_by_subject_and_seed() -> None:
+    seeds = [option(ds, '--seed') for ds in r.SETS.values()]
+    assert len(seeds) == len(set(seeds))
+    for ds in r.SETS.values():
+        takes = option(ds, '--takes')
+        assert takes == ('s07-s08' if ds.role == 'test' else 's01-s06'), ds.name
+
+
+def test_choices_on_validation_reports_on_test() -> None:
+    ctx = r.Context('U', 'L', peer=True, dry=True)
+    for job in r.JOBS:
+        roles = {r.SETS[s].role for s in job.sets}
+        if job.name == 'validation':
+            assert roles == {'validation'}
+        elif job.name == 'peer_depth':
+            assert roles == {'training'}
+        else:
+            assert roles <= {'test'}, job.name
+            for cmd in job.commands(ctx):
+                assert not any(f'/{s}' in ' '.join(cmd) for s, ds in r.SETS.items()
+                               if ds.role != 'test'), cmd
+    # the peer's fitted row reads the offsets fitted on training renders
+    test = next(j for j in r.JOBS if j.name == 'test').commands(ctx)[0]
+    assert '--peer-depth' in test
+
+
+def test_an_unknown_job_is_refused_in_one_line(capsys: pytest.CaptureFixture) -> None:
+    assert pose4d_main(['results', '--only', 'nosuch']) == 2
+    assert 'no such job' in capsys.readouterr().err
