@@ -14,7 +14,8 @@ def option(ds: r.DataSet, name: str) -> str:
 
 
 def test_sets_are_disjoint_by_subject_and_seed() -> None:
-    seeds = [option(ds, '--seed') for ds in r.SETS.values()]
+    # a set of the same videos with one person alone (--alone) shares its seed on purpose
+    seeds = [option(ds, '--seed') for ds in r.SETS.values() if '--alone' not in ds.options]
     assert len(seeds) == len(set(seeds))
     for ds in r.SETS.values():
         takes = option(ds, '--takes')

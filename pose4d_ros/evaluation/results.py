@@ -61,11 +61,19 @@ SETS: dict[str, DataSet] = {s.name: s for s in (
     # validation: the training subjects, new bodies and rooms (seeds no model was trained on)
     DataSet('valid30', 'validation', _synth(97, 's01-s06', 1, 45, 1)),
     DataSet('valid30_people2', 'validation', _synth(98, 's01-s06', 1, 45, 1, '--people', '2')),
+    DataSet('valid60_people2', 'validation', _synth(201, 's01-s06', 1, 60, 1, '--people', '2')),
     # test: the held-out subjects s07-s08, run once per shipped model
     DataSet('test', 'test', _synth(2, 's07-s08', 5, 20, 3)),
     DataSet('test30', 'test', _synth(3, 's07-s08', 4, 45, 1)),
     DataSet('test30_arms', 'test', _synth(96, 's07-s08', 2, 45, 1, *ARMS)),
     DataSet('test30_people2', 'test', _synth(4, 's07-s08', 2, 45, 1, '--people', '2')),
+    # two people, and the same videos with each of them alone (the baseline); three people
+    DataSet('test60_people2', 'test', _synth(101, 's07-s08', 3, 60, 1, '--people', '2')),
+    DataSet('test60_people2_alone1', 'test',
+            _synth(101, 's07-s08', 3, 60, 1, '--people', '2', '--alone', '1')),
+    DataSet('test60_people2_alone2', 'test',
+            _synth(101, 's07-s08', 3, 60, 1, '--people', '2', '--alone', '2')),
+    DataSet('test60_people3', 'test', _synth(301, 's07-s08', 2, 60, 1, '--people', '3')),
 )}
 
 # Validation sweeps: the values tried (the shipped default among them); another value is chosen
@@ -112,6 +120,11 @@ def _validation(ctx: Context) -> list[list[str]]:
     cmds += [_eval(ctx, str(DATA / 'valid30_people2'), WORK / f'birth_{b}.json', '--model',
                    'rgbd_14', '--birth-score', str(b), '--no-single-frame', peer=False)
              for b in BIRTH_SCORES]
+    # the several-person tracker's birth score and confirmation (TrackingConfig), the detections
+    # computed once (tools/people_sweep.py)
+    cmds.append([sys.executable, 'tools/people_sweep.py', str(DATA / 'valid60_people2'),
+                 '--birth-score', '0,1,2,3,4,5', '--confirm-frames', '2,3,5', '--json',
+                 str(RESULTS / 'people_sweep_valid60_people2.json')])
     return cmds
 
 
@@ -122,7 +135,7 @@ JOBS: tuple[Job, ...] = (
             '--peer', 'mediapipe', '--fit-peer-depth', str(RESULTS / 'peer_depth.json')]],
         needs_peer=True),
     Job('validation', 'the search margin and the birth score, swept on validation renders',
-        ('valid30', 'valid30_people2'), _validation),
+        ('valid30', 'valid30_people2', 'valid60_people2'), _validation),
     Job('test', 'held-out test (s07-s08, 400 frames 0.1 s apart): rgbd_14 and rgb_10',
         ('test',), lambda c: [_eval(c, str(DATA / 'test'), RESULTS / 'test.json')]),
     Job('test30', 'held-out test30 (720 frames at 30 fps), with the PCK curves',
@@ -138,6 +151,13 @@ JOBS: tuple[Job, ...] = (
         ('test30_people2',), lambda c: [_eval(c, str(DATA / 'test30_people2'),
                                               RESULTS / 'test30_people2.json', '--model',
                                               'rgbd_14', peer=False)]),
+    Job('people', 'held-out renders of two and three people (60 frames a video, crossings), '
+        'and the same two-person videos with each person alone, in the several-person pipeline',
+        ('test60_people2', 'test60_people2_alone1', 'test60_people2_alone2', 'test60_people3'),
+        lambda c: [_eval(c, str(DATA / s), RESULTS / f'{s}.json', '--model', 'rgbd_14',
+                         '--max-people', '4', peer=False)
+                   for s in ('test60_people2', 'test60_people2_alone1', 'test60_people2_alone2',
+                             'test60_people3')]),
     Job('lspet', 'LSPET photographs 2501-3000: the photograph network and the part model', (),
         lambda c: [_eval(c, c.lspet, RESULTS / 'lspet.json', '--range', '2501-3000',
                          '--model', 'lspet_convnet', '--model', 'lspet_rgb_14')],

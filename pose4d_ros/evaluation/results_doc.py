@@ -134,11 +134,16 @@ def write_all(results: Path, index: dict, *, readme: Path = Path('README.md'),
     titles = {'test': 'Held-out test', 'test30': 'Held-out test30 (30 fps)',
               'test30_arms': 'Held-out test30_arms', 'sample': 'The demo bag (bags/sample)',
               'test30_people2': 'Held-out two-person renders',
+              'test60_people2': 'Held-out two-person renders, 60 frames a video',
+              'test60_people2_alone1': 'The same videos, the first person alone',
+              'test60_people2_alone2': 'The same videos, the second person alone',
+              'test60_people3': 'Held-out three-person renders',
               'lspet': 'LSPET photographs 2501-3000'}
     for stem, title in titles.items():
         data = load(results, stem)
         if data is not None:
-            lines += eval_section(title, data, jobs.get(stem))
+            lines += eval_section(title, data, jobs.get(
+                'people' if stem.startswith('test60_people') else stem))
             if stem == 'test30' and (results / 'pck_test30.png').exists():
                 lines += ['![PCK curves on test30](results/pck_test30.png)', '']
     lines += bench_section(results, jobs)
