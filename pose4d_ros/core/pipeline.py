@@ -423,6 +423,20 @@ class IkStage:
         eqs. 17-24, the same swivel choice, joint limits as angles, bones of the learned lengths
         exactly, joint angles computed).
     limits : the DH chains' joint limits (method 'dh').
+
+    Notes
+    -----
+    The default method stays 'geometric', chosen on the validation subjects only (UTKinect
+    s01-s06, `pose4d track-eval --train 1-3 --test 4-6 --no-tracking`, seed 0, mean elbow and
+    knee error): with depth from capsules on the real Kinect skeletons (the truth the IK was
+    tuned against) 'dh' is worse, 74.6 vs 50.7 mm (s01-s03) and 81.2 vs 52.9 mm (s04-s06),
+    because it keeps the bones at the learned lengths while Kinect's own bones stretch from
+    frame to frame and the geometric depth search follows them (`IkConfig.length_scales`);
+    with the prior alone the two agree within 3 mm. 'dh' wins where the truth's bones are rigid:
+    on the synthetic body, whose bones are exactly the learned lengths (28.6 vs 33.6, 34.5 vs
+    40.5 mm), and by a little on MSR Action3D's s01-s06 with capsule depth (37.7 vs 39.5, 44.9
+    vs 45.4 mm: better elbows, worse knees). Not better on validation as a whole, so not the
+    default.
     """
 
     LEARN = True  # the defaults of `learn`, `use_depth` and `method` (and of the ik node's)
