@@ -7,7 +7,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from helpers import J, synthetic_take
+from helpers import J, write_msr
 from numpy.testing import assert_allclose
 
 from pose4d_ros.cli.main import main as pose4d_main
@@ -17,22 +17,6 @@ from pose4d_ros.datasets.utkinect import UTKINECT_JOINTS, to_optical
 from pose4d_ros.synth import video
 
 MSR = Path(__file__).resolve().parents[2] / 'shared' / 'data' / 'msraction3d'
-
-
-def write_msr(directory: Path, name: str, frames: int = 30, *, zero: tuple[int, ...] = (),
-              start: int = 0) -> np.ndarray:
-    """An `aAA_sSS_eEE_skeleton3D.txt` of `synthetic_take` at 15 fps (every other 30 fps frame);
-    frames in `zero` hold zeros. Returns the (frames, 20, 3) Kinect-space joints, UTKinect
-    order."""
-    directory.mkdir(parents=True, exist_ok=True)
-    sdk = synthetic_take(2 * (frames + start))[2 * start::2] * [-1.0, -1.0, 1.0]
-    lines = []
-    for f in range(frames):
-        for name_j in msr.MSR_JOINTS:
-            x, y, z = (0.0, 0.0, 0.0) if f in zero else sdk[f, J[name_j]]
-            lines.append(f'{x:.6f} {y:.6f} {z:.6f} 1.000000')
-    (directory / f'{name}_skeleton3D.txt').write_text('\n'.join(lines) + '\n')
-    return sdk
 
 
 def test_joint_order_maps_every_utkinect_joint_once() -> None:

@@ -9,6 +9,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from helpers import write_msr
 from numpy.testing import assert_allclose
 
 from pose4d_ros.cli.main import main
@@ -144,8 +145,6 @@ def test_track_eval_command(utkinect_dir: Path, tmp_path: Path) -> None:
 
 
 def test_track_eval_ik_only_on_msraction3d(utkinect_dir: Path, tmp_path: Path) -> None:
-    from test_msraction3d import write_msr
-
     msr = tmp_path / 'msr'
     for name in ('a01_s01_e01', 'a14_s07_e01'):
         write_msr(msr, name, frames=40)
