@@ -1,5 +1,5 @@
 """Test data shared by several test modules: a body in front of the camera and its parts as a
-message, synthetic Kinect motion and a tiny UTKinect directory made from it."""
+message, synthetic Kinect motion and tiny UTKinect and MSR Action3D files made from it."""
 
 from __future__ import annotations
 
@@ -11,6 +11,7 @@ from pose4d_ros.core import joints as cj
 from pose4d_ros.core.camera import cad60_intrinsics, project
 from pose4d_ros.core.joints import JointSet
 from pose4d_ros.core.skeleton import PARTS_10
+from pose4d_ros.datasets.msraction3d import MSR_JOINTS
 from pose4d_ros.datasets.utkinect import UTKINECT_JOINTS
 from pose4d_ros.synth import render
 
@@ -65,6 +66,22 @@ def write_utkinect(directory: Path, frames: int = 90) -> None:
         (directory / f'joints_{name}.txt').write_text('\n'.join(lines) + '\n')
     (directory / 'actionLabel.txt').write_text(
         's01_e01\nwaveHands: 10 100\nclapHands: NaN NaN\ns02_e01\nsitDown: 150 180\n')
+
+
+def write_msr(directory: Path, name: str, frames: int = 30, *, zero: tuple[int, ...] = (),
+              start: int = 0) -> np.ndarray:
+    """An `aAA_sSS_eEE_skeleton3D.txt` of `synthetic_take` at 15 fps (every other 30 fps frame);
+    frames in `zero` hold zeros. Returns the (frames, 20, 3) Kinect-space joints, UTKinect
+    order."""
+    directory.mkdir(parents=True, exist_ok=True)
+    sdk = synthetic_take(2 * (frames + start))[2 * start::2] * [-1.0, -1.0, 1.0]
+    lines = []
+    for f in range(frames):
+        for name_j in MSR_JOINTS:
+            x, y, z = (0.0, 0.0, 0.0) if f in zero else sdk[f, J[name_j]]
+            lines.append(f'{x:.6f} {y:.6f} {z:.6f} 1.000000')
+    (directory / f'{name}_skeleton3D.txt').write_text('\n'.join(lines) + '\n')
+    return sdk
 
 
 def header_at(k: int):

@@ -9,6 +9,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from helpers import write_msr
 from numpy.testing import assert_allclose
 
 from pose4d_ros.cli.main import main
@@ -132,8 +133,30 @@ def test_track_eval_command(utkinect_dir: Path, tmp_path: Path) -> None:
         assert table['slqe']['average'] < table['input']['average']
     assert set(res['ik']['test']) == {'prior, lengths take', 'prior, lengths fixed',
                                       'prior shrunk, lengths take',
-                                      'depth capsules, lengths take'}
+                                      'depth capsules, lengths take',
+                                      'dh: prior, lengths take', 'dh: prior, lengths fixed',
+                                      'dh: depth capsules, lengths take'}
+    # the same swivel choice: with the prior alone and the lengths of the take, the DH chains
+    # put the elbows and knees where the geometric solver does
+    ik_test = res['ik']['test']
+    assert_allclose(ik_test['dh: prior, lengths take']['average'],
+                    ik_test['prior, lengths take']['average'], rtol=1e-6)
     assert not list(out.parent.glob('.track.json.*'))  # no temporary file left
+
+
+def test_track_eval_ik_only_on_msraction3d(utkinect_dir: Path, tmp_path: Path) -> None:
+    msr = tmp_path / 'msr'
+    for name in ('a01_s01_e01', 'a14_s07_e01'):
+        write_msr(msr, name, frames=40)
+    out = tmp_path / 'track.json'
+    assert main(['track-eval', str(utkinect_dir), '--msraction3d', str(msr), '--json', str(out),
+                 '--no-tracking', '--ik-method', 'dh', '--ik-stride', '6', '--depth-stride',
+                 '20', '--no-render', '--quiet']) == 0
+    res = json.loads(out.read_text())
+    assert res['tracking'] == {}
+    assert set(res['ik']['msr_test']) == {'dh: prior, lengths take', 'dh: prior, lengths fixed',
+                                          'dh: depth capsules, lengths take'}
+    assert res['ik']['msr_test']['dh: prior, lengths take']['n'] == 4 * 14  # 79 frames / 6
 
 
 def test_track_eval_refuses_bad_input(tmp_path: Path, capsys) -> None:

@@ -1,12 +1,13 @@
 """`pose4d synth`: render synthetic RGB-D people in CAD-60's on-disk format.
 
-People are posed by real Kinect motion (UTKinect takes), each video a window of a take on a new
-random body in a new random room (see `pose4d_ros.synth.video`). Output: one `dataN/`
-per UTKinect subject N, each with `activityLabel.txt` and its videos (`<id>.txt`,
-`<id>/RGB_<k>.png`, `<id>/Depth_<k>.png`, plus `<id>/Mask_<k>.png`, the person mask), and a
-`synth.json` at the top recording the command's parameters and every video's source. The set
-is built in a temporary directory next to `--out` and renamed when complete, so a failed or
-interrupted run leaves nothing behind.
+People are posed by real Kinect motion (UTKinect takes and/or MSR Action3D sequences), each
+video a window of a take on a new random body in a new random room (see
+`pose4d_ros.synth.video`). Output: one `dataN/` per subject N (UTKinect's and MSR Action3D's
+subjects share the numbers: data7 holds both sources' subject 7), each with `activityLabel.txt`
+and its videos (`<id>.txt`, `<id>/RGB_<k>.png`, `<id>/Depth_<k>.png`, plus `<id>/Mask_<k>.png`,
+the person mask), and a `synth.json` at the top recording the command's parameters and every
+video's source. The set is built in a temporary directory next to `--out` and renamed when
+complete, so a failed or interrupted run leaves nothing behind.
 
 With `--people N` (2-3) every video shows N people (`pose4d_ros.synth.people`): person 1 is the
 video's own window of motion, written as in a one-person set (`<id>.txt`); persons k = 2..N,
@@ -35,6 +36,9 @@ from pose4d_ros import __version__
 from pose4d_ros.core.camera import cad60_intrinsics
 
 _TAKE = re.compile(r'^s(\d{2})_e(\d{2})$')
+_MSR_TAKE = re.compile(r'^a(\d{2})_s(\d{2})_e(\d{2})$')
+# subject and take of a take name: UTKinect 'sNN_eMM' or MSR Action3D 'aAA_sSS_eEE'
+_FIELDS = re.compile(r'(?:^|_)s(\d{2})_e(\d{2})$')
 _SUBJECT = re.compile(r'^s(\d{2})$')
 _RANGE = re.compile(r'^s(\d{2})-s(\d{2})$')
 
@@ -44,12 +48,17 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
         'synth', help='render synthetic RGB-D people in CAD-60 format',
         description=' '.join(__doc__.split('\n\n')[i].replace('\n', ' ') for i in (1, 2)),
         formatter_class=argparse.ArgumentDefaultsHelpFormatter)
-    p.add_argument('--utkinect', required=True, type=Path,
+    p.add_argument('--utkinect', type=Path, default=None,
                    help='UTKinect directory (joints_sNN_eMM.txt, actionLabel.txt)')
+    p.add_argument('--msraction3d', type=Path, default=None,
+                   help='MSR Action3D directory (aAA_sSS_eEE_skeleton3D.txt): instead of or '
+                        'besides --utkinect (at least one); its empty and broken sequences are '
+                        'skipped (listed in synth.json)')
     p.add_argument('--out', required=True, type=Path, help='output directory (must not exist)')
     p.add_argument('--seed', type=int, default=0, help='random seed (bodies, rooms, noise)')
     p.add_argument('--takes', default='all',
-                   help="takes: 'all' or a comma list of s01_e01, s02 (both takes), s01-s06")
+                   help="takes: 'all' or a comma list of s01_e01 (MSR Action3D: take 1 of "
+                        "every action), s02 (all takes), s01-s06, a05_s07_e02 (MSR Action3D)")
     p.add_argument('--frames', type=int, default=60, help='frames per video (at most)')
     p.add_argument('--stride', type=int, default=1,
                    help='keep every N-th frame of the 30 fps motion (frame numbers keep 30 fps)')
@@ -59,7 +68,9 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
                    help='windows per take, spread evenly from --start to the end')
     p.add_argument('--actions', default=None,
                    help='comma list of UTKinect actions (waveHands, sitDown, ...): the windows '
-                        'of each take are spread over each of these actions instead')
+                        'of each take are spread over each of these actions instead; and of MSR '
+                        'Action3D actions (a01-a20 or names: highArmWave, ..., pickUpThrow): '
+                        'only those sequences are used')
     p.add_argument('--body-per', choices=('video', 'subject'), default='video',
                    help='a new random body for every video, or one per UTKinect subject')
     # defaults: `synth.video.Staging` (imported in `run`, to keep `pose4d --help` fast)
@@ -111,18 +122,7 @@ def parse_takes(spec: str, available: list[str]) -> list[str]:
             raise ValueError('no joints_sNN_eMM.txt files in the UTKinect directory')
         return sorted(available)
     out: list[str] = []
-    for item in (s.strip() for s in spec.split(',')):
-        if _TAKE.match(item):
-            names = [item]
-        elif m := _SUBJECT.match(item):
-            names = sorted(t for t in available if t.startswith(f's{m.group(1)}_'))
-        elif m := _RANGE.match(item):
-            lo, hi = int(m.group(1)), int(m.group(2))
-            if lo > hi:
-                raise ValueError(f'--takes: empty subject range {item!r}')
-            names = sorted(t for t in available if lo <= int(t[1:3]) <= hi)
-        else:
-            raise ValueError(f"--takes: {item!r} is not sNN_eMM, sNN or sNN-sMM")
+    for item, names in match_takes(spec, available).items():
         if not names or any(n not in available for n in names):
             missing = [n for n in names if n not in available] or [item]
             raise ValueError(f'--takes: no UTKinect take for {", ".join(missing)}')
@@ -130,9 +130,93 @@ def parse_takes(spec: str, available: list[str]) -> list[str]:
     return out
 
 
+def match_takes(spec: str, available: list[str]) -> dict[str, list[str]]:
+    """Each item of a --takes value (not 'all') and the take names it stands for.
+
+    Names are UTKinect's 'sNN_eMM' or MSR Action3D's 'aAA_sSS_eEE'. sNN_eMM stands for that
+    UTKinect take, which need not be in `available`, and for take MM of every MSR Action3D
+    action of subject NN; aAA_sSS_eEE for that sequence (even if not available); sNN and
+    sNN-sMM for every available take of those subjects.
+    """
+    fields = {t: (int(m.group(1)), int(m.group(2)))
+              for t in available if (m := _FIELDS.search(t))}
+    out: dict[str, list[str]] = {}
+    for item in (s.strip() for s in spec.split(',')):
+        if m := _TAKE.match(item):
+            key = (int(m.group(1)), int(m.group(2)))
+            names = [item] + sorted(t for t, f in fields.items()
+                                    if f == key and _MSR_TAKE.match(t))
+        elif _MSR_TAKE.match(item):
+            names = [item]
+        elif m := _SUBJECT.match(item):
+            names = sorted(t for t, f in fields.items() if f[0] == int(m.group(1)))
+        elif m := _RANGE.match(item):
+            lo, hi = int(m.group(1)), int(m.group(2))
+            if lo > hi:
+                raise ValueError(f'--takes: empty subject range {item!r}')
+            names = sorted(t for t, f in fields.items() if lo <= f[0] <= hi)
+        else:
+            raise ValueError(f"--takes: {item!r} is not sNN_eMM, sNN, sNN-sMM or aAA_sSS_eEE")
+        out[item] = names
+    return out
+
+
+def select_sources(takes: str, actions: str | None, utkinect: list[str], msr: list[str]
+                   ) -> tuple[list[str], list[str]]:
+    """The UTKinect takes and MSR Action3D sequences a run uses (names, sorted as asked).
+
+    `utkinect`, `msr`: the names available in each source given. Every --takes item must stand
+    for a take of one source at least; --actions items that name MSR Action3D actions (a01-a20
+    or their names) keep only those sequences (none named: no MSR Action3D sequence).
+    """
+    from pose4d_ros.datasets.msraction3d import action_number
+
+    if takes.strip() == 'all':
+        ut, ms = sorted(utkinect), sorted(msr)
+    else:
+        ut, ms = [], []
+        for item, names in match_takes(takes, utkinect + msr).items():
+            found_ut = [n for n in names if n in utkinect]
+            found_ms = [n for n in names if n in msr]
+            if not found_ut and not found_ms:
+                source = 'UTKinect take' if not msr else 'MSR Action3D sequence' if not \
+                    utkinect else 'UTKinect take or MSR Action3D sequence'
+                raise ValueError(f'--takes: no {source} for {item}')
+            ut += [n for n in found_ut if n not in ut]
+            ms += [n for n in found_ms if n not in ms]
+    if actions is not None:
+        wanted = set()
+        for a in actions.split(','):
+            try:
+                wanted.add(action_number(a))
+            except ValueError:
+                continue  # a UTKinect action
+        ms = [n for n in ms if int(n[1:3]) in wanted]
+    return ut, ms
+
+
+def plan_actions(actions: str | None) -> list[str] | None:
+    """--actions for `video.plan_videos`: MSR Action3D actions given as a01-a20 by name."""
+    from pose4d_ros.datasets.msraction3d import ACTIONS, action_number
+
+    if actions is None:
+        return None
+    out = []
+    for a in (x.strip() for x in actions.split(',')):
+        try:
+            out.append(ACTIONS[action_number(a) - 1])
+        except ValueError:
+            out.append(a)
+    return out
+
+
 def _check(args: argparse.Namespace) -> None:
-    if not args.utkinect.is_dir():
-        raise ValueError(f'--utkinect {args.utkinect}: not a directory')
+    if args.utkinect is None and args.msraction3d is None:
+        raise ValueError('give --utkinect DIR, --msraction3d DIR or both')
+    for name in ('utkinect', 'msraction3d'):
+        path = getattr(args, name)
+        if path is not None and not path.is_dir():
+            raise ValueError(f'--{name} {path}: not a directory')
     for name in ('frames', 'stride', 'videos_per_take', 'width', 'height'):
         if getattr(args, name) < 1:
             raise ValueError(f'--{name.replace("_", "-")} must be >= 1, got '
@@ -166,6 +250,7 @@ def run(args: argparse.Namespace) -> int:
     import numpy as np
 
     from pose4d_ros.datasets import cad60
+    from pose4d_ros.datasets.msraction3d import list_sequences
     from pose4d_ros.datasets.utkinect import list_takes
     from pose4d_ros.synth import people, video
     from pose4d_ros.synth.render import HC, Body
@@ -179,13 +264,27 @@ def run(args: argparse.Namespace) -> int:
         distance_m=tuple(args.distance or (people.PEOPLE_DISTANCE_M if several
                                            else default.distance_m)),
         turn_deg=tuple(args.turn or default.turn_deg), arm_jitter_deg=args.arm_jitter)
-    available = [p.name[len('joints_'):-len('.txt')] for p in list_takes(args.utkinect)]
-    names = parse_takes(args.takes, available)
     intrinsics = cad60_intrinsics(args.width, args.height)
-    motions = video.load_takes(args.utkinect, names)
+    skipped: list[str] = []
+    if args.msraction3d is None:  # as it always was
+        available = [p.name[len('joints_'):-len('.txt')] for p in list_takes(args.utkinect)]
+        names = parse_takes(args.takes, available)
+        motions = video.load_takes(args.utkinect, names)
+    else:
+        ut = [] if args.utkinect is None else [
+            p.name[len('joints_'):-len('.txt')] for p in list_takes(args.utkinect)]
+        msr = [p.name[:-len('_skeleton3D.txt')] for p in list_sequences(args.msraction3d)]
+        if not msr:
+            raise ValueError(f'--msraction3d {args.msraction3d}: no '
+                             'aAA_sSS_eEE_skeleton3D.txt files')
+        ut_names, msr_names = select_sources(args.takes, args.actions, ut, msr)
+        motions = video.load_takes(args.utkinect, ut_names) if ut_names else []
+        msr_motions, skipped = video.load_msr_takes(args.msraction3d, msr_names)
+        motions += msr_motions
+        names = ut_names + [m.name for m in msr_motions]
     plans = [plan for m in motions for plan in video.plan_videos(
         m, seed=args.seed, videos=args.videos_per_take, frames=args.frames, stride=args.stride,
-        start_s=args.start, actions=args.actions.split(',') if args.actions else None)]
+        start_s=args.start, actions=plan_actions(args.actions))]
     if not plans:
         raise ValueError(f'--actions {args.actions}: none of the takes has any of them')
     by_take = {m.name: m for m in motions}
@@ -250,6 +349,11 @@ def run(args: argparse.Namespace) -> int:
             'size': [args.width, args.height], 'kinect_noise': not args.no_noise,
             'videos': records,
         }
+        if args.msraction3d is not None:
+            info = {**{k: v for k, v in info.items() if k != 'videos'},
+                    'utkinect': None if args.utkinect is None else str(args.utkinect),
+                    'msraction3d': str(args.msraction3d), 'msraction3d_skipped': skipped,
+                    'videos': records}
         if several:  # a one-person set's synth.json stays as it always was
             info = {**{k: v for k, v in info.items() if k != 'videos'},
                     'people': args.people, 'crossing': crossing, 'videos': records}

@@ -58,6 +58,13 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument('--depth-stride', type=int, default=15,
                    help='every N-th frame for the IK with depth (rendering is slow)')
     p.add_argument('--no-ik', action='store_true', help='tracking only')
+    p.add_argument('--ik-method', choices=('geometric', 'dh', 'both'), default='both',
+                   help="IK solver(s): the law-of-cosines circle, the paper's DH chains "
+                        "(rows 'dh: ...'), or both on the same frames")
+    p.add_argument('--msraction3d', type=Path, default=None,
+                   help='MSR Action3D directory: the IK also on its sequences, same training '
+                        "and test subjects (tables 'msr_train', 'msr_test')")
+    p.add_argument('--no-tracking', action='store_true', help='IK only')
     p.add_argument('--no-ablations', action='store_true',
                    help='skip SLQE without coupling and SLQE with a constant-velocity state')
     p.add_argument('--no-render', action='store_true',
@@ -88,11 +95,11 @@ def _print_tracking(title: str, res: dict, out=sys.stdout) -> None:
 
 def _print_ik(title: str, rows: dict, out=sys.stdout) -> None:
     print(f'\n{title}', file=out)
-    print(f"  {'variant':<26}{'elbow':>8}{'knee':>8}{'average':>9}{'joints':>8}  flags",
+    print(f"  {'variant':<34}{'elbow':>8}{'knee':>8}{'average':>9}{'joints':>8}  flags",
           file=out)
     for name, t in rows.items():
         flags = ', '.join(f'{k} {v}' for k, v in t['flags'].items() if v)
-        print(f"  {name:<26}{t['elbow']:8.1f}{t['knee']:8.1f}{t['average']:9.1f}"
+        print(f"  {name:<34}{t['elbow']:8.1f}{t['knee']:8.1f}{t['average']:9.1f}"
               f"{t['n']:8d}  {flags}", file=out)
 
 
@@ -129,12 +136,13 @@ def run(args: argparse.Namespace) -> int:
                                  'cv_gated': tracking.config_dict(cvg)}
     methods = tracking.default_methods(slqe, cv, cvg, ablations=not args.no_ablations)
     tables = {}
-    for name, segs in (('train', train), ('test', test)):
+    for name, segs in () if args.no_tracking else (('train', train), ('test', test)):
         say(f'tracking on the {name} subjects')
         tables[name] = tracking.evaluate_tracking(segs, methods, seed=args.seed)
-    say('tracking on the test subjects at the recorded, irregular frame times')
-    native = tracking.load_segments(args.utkinect, test_s, native=True)
-    tables['test_native_dt'] = tracking.evaluate_tracking(native, methods, seed=args.seed)
+    if not args.no_tracking:
+        say('tracking on the test subjects at the recorded, irregular frame times')
+        native = tracking.load_segments(args.utkinect, test_s, native=True)
+        tables['test_native_dt'] = tracking.evaluate_tracking(native, methods, seed=args.seed)
     report['tracking'] = tables
     for name, res in tables.items():
         _print_tracking(f'Tracking, {name}: mean pixel error on the detected part-frames',
@@ -142,7 +150,7 @@ def run(args: argparse.Namespace) -> int:
         _print_tracking(f'Tracking, {name}: mean pixel error on all part-frames',
                         res['all_frames'])
     targets = {}
-    for name in ('train', 'test'):
+    for name in () if args.no_tracking else ('train', 'test'):
         det = tables[name]['detected_frames']
         red = tracking.reduction(det['slqe'], det['input'])
         targets[name] = {'slqe_reduction_vs_input': red,
@@ -154,18 +162,25 @@ def run(args: argparse.Namespace) -> int:
     report['tracking_targets'] = targets
 
     if not args.no_ik:
-        report['ik'] = _run_ik(args, train, test, say)
+        sets = {'train': train, 'test': test}
+        if args.msraction3d is not None:
+            sets['msr_train'] = tracking.load_msr_segments(args.msraction3d, train_s)
+            sets['msr_test'] = tracking.load_msr_segments(args.msraction3d, test_s)
+            say(f"MSR Action3D: {len(sets['msr_train'])} training and "
+                f"{len(sets['msr_test'])} test segments")
+        report['ik'] = _run_ik(args, sets, say)
     report['seconds'] = time.perf_counter() - t0
     write_json(args.json, report, indent=1, default=_jsonable)
     say(f'wrote {args.json} ({report["seconds"]:.0f} s)')
     return 0
 
 
-def _run_ik(args: argparse.Namespace, train: list, test: list, say) -> dict:
+def _run_ik(args: argparse.Namespace, sets: dict[str, list], say) -> dict:
     config = IkConfig()
     out: dict = {}
+    train = sets['train']
     lengths = {name: {mode: ik.take_lengths(segs, mode) for mode in ('take', 'fixed')}
-               for name, segs in (('train', train), ('test', test))}
+               for name, segs in sets.items()}
     out['lengths'] = {'take': 'per take: medians of the bone lengths over the take\'s frames '
                               '(elbows/knees visible there)',
                       'fixed': 'DEFAULT_LIMB_LENGTHS_M (medians of subjects s01-s06)',
@@ -189,28 +204,39 @@ def _run_ik(args: argparse.Namespace, train: list, test: list, say) -> dict:
     out['prior_shrink'] = shrink
     shrunk = replace(config, prior_shrink=shrink)
     renderer = None if args.no_render else {
-        name: ik.synth_renderer(segs, seed=args.seed)
-        for name, segs in (('train', train), ('test', test))}
-    for name, segs in (('train', train), ('test', test)):
+        name: ik.synth_renderer(segs, seed=args.seed) for name, segs in sets.items()}
+    methods = ik.IK_METHODS if args.ik_method == 'both' else (args.ik_method,)
+    out['methods'] = {'geometric': 'kinematics.infer_middle_joints (rows without prefix)',
+                      'dh': "dh.infer_middle_joints_dh, DhLimits() (rows 'dh: ...')"}
+    for name, segs in sets.items():
         rows: dict = {}
-        for mode in ('take', 'fixed'):
-            say(f'IK on the {name} subjects, prior only, lengths {mode}')
-            rows[f'prior, lengths {mode}'] = ik.evaluate_ik(
-                segs, lengths[name][mode], config=config, stride=args.ik_stride)
-        rows['prior shrunk, lengths take'] = ik.evaluate_ik(
-            segs, lengths[name]['take'], config=shrunk, stride=args.ik_stride)
-        say(f'IK on the {name} subjects, depth (capsules ray-cast on the real skeleton)')
-        rows['depth capsules, lengths take'] = ik.evaluate_ik(
-            segs, lengths[name]['take'], depth='capsules', config=config,
-            stride=args.depth_stride, seed=args.seed)
+        for method in methods:
+            pre = 'dh: ' if method == 'dh' else ''
+            for mode in ('take', 'fixed'):
+                say(f'IK ({method}) on the {name} subjects, prior only, lengths {mode}')
+                rows[f'{pre}prior, lengths {mode}'] = ik.evaluate_ik(
+                    segs, lengths[name][mode], config=config, stride=args.ik_stride,
+                    method=method)
+            if method == 'geometric':
+                rows['prior shrunk, lengths take'] = ik.evaluate_ik(
+                    segs, lengths[name]['take'], config=shrunk, stride=args.ik_stride)
+            say(f'IK ({method}) on the {name} subjects, depth (capsules ray-cast on the real '
+                'skeleton)')
+            rows[f'{pre}depth capsules, lengths take'] = ik.evaluate_ik(
+                segs, lengths[name]['take'], depth='capsules', config=config,
+                stride=args.depth_stride, seed=args.seed, method=method)
         if renderer is not None:
             render, render_lengths = renderer[name]
             say(f'IK on the {name} subjects, synthetic renderer (prior only and depth)')
             frames = list(ik.ik_frames(segs, depth='render', stride=args.depth_stride,
                                        seed=args.seed, renderer=render))
             no_depth = [(take, None, None, truth) for take, _, _, truth in frames]
-            rows['render: prior'] = ik.score_ik(no_depth, render_lengths, config=config)
-            rows['render: depth'] = ik.score_ik(frames, render_lengths, config=config)
+            for method in methods:
+                pre = 'dh: ' if method == 'dh' else ''
+                rows[f'{pre}render: prior'] = ik.score_ik(no_depth, render_lengths,
+                                                          config=config, method=method)
+                rows[f'{pre}render: depth'] = ik.score_ik(frames, render_lengths,
+                                                          config=config, method=method)
         out[name] = rows
         _print_ik(f'IK, {name} subjects: mean 3-D error of the inferred joints, mm', rows)
     return out

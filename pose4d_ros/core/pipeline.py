@@ -35,6 +35,7 @@ from pose4d_ros.core.camera import (
     backproject,
     project,
 )
+from pose4d_ros.core.dh import DhLimits, infer_middle_joints_dh
 from pose4d_ros.core.dpm.infer import Detector, SearchConfig
 from pose4d_ros.core.dpm.model import PartModel
 from pose4d_ros.core.dpm.scale import PersonScale, ScaleConfig
@@ -423,16 +424,42 @@ class IkStage:
     learn : learn each track's bone lengths from its observed reach (`LimbLengths`), starting
         from `lengths`; False = always `lengths`.
     use_depth : choose the swivel angle with the depth image (else the joint-limit prior).
+    method : 'geometric' (`kinematics.infer_middle_joints`: the elbow/knee on the law-of-cosines
+        circle) or 'dh' (`dh.infer_middle_joints_dh`: the paper's Denavit-Hartenberg chains,
+        eqs. 17-24, the same swivel choice, joint limits as angles, bones of the learned lengths
+        exactly, joint angles computed).
+    limits : the DH chains' joint limits (method 'dh').
+
+    Notes
+    -----
+    The default method stays 'geometric', chosen on the validation subjects only (UTKinect
+    s01-s06, `pose4d track-eval --train 1-3 --test 4-6 --no-tracking`, seed 0, mean elbow and
+    knee error): with depth from capsules on the real Kinect skeletons (the truth the IK was
+    tuned against) 'dh' is worse, 74.6 vs 50.7 mm (s01-s03) and 81.2 vs 52.9 mm (s04-s06),
+    because it keeps the bones at the learned lengths while Kinect's own bones stretch from
+    frame to frame and the geometric depth search follows them (`IkConfig.length_scales`);
+    with the prior alone the two agree within 3 mm. 'dh' wins where the truth's bones are rigid:
+    on the synthetic body, whose bones are exactly the learned lengths (28.6 vs 33.6, 34.5 vs
+    40.5 mm), and by a little on MSR Action3D's s01-s06 with capsule depth (37.7 vs 39.5, 44.9
+    vs 45.4 mm: better elbows, worse knees). Not better on validation as a whole, so not the
+    default.
     """
 
-    LEARN = True  # the defaults of `learn` and `use_depth` (and of the ik node's)
+    LEARN = True  # the defaults of `learn`, `use_depth` and `method` (and of the ik node's)
     USE_DEPTH = True
+    METHODS = ('geometric', 'dh')
+    METHOD = 'geometric'
 
     def __init__(self, config: IkConfig | None = None, *,
                  lengths: Mapping[str, tuple[float, float]] | None = None, learn: bool = LEARN,
-                 use_depth: bool = USE_DEPTH) -> None:
+                 use_depth: bool = USE_DEPTH, method: str = METHOD,
+                 limits: DhLimits | None = None) -> None:
+        if method not in self.METHODS:
+            raise ValueError(f"IK method must be one of {self.METHODS}, got {method!r}")
         self.config = config or IkConfig()
         self.use_depth = use_depth
+        self.method = method
+        self.limits = limits or DhLimits()
         self.track_id: int | None = None
         self.configure(lengths=lengths, learn=learn)
 
@@ -504,10 +531,12 @@ class IkStage:
         measured = (src != cj.MISSING) & valid
         unmeasured = [limb for limb, (_, middle, _) in LIMBS.items()
                       if not measured[SKELETON_14.index(middle)]]
-        result = infer_middle_joints(
+        extra = {'limits': self.limits} if self.method == 'dh' else {}
+        solver = infer_middle_joints_dh if self.method == 'dh' else infer_middle_joints
+        result = solver(
             depth_m if self.use_depth else None, points, intrinsics, self.lengths(),
             names=SKELETON_14, mask=mask if self.use_depth else None, config=self.config,
-            limbs=unmeasured)
+            limbs=unmeasured, **extra)
         for k, name in enumerate(result.names):
             i = SKELETON_14.index(name)
             if result.flags[k] in (IkFlag.MISSING, IkFlag.BEHIND_CAMERA) or \
@@ -670,6 +699,7 @@ class PeopleStages:
             kind=tracker.kind, slqe=tracker.slqe_config, cv=tracker.cv_config,
             tree=tracker.fixed_tree, depth_std_m=tracker.depth_std_m), config)
         self.ik = PeopleIk(lambda: IkStage(ik.config, lengths=ik.defaults, learn=ik.learn,
+                                           method=ik.method, limits=ik.limits,
                                            use_depth=ik.use_depth))
 
     def reset(self) -> None:

@@ -30,6 +30,7 @@ UTKINECT_JOINTS: tuple[str, ...] = (
 )
 
 _NAME = re.compile(r'joints_(s\d+_e\d+)\.txt$')
+_SUBJECT = re.compile(r'(?:^|_)s(\d+)(?:_|$)')
 
 
 @dataclass(frozen=True)
@@ -38,7 +39,7 @@ class Take:
 
     Attributes
     ----------
-    name : 'sNN_eMM'.
+    name : 'sNN_eMM' (or an MSR Action3D sequence's 'aAA_sSS_eEE', `msraction3d.as_take`).
     frames : (F,) int frame numbers of a 30 fps stream, strictly increasing.
     joints : (F, 20, 3) float64 metres, Kinect SDK skeleton space, `UTKINECT_JOINTS` order.
     """
@@ -49,7 +50,11 @@ class Take:
 
     @property
     def subject(self) -> int:
-        return int(self.name[1:3])
+        """NN of the name's 'sNN'."""
+        match = _SUBJECT.search(self.name)
+        if match is None:
+            raise ValueError(f'{self.name!r}: no subject (sNN) in the take name')
+        return int(match.group(1))
 
 
 def read_take(path: str | Path) -> Take:

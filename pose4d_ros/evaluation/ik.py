@@ -1,8 +1,8 @@
-"""Offline evaluation of the IK (eqs. 17-24) on real motion (UTKinect-Action3D, split into
-segments by `evaluation.tracking`): elbows and knees are hidden and inferred from the 3-D
-shoulders/hips and wrists/ankles with limb lengths (learned from the take or fixed), with the
-joint-limit prior alone and with the support of a depth image; scored by the 3-D error in
-millimetres.
+"""Offline evaluation of the IK (eqs. 17-24) on real motion (UTKinect-Action3D or MSR Action3D,
+split into segments by `evaluation.tracking`): elbows and knees are hidden and inferred from the
+3-D shoulders/hips and wrists/ankles with limb lengths (learned from the take or fixed), with
+the joint-limit prior alone and with the support of a depth image, by the geometric solver or
+the DH chains (`core.dh`); scored by the 3-D error in millimetres.
 
 This module reads files and returns numbers; the `pose4d track-eval` verb prints and saves them.
 """
@@ -17,6 +17,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from pose4d_ros.core.camera import Intrinsics, cad60_intrinsics, depth_to_metres
+from pose4d_ros.core.dh import DhLimits, infer_middle_joints_dh
 from pose4d_ros.core.kinematics import (
     IkConfig,
     IkFlag,
@@ -27,7 +28,7 @@ from pose4d_ros.core.kinematics import (
 from pose4d_ros.core.limb_lengths import LimbLengths
 from pose4d_ros.core.skeleton import LIMBS, PARTS_10
 from pose4d_ros.datasets.utkinect import UTKINECT_JOINTS
-from pose4d_ros.evaluation.tracking import Segment, part_indices, segment_rng
+from pose4d_ros.evaluation.tracking import Segment, name_numbers, part_indices, segment_rng
 from pose4d_ros.synth.render import PARENTS, capsule_depth, random_body, render
 
 # Index of each UTKinect joint by name.
@@ -237,7 +238,7 @@ def synth_renderer(segments: Sequence[Segment], *, seed: int = 0,
     bodies = {}
     lengths: dict[str, dict[str, tuple]] = {}
     for take, bones in take_bones(segments).items():
-        rng = np.random.default_rng([seed, int(take[1:3]), int(take[5:7]), 7])
+        rng = np.random.default_rng([seed, *name_numbers(take), 7])
         bodies[take] = replace(random_body(rng), bones=bones)
         lengths[take] = {limb: (float(bones[_UT[m]]), float(bones[_UT[b]]))
                          for limb, (_, m, b) in LIMB_JOINTS.items()}
@@ -282,20 +283,28 @@ def ik_frames(segments: Sequence[Segment], *, depth: str = 'none', stride: int =
                 yield take, None, None, frame
 
 
+IK_METHODS = ('geometric', 'dh')
+
+
 def score_ik(frames: Iterable[IkFrame], lengths: dict[str, dict[str, tuple]], *,
-             config: IkConfig | None = None, intrinsics: Intrinsics | None = None
-             ) -> dict[str, object]:
-    """Hide elbows and knees, infer them with `infer_middle_joints`, score in millimetres.
+             config: IkConfig | None = None, intrinsics: Intrinsics | None = None,
+             method: str = 'geometric', limits: DhLimits | None = None) -> dict[str, object]:
+    """Hide elbows and knees, infer them with `infer_middle_joints` (method 'geometric') or
+    `dh.infer_middle_joints_dh` ('dh', with `limits`), score in millimetres.
 
     The inputs are the truth's shoulders, hips, wrists and ankles (3-D) and the frame's depth.
     """
+    if method not in IK_METHODS:
+        raise ValueError(f'IK method must be one of {IK_METHODS}, got {method!r}')
     intrinsics = intrinsics or cad60_intrinsics()
     config = config or IkConfig()
+    extra = {'limits': limits or DhLimits()} if method == 'dh' else {}
+    solver = infer_middle_joints_dh if method == 'dh' else infer_middle_joints
     acc = IkErrors()
     pidx = part_indices(PARTS_10)
     for take, depth_m, mask, truth in frames:
-        res = infer_middle_joints(depth_m, truth[pidx], intrinsics, lengths[take],
-                                  names=PARTS_10.names, mask=mask, config=config)
+        res = solver(depth_m, truth[pidx], intrinsics, lengths[take],
+                     names=PARTS_10.names, mask=mask, config=config, **extra)
         for k, (limb, (_, m, _)) in enumerate(LIMB_JOINTS.items()):
             acc.add(limb, float(np.linalg.norm(res.positions[k] - truth[_UT[m]])),
                     int(res.flags[k]))
@@ -305,11 +314,13 @@ def score_ik(frames: Iterable[IkFrame], lengths: dict[str, dict[str, tuple]], *,
 def evaluate_ik(segments: Sequence[Segment], lengths: dict[str, dict[str, tuple]], *,
                 depth: str = 'none', config: IkConfig | None = None, stride: int = 1,
                 seed: int = 0, intrinsics: Intrinsics | None = None,
-                renderer: Callable | None = None) -> dict[str, object]:
+                renderer: Callable | None = None, method: str = 'geometric',
+                limits: DhLimits | None = None) -> dict[str, object]:
     """`score_ik` over `ik_frames` (see both)."""
     frames = ik_frames(segments, depth=depth, stride=stride, seed=seed, intrinsics=intrinsics,
                        renderer=renderer)
-    return score_ik(frames, lengths, config=config, intrinsics=intrinsics)
+    return score_ik(frames, lengths, config=config, intrinsics=intrinsics, method=method,
+                    limits=limits)
 
 
 def tune_ik_depth(frames: Sequence[IkFrame], lengths: dict[str, dict[str, tuple]],

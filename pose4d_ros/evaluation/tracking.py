@@ -21,6 +21,7 @@ This module reads files and returns numbers; the `pose4d track-eval` verb prints
 from __future__ import annotations
 
 import math
+import re
 from collections.abc import Callable, Iterable, Sequence
 from dataclasses import asdict, dataclass, replace
 from pathlib import Path
@@ -37,6 +38,7 @@ from pose4d_ros.core.slqe import (
     SlqeTracker,
     Source,
 )
+from pose4d_ros.datasets import msraction3d
 from pose4d_ros.datasets.utkinect import (
     UTKINECT_JOINTS,
     Take,
@@ -139,6 +141,28 @@ def load_segments(directory: str | Path, subjects: Iterable[int] | None = None, 
     return out
 
 
+def load_msr_segments(directory: str | Path, subjects: Iterable[int] | None = None, *,
+                      actions: Iterable[int] | None = None, max_gap_s: float = 0.5
+                      ) -> list[Segment]:
+    """All segments of the MSR Action3D sequences in `directory` (optionally only some subjects
+    and actions), as `load_segments`' (names 'aAA_sSS_eEE/k'); empty sequences give none."""
+    paths = msraction3d.list_sequences(directory)
+    if not paths:
+        raise ValueError(f'{directory}: no aAA_sSS_eEE_skeleton3D.txt files')
+    keep_s = None if subjects is None else set(subjects)
+    keep_a = None if actions is None else set(actions)
+    out: list[Segment] = []
+    for path in paths:
+        _, action, subject, _ = msraction3d.parse_name(path)
+        if (keep_s is not None and subject not in keep_s) or \
+                (keep_a is not None and action not in keep_a):
+            continue
+        seq = msraction3d.read_sequence(path)
+        if len(seq.frames):
+            out.extend(split_take(msraction3d.as_take(seq), max_gap_s=max_gap_s))
+    return out
+
+
 def part_indices(tree: PartTree = PARTS_10) -> NDArray[np.int64]:
     """Index into `UTKINECT_JOINTS` of each part of `tree`."""
     return np.array([UTKINECT_JOINTS.index(UTKINECT_NAMES.get(n, n)) for n in tree.names])
@@ -181,10 +205,16 @@ def corrupt(uv: NDArray[np.floating], rng: np.random.Generator,
     return noisy, kind
 
 
+def name_numbers(take: str) -> list[int]:
+    """The numbers of a take's name: [NN, MM] of UTKinect's 'sNN_eMM', [AA, SS, EE] of MSR
+    Action3D's 'aAA_sSS_eEE' (random streams are seeded by them)."""
+    return [int(x) for x in re.findall(r'\d+', take)]
+
+
 def segment_rng(seed: int, segment: Segment) -> np.random.Generator:
     """A generator that depends on the seed and the segment only (order-independent)."""
     take, _, k = segment.name.partition('/')
-    return np.random.default_rng([seed, int(take[1:3]), int(take[5:7]), int(k or 0)])
+    return np.random.default_rng([seed, *name_numbers(take), int(k or 0)])
 
 
 TrackerFactory = Callable[[], SlqeTracker]

@@ -2,7 +2,8 @@
 
 Elbows and knees come from shoulders/hips and wrists/ankles in 3-D and the bone lengths (fixed
 parameters, or learned per track); the swivel angle on the circle of possible elbows is chosen by
-the depth image of the person, with a joint-limit prior where depth cannot tell. Tracked parts
+the depth image of the person, with a joint-limit prior where depth cannot tell; `ik.method`
+picks the law-of-cosines circle or the paper's Denavit-Hartenberg chains. Tracked parts
 and depth are paired by stamp (exact, or nearest within `ik.depth_slop_s`).
 
 Several people: one IK per track id, each with its own learned bone lengths.
@@ -24,7 +25,7 @@ Publications
     /diagnostics
     (markers and /tf are built and sent only while they have a subscriber)
 Parameters (config/ik.yaml)
-    ik.use_depth, ik.learn_lengths, ik.upper_arm_length_m, ik.forearm_length_m,
+    ik.use_depth, ik.method, ik.learn_lengths, ik.upper_arm_length_m, ik.forearm_length_m,
     ik.thigh_length_m, ik.shin_length_m, ik.depth_slop_s, ik.marker_lifetime_s, tf.publish,
     tf.prefix
 """
@@ -72,6 +73,10 @@ PARAMS = (
     Param('ik.use_depth', IkStage.USE_DEPTH, 'Choose the elbow/knee swivel with the depth image '
           '(pose4d/foreground/depth); false = joint-limit prior only, no depth subscription.',
           restart='it decides at start-up whether depth is subscribed to'),
+    Param('ik.method', IkStage.METHOD, "How elbows and knees are solved: 'geometric' (the "
+          "law-of-cosines circle) or 'dh' (the paper's Denavit-Hartenberg chains, eqs. 17-24, "
+          'with joint limits as angles); both choose the swivel by depth, then the prior.',
+          choices=IkStage.METHODS, restart='the solver is chosen at start-up'),
     Param('ik.learn_lengths', IkStage.LEARN,
           "Learn each track's bone lengths from the observed reach; "
           'false = the fixed lengths below.', live=True),
@@ -103,7 +108,7 @@ def ik_settings(p: dict[str, Any]) -> dict[str, Any]:
 
 def ik_stage(p: dict[str, Any]) -> IkStage:
     """The IK stage configured by the parameters (also used by the pipeline node)."""
-    return IkStage(use_depth=p['ik.use_depth'], **ik_settings(p))
+    return IkStage(use_depth=p['ik.use_depth'], method=p['ik.method'], **ik_settings(p))
 
 
 class SkeletonOutputs:
@@ -174,7 +179,8 @@ class IkNode(Node):
 
     def _new_stage(self) -> IkStage:
         t = self.template
-        return IkStage(t.config, lengths=t.defaults, learn=t.learn, use_depth=t.use_depth)
+        return IkStage(t.config, lengths=t.defaults, learn=t.learn, use_depth=t.use_depth,
+                       method=t.method, limits=t.limits)
 
     def process(self, tracked: list[JointSet], header: Header, extra: tuple) -> None:
         if (p := self.params.changes()) is not None:

@@ -89,7 +89,7 @@ class PipelineNode(Node):
         self.get_logger().info(
             f'pipeline on {self.resolve_topic_name("camera/color/image_raw")} -> '
             f'{self.resolve_topic_name("pose4d/skeleton")} (model {p["detector.model"]}, '
-            f'tracker {p["tracker.kind"]}, IK depth {p["ik.use_depth"]})')
+            f'tracker {p["tracker.kind"]}, IK {p["ik.method"]}, depth {p["ik.use_depth"]})')
 
     def configure(self, p: dict[str, Any]) -> None:
         """The live parameters' new values, between two frames."""

@@ -1,8 +1,9 @@
-"""From real Kinect motion (UTKinect takes) to synthetic CAD-60 videos on disk.
+"""From real Kinect motion (UTKinect takes, MSR Action3D sequences) to synthetic CAD-60 videos.
 
-A take is resampled to 30 fps (`utkinect.resample`) and moved into a floor frame: the floor is
-the plane through the lower foot joint of each frame (robust least squares), which removes the
-recording camera's height and tilt; the lower foot is then put on it in every frame. A
+A take (or an MSR Action3D sequence, `load_msr_takes`) is resampled to 30 fps
+(`utkinect.resample`) and moved into a floor frame: the floor is the plane through the lower
+foot joint of each frame (robust least squares), which removes the recording camera's height
+and tilt; the lower foot is then put on it in every frame. A
 video is a window of a take (every `stride`-th frame), posed by that motion on a fresh random
 body (`render.random_body`) in a fresh random room (`scene.random_scene`): the walk keeps its
 shape and its heading towards the camera but is turned by up to +-25 degrees and moved so that
@@ -27,7 +28,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from pose4d_ros.core.camera import Intrinsics
-from pose4d_ros.datasets import cad60
+from pose4d_ros.datasets import cad60, msraction3d
 from pose4d_ros.datasets.utkinect import read_actions, read_take, resample, to_optical
 from pose4d_ros.synth import render
 from pose4d_ros.synth import scene as rooms
@@ -92,11 +93,13 @@ class Staging:
 
 @dataclass(frozen=True)
 class TakeMotion:
-    """A UTKinect take at 30 fps in its floor frame.
+    """A UTKinect take (or an MSR Action3D sequence) at 30 fps in its floor frame.
 
     Attributes
     ----------
-    name : 'sNN_eMM'; subject, take : NN, MM.
+    name : 'sNN_eMM' (MSR Action3D: 'aAA_sSS_eEE'); subject, take : NN, MM (MSR Action3D:
+        SS, and `msr_take_number` AA, EE: 21-80, apart from UTKinect's takes 1-2, so that
+        the video ids of a set made from both stay distinct).
     joints : (T, 20, 3) float64 metres, floor frame (X right, Y forward, Z up, floor Z = 0 at
         the lower foot joint), `UTKINECT_JOINTS` order.
     actions : {action: (first, last)} frame indices into `joints`.
@@ -184,13 +187,61 @@ def load_takes(directory: str | Path, names: list[str]) -> list[TakeMotion]:
     return out
 
 
+def msr_take_number(action: int, take: int) -> int:
+    """`TakeMotion.take` of MSR Action3D sequence aAA_sSS_eEE: 20 + 3 (AA - 1) + EE, 21-80
+    (two digits of the video id, apart from UTKinect's 1-2)."""
+    if not (1 <= action <= len(msraction3d.ACTIONS) and 1 <= take <= 3):
+        raise ValueError(f'MSR Action3D action {action} take {take}: expected 1-20 and 1-3')
+    return 20 + 3 * (action - 1) + take
+
+
+def load_msr_take(path: str | Path, *, max_gap_s: float = 0.5, min_frames: int = 8
+                  ) -> TakeMotion | None:
+    """Read an MSR Action3D sequence, keep its longest piece without a gap over `max_gap_s`
+    (`msraction3d.pieces`), resample it to 30 fps and move it into its floor frame. The whole
+    window is the sequence's action. None if no piece has `min_frames` frames (15 fps): the
+    dataset's empty and broken sequences."""
+    seq = msraction3d.read_sequence(path)
+    parts = msraction3d.pieces(seq, max_gap_s=max_gap_s)
+    if not parts or max(len(p.frames) for p in parts) < min_frames:
+        return None
+    piece = max(parts, key=lambda p: len(p.frames))
+    _, joints = msraction3d.resample(piece, fps=FPS)
+    optical = to_optical(joints)
+    up, height = fit_floor(optical)
+    return TakeMotion(seq.name, seq.subject, msr_take_number(seq.action, seq.take),
+                      to_floor_frame(optical, up, height),
+                      {seq.action_name: (0, len(joints) - 1)})
+
+
+def load_msr_takes(directory: str | Path, names: Sequence[str]
+                   ) -> tuple[list[TakeMotion], list[str]]:
+    """Load the named sequences ('aAA_sSS_eEE') of an MSR Action3D directory.
+
+    Returns the motions and the names skipped as empty or too short (`load_msr_take`).
+    """
+    directory = Path(directory)
+    out, skipped = [], []
+    for name in names:
+        path = directory / f'{name}_skeleton3D.txt'
+        if not path.is_file():
+            raise ValueError(f'{path}: MSR Action3D sequence not found')
+        motion = load_msr_take(path)
+        if motion is None:
+            skipped.append(name)
+        else:
+            out.append(motion)
+    return out, skipped
+
+
 @dataclass(frozen=True)
 class VideoPlan:
     """One synthetic video: a window of a take and the seed of its body and room.
 
     Attributes
     ----------
-    take : 'sNN_eMM'; subject, take_no : NN, MM; window : index of the window in the take.
+    take : 'sNN_eMM' or 'aAA_sSS_eEE'; subject, take_no : `TakeMotion.subject`, `.take`;
+    window : index of the window in the take.
     start : first frame index (30 fps) in the take; n_frames : frames written; stride : step.
     seed : the run's seed; video_id : 10 digits; activity : the UTKinect action covering most
         of the window, or 'random' (CAD-60's name for unscripted activity).
