@@ -21,6 +21,7 @@ offline evaluation and a live run of the graph give the same answers on the same
 
 from __future__ import annotations
 
+import functools
 import math
 import time
 from collections.abc import Mapping
@@ -70,21 +71,33 @@ def check_known(joints: JointSet, names: tuple[str, ...], intrinsics: Intrinsics
 
 
 def reorder(joints: JointSet, names: tuple[str, ...]) -> JointSet:
-    """`joints` in the order of `names`; names it lacks are MISSING."""
+    """`joints` in the order of `names`; names it lacks are MISSING (`joints` itself when it
+    is in that order already: a JointSet is immutable)."""
+    if joints.names == names:
+        return joints
     n = len(names)
+    rows, found = _reordering(joints.names, names)
     uv = np.full((n, 2), np.nan)
     xyz = np.full((n, 3), np.nan)
     conf = np.zeros(n, np.float32)
     src = np.full(n, cj.MISSING, np.uint8)
     cov = np.zeros((n, 3, 3))
-    for i, name in enumerate(names):
-        k = joints.get(name)
-        if k is not None:
-            uv[i], xyz[i], conf[i], src[i], cov[i] = (joints.uv[k], joints.xyz[k],
-                                                      joints.confidence[k], joints.source[k],
-                                                      joints.covariance[k])
-    return JointSet(names, uv, xyz, confidence=conf, source=src, covariance=cov,
-                    score=joints.score, track_id=joints.track_id)
+    uv[rows], xyz[rows], conf[rows], src[rows], cov[rows] = (
+        joints.uv[found], joints.xyz[found], joints.confidence[found], joints.source[found],
+        joints.covariance[found])
+    return JointSet.of_arrays(names, uv, xyz, conf, src, cov, score=joints.score,
+                              track_id=joints.track_id)
+
+
+@functools.lru_cache(maxsize=64)
+def _reordering(given: tuple[str, ...], names: tuple[str, ...]
+                ) -> tuple[NDArray[np.intp], NDArray[np.intp]]:
+    """The rows of `names` that `given` has, and where `given` has them (read-only)."""
+    pairs = [(i, given.index(name)) for i, name in enumerate(names) if name in given]
+    rows, found = (np.array([p[k] for p in pairs], np.intp) for k in (0, 1))
+    rows.setflags(write=False)
+    found.setflags(write=False)
+    return rows, found
 
 
 class ForegroundStage:
@@ -356,14 +369,14 @@ class TrackerStage:
         ValueError (and the track untouched) for parts no camera could have seen
         (`joints.check_joints`) or none of which the tree has.
         """
-        tree = self.fixed_tree or tree_for(parts.names)
+        tree = self.fixed_tree or _tree_for(parts.names)
         check_known(parts, tree.names, intrinsics)
         if tree is not self.tree:
             self._use(tree)
         parts = reorder(parts, self.tree.names)
         state = self.filter.state
         cfg = self.filter.config
-        new_track = not state.active.any() or (
+        new_track = not _any(state.active) or (
             state.stamp is not None and not 0.0 <= stamp_s - state.stamp <= cfg.max_dt_s)
         if new_track:
             self.depth[:] = np.nan
@@ -371,40 +384,66 @@ class TrackerStage:
         uv = np.where(detected[:, None], parts.uv, np.nan)
         out = self.filter.step(uv, np.where(detected, parts.confidence, 0.0), stamp_s,
                                person_scale_px(parts.xyz[detected], intrinsics))
-        if new_track and self.filter.state.active.any():
+        if new_track and _any(self.filter.state.active):
             self.track_id += 1
+        positions, source, confidence = out.positions, out.source, out.confidence
+        covariances = out.covariances
         # a part's depth is its accepted detection's: a rejected one lies elsewhere
-        measured = detected & (out.source == cj.DETECTED) & valid_xyz(parts.xyz)
+        measured = detected & (source == cj.DETECTED) & valid_xyz(parts.xyz)
         self.depth[measured] = parts.xyz[measured, 2]
         # an accepted detection lies on the image, and so does its filtered estimate (the
-        # prediction may overshoot an edge the part moves towards)
+        # prediction may overshoot an edge the part moves towards); np.clip's values
         if intrinsics is not None:
-            held = np.clip(out.positions, 0.0, [intrinsics.width - 1, intrinsics.height - 1])
-            on = (out.source == cj.DETECTED)[:, None]
-            out = replace(out, positions=np.where(on, held, out.positions))
+            held = np.minimum(np.maximum(positions, 0.0), _image_max(intrinsics))
+            positions = np.where((source == cj.DETECTED)[:, None], held, positions)
         # a part predicted off the image (coasting away) is lost: no stage takes such pixels
-        lost = (out.source != cj.MISSING) & ~cj.near_image(out.positions, intrinsics)
-        if lost.any():
-            out = replace(out, positions=np.where(lost[:, None], np.nan, out.positions),
-                          covariances=np.where(lost[:, None, None], np.nan, out.covariances),
-                          confidence=np.where(lost, 0, out.confidence).astype(np.float32),
-                          source=np.where(lost, cj.MISSING, out.source).astype(np.uint8))
-        missing = out.source == cj.MISSING
+        lost = (source != cj.MISSING) & ~cj.near_image(positions, intrinsics)
+        if _any(lost):
+            positions = np.where(lost[:, None], np.nan, positions)
+            covariances = np.where(lost[:, None, None], np.nan, covariances)
+            confidence = np.where(lost, 0, confidence).astype(np.float32)
+            source = np.where(lost, cj.MISSING, source).astype(np.uint8)
+        missing = source == cj.MISSING
         self.depth[missing] = np.nan
-        xyz = np.full((len(self.tree), 3), np.nan)
-        cov = np.zeros((len(self.tree), 3, 3))
+        n = len(self.tree)
         if intrinsics is not None:
-            xyz = backproject(out.positions, self.depth, intrinsics)
+            xyz = backproject(positions, self.depth, intrinsics)
             # pixel covariance -> metric x/y at the part's depth; z from the depth parameter
-            scale = np.stack([self.depth / intrinsics.fx, self.depth / intrinsics.fy], axis=1)
-            cov[:, :2, :2] = out.covariances * scale[:, :, None] * scale[:, None, :]
+            scale = np.empty((n, 2))
+            scale[:, 0] = self.depth / intrinsics.fx
+            scale[:, 1] = self.depth / intrinsics.fy
+            cov = np.zeros((n, 3, 3))
+            cov[:, :2, :2] = covariances * scale[:, :, None] * scale[:, None, :]
             cov[:, 2, 2] = self.depth_std_m ** 2
             cov[~valid_xyz(xyz)] = 0.0
-        live = ~missing
-        score = float(np.mean(out.confidence[live])) if live.any() else float('nan')
-        return JointSet(self.tree.names, out.positions, xyz, confidence=out.confidence,
-                        source=out.source, covariance=np.nan_to_num(cov), score=score,
-                        track_id=self.track_id if live.any() else 0)
+            if not _all(np.isfinite(cov), axis=None):
+                cov = np.nan_to_num(cov)
+        else:
+            xyz, cov = np.full((n, 3), np.nan), np.zeros((n, 3, 3))
+        live = confidence[~missing]
+        # np.mean's value (float32 sum over the count), without its Python wrapper
+        score = float(np.add.reduce(live) / len(live)) if len(live) else float('nan')
+        return JointSet.of_arrays(self.tree.names, positions, xyz, confidence, source, cov,
+                                  score=score, track_id=self.track_id if len(live) else 0)
+
+
+# `ndarray.any` and `ndarray.all` without their Python wrappers (the per-frame path)
+_any = np.logical_or.reduce
+_all = np.logical_and.reduce
+
+
+@functools.lru_cache(maxsize=16)
+def _tree_for(names: tuple[str, ...]) -> PartTree:
+    """`skeleton.tree_for`, remembered per set of names (the same parts every frame)."""
+    return tree_for(names)
+
+
+@functools.lru_cache(maxsize=16)
+def _image_max(intrinsics: Intrinsics) -> NDArray[np.float64]:
+    """The largest pixel (u, v) of the image (read-only)."""
+    hi = np.array([intrinsics.width - 1, intrinsics.height - 1], np.float64)
+    hi.setflags(write=False)
+    return hi
 
 
 class IkStage:
