@@ -427,6 +427,8 @@ class TrackerStage:
                                   score=score, track_id=self.track_id if len(live) else 0)
 
 
+# each limb and the row of its middle joint in SKELETON_14
+_MIDDLE_ROWS = tuple((limb, SKELETON_14.index(middle)) for limb, (_, middle, _) in LIMBS.items())
 # `ndarray.any` and `ndarray.all` without their Python wrappers (the per-frame path)
 _any = np.logical_or.reduce
 _all = np.logical_and.reduce
@@ -535,8 +537,7 @@ class IkStage:
             self.learner.observe_skeleton(SKELETON_14, points)
         # elbows and knees measured by a 14-part detector are kept: only the others are solved
         measured = (src != cj.MISSING) & valid
-        unmeasured = [limb for limb, (_, middle, _) in LIMBS.items()
-                      if not measured[SKELETON_14.index(middle)]]
+        unmeasured = [limb for limb, k in _MIDDLE_ROWS if not measured[k]]
         result = infer_middle_joints(
             depth_m if self.use_depth else None, points, intrinsics, self.lengths(),
             names=SKELETON_14, mask=mask if self.use_depth else None, config=self.config,
@@ -555,10 +556,11 @@ class IkStage:
             # kinematics' confidence is exp(-sigma / confidence_scale_m): invert it for sigma
             sigma = -self.config.confidence_scale_m * math.log(max(float(conf[i]), 1e-3))
             cov[i] = np.eye(3) * sigma ** 2
-        live = src != cj.MISSING
-        score = float(np.mean(conf[live])) if live.any() else math.nan
-        return JointSet(SKELETON_14, uv, xyz, confidence=conf, source=src, covariance=cov,
-                        score=score, track_id=tracked.track_id)
+        live = conf[src != cj.MISSING]
+        # np.mean's value (float32 sum over the count), without its Python wrapper
+        score = float(np.add.reduce(live) / len(live)) if len(live) else math.nan
+        return JointSet.of_arrays(SKELETON_14, uv, xyz, conf, src, cov, score=score,
+                                  track_id=tracked.track_id)
 
 
 # The stages of `FramePipeline.step`, in order (the keys of `FrameResult.cpu_s` and `wall_s`)
