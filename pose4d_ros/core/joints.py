@@ -115,7 +115,8 @@ class JointSet:
                   score: float = float('nan'), track_id: int = 0) -> JointSet:
         """A JointSet that takes over arrays made for it, without the constructor's copies:
         the per-frame path of the stages. The arrays must have the shapes and dtypes of the
-        attributes and no other user (they are made read-only, as the constructor's)."""
+        attributes, and no other user that writes to them (they are made read-only, as the
+        constructor's; another JointSet's arrays may be shared)."""
         self = object.__new__(cls)
         for arr in (uv, xyz, confidence, source, covariance):
             arr.setflags(write=False)

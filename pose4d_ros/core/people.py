@@ -29,9 +29,10 @@ the arms), matched to candidates by the 3-D centre of their regions.
 
 from __future__ import annotations
 
+import functools
 import math
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field
 
 import numpy as np
 from numpy.typing import NDArray
@@ -86,11 +87,22 @@ class TrackingConfig:
 def torso(joints: JointSet) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
     """A person's torso point: the mean 3-D position of the located `TORSO` joints (NaN if
     none has one) and the mean of their covariances ((3,), (3, 3))."""
-    idx = [k for name in TORSO if (k := joints.get(name)) is not None
-           and joints.source[k] != cj.MISSING and np.isfinite(joints.xyz[k]).all()]
-    if not idx:
+    rows = _torso_rows(joints.names)
+    idx = rows[(joints.source[rows] != cj.MISSING)
+               & np.logical_and.reduce(np.isfinite(joints.xyz[rows]), axis=1)]
+    if not len(idx):
         return np.full(3, np.nan), np.zeros((3, 3))
-    return joints.xyz[idx].mean(axis=0), joints.covariance[idx].mean(axis=0)
+    # np.mean's values (the sums in `TORSO` order over the count), without its Python wrapper
+    return (np.add.reduce(joints.xyz[idx], axis=0) / len(idx),
+            np.add.reduce(joints.covariance[idx], axis=0) / len(idx))
+
+
+@functools.lru_cache(maxsize=16)
+def _torso_rows(names: tuple[str, ...]) -> NDArray[np.intp]:
+    """The rows of the `TORSO` joints in `names`, in `TORSO` order (read-only)."""
+    rows = np.array([names.index(n) for n in TORSO if n in names], np.intp)
+    rows.setflags(write=False)
+    return rows
 
 
 def assign(cost: NDArray[np.float64], gate: float) -> list[tuple[int, int]]:
@@ -111,6 +123,16 @@ def _mahalanobis2(d: NDArray[np.float64], s: NDArray[np.float64]) -> float:
         return float(d @ np.linalg.solve(s, d))
     except np.linalg.LinAlgError:
         return math.inf
+
+
+def _mahalanobis2_all(d: NDArray[np.float64], s: NDArray[np.float64]) -> NDArray[np.float64]:
+    """`_mahalanobis2` of each pair of `d` (K, 3) and `s` (K, 3, 3), in one solve (the same
+    LAPACK solve per pair, and np.vecdot is the dot's sum); one by one when a matrix is
+    singular (inf for it)."""
+    try:
+        return np.vecdot(d, np.linalg.solve(s, d[:, :, None])[:, :, 0])
+    except np.linalg.LinAlgError:
+        return np.array([_mahalanobis2(a, b) for a, b in zip(d, s, strict=True)])
 
 
 @dataclass
@@ -252,7 +274,7 @@ class PeopleTracker:
         for j, det in enumerate(detections):
             if j in matched and not self.tracks[matched[j]].id and not born(det):
                 del matched[j]  # a tentative track's detection must be a person's
-            if j not in matched and np.isfinite(points[j][0]).all() and born(det):
+            if j not in matched and _finite(points[j][0]) and born(det):
                 self.tracks.append(_Track(self.make(), names=det.names))
                 matched[j] = len(self.tracks) - 1
         seen = {i: j for j, i in matched.items()}
@@ -265,7 +287,7 @@ class PeopleTracker:
                 if not track.id and (track.hits >= cfg.confirm_frames or not any_confirmed):
                     track.id, self.next_id = self.next_id, self.next_id + 1
                     self.born.append(track.id)
-            track.last = replace(out, track_id=track.id)
+            track.last = _with_track_id(out, track.id)
         keep = []
         for track in self.tracks:
             unseen = stamp_s - track.seen_s
@@ -283,22 +305,29 @@ class PeopleTracker:
               ) -> NDArray[np.float64]:
         cfg = self.config
         cost = np.full((len(self.tracks), len(points)), np.nan)
+        seen = [j for j, (p, _) in enumerate(points) if _finite(p)]
+        pairs, d, s = [], [], []
         for i, t in enumerate(self.tracks):
-            if not np.isfinite(t.point).all():
+            if not _finite(t.point):
                 continue
             dt = max(stamp_s - t.seen_s, 0.0)
             predicted = t.point + t.velocity * min(dt, cfg.max_unseen_s)
-            spread = (cfg.torso_std_m ** 2 + (cfg.max_speed_mps * dt) ** 2) * np.eye(3)
-            for j, (p, c) in enumerate(points):
-                if np.isfinite(p).all():
-                    cost[i, j] = _mahalanobis2(p - predicted, t.cov + c + spread)
+            spread = (cfg.torso_std_m ** 2 + (cfg.max_speed_mps * dt) ** 2) * _EYE3
+            for j in seen:
+                p, c = points[j]
+                pairs.append((i, j))
+                d.append(p - predicted)
+                s.append(t.cov + c + spread)
+        if pairs:
+            rows, cols = zip(*pairs, strict=True)
+            cost[rows, cols] = _mahalanobis2_all(np.array(d), np.array(s))
         return cost
 
     def _seen(self, track: _Track, out: JointSet, stamp_s: float) -> None:
         point, cov = torso(out)
-        if np.isfinite(point).all():
+        if _finite(point):
             dt = stamp_s - track.seen_s
-            if np.isfinite(track.point).all() and 0 < dt <= self.config.max_unseen_s:
+            if _finite(track.point) and 0 < dt <= self.config.max_unseen_s:
                 track.velocity = 0.7 * track.velocity + 0.3 * (point - track.point) / dt
             track.point, track.cov = point, cov
         track.hits += 1
@@ -309,6 +338,22 @@ class PeopleTracker:
         seen = [t for t in confirmed if t.seen_s == stamp_s]
         primary = (seen or confirmed)[:1]
         return primary + [t for t in confirmed if t not in primary]
+
+
+def _finite(v: NDArray[np.float64]) -> bool:
+    """Every value finite (`np.isfinite(v).all()` without its Python wrapper)."""
+    return bool(np.logical_and.reduce(np.isfinite(v), axis=None))
+
+
+def _with_track_id(joints: JointSet, track_id: int) -> JointSet:
+    """`joints` with another `track_id`, sharing its (read-only) arrays."""
+    return JointSet.of_arrays(joints.names, joints.uv, joints.xyz, joints.confidence,
+                              joints.source, joints.covariance, score=joints.score,
+                              track_id=track_id)
+
+
+_EYE3 = np.eye(3)
+_EYE3.setflags(write=False)
 
 
 class PeopleIk:
