@@ -26,6 +26,7 @@ import math
 import time
 from collections.abc import Mapping
 from dataclasses import dataclass, replace
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -599,6 +600,11 @@ class FramePipeline:
         person tracked and completed on their own (the stages above are the first person's
         and the template of the others'); `FrameResult.people` holds every confirmed track's
         skeleton and `skeleton` the primary person's. None: one person, as the paper.
+
+    Attributes
+    ----------
+    profilers : None, or per name of `STAGES` an object with ``enable()`` and ``disable()``
+        (a `cProfile.Profile`), enabled only while that stage runs.
     """
 
     def __init__(self, detector: DetectorStage, *, foreground: ForegroundStage | None = None,
@@ -611,6 +617,9 @@ class FramePipeline:
         self.people = people
         self.multi = None if people is None else PeopleStages(
             self.detector, self.tracker, self.ik, people)
+        # per name of `STAGES`, a profiler (enable(), disable(): `cProfile.Profile`) that runs
+        # only while that stage does (`pose4d bench` counts the Python calls of each stage)
+        self.profilers: Mapping[str, Any] | None = None
 
     def reset(self) -> None:
         """Forget the previous frames (the next one starts a new track)."""
@@ -630,20 +639,20 @@ class FramePipeline:
         """
         if self.multi is not None and depth_m is not None:
             return self._step_people(color, depth_m, intrinsics, stamp_s)
-        clock = [(time.process_time(), time.perf_counter())]
+        clock = self._lap([])
         fg, color_m, depth_mm = None, color, None
         if depth_m is not None:
             fg, color_m, depth_mm = self.foreground.step(color, depth_m, intrinsics)
-        clock.append((time.process_time(), time.perf_counter()))
+        self._lap(clock)
         # the detector sees what the detector node receives: the masked frame and the mask
         parts = self.detector.step(color_m, depth_mm, intrinsics,
                                    mask=fg.mask if fg is not None else None, stamp_s=stamp_s,
                                    blanked=fg is not None)
-        clock.append((time.process_time(), time.perf_counter()))
+        self._lap(clock)
         tracked = self.tracker.step(parts, stamp_s, intrinsics)
-        clock.append((time.process_time(), time.perf_counter()))
+        self._lap(clock)
         skeleton = self.ik.step(tracked, depth_mm, intrinsics)
-        clock.append((time.process_time(), time.perf_counter()))
+        self._lap(clock)
         cpu_s, wall_s = ({stage: clock[k + 1][c] - clock[k][c] for k, stage in enumerate(STAGES)}
                          for c in (0, 1))
         return FrameResult(fg, color_m, depth_mm, parts, tracked, skeleton, cpu_s, wall_s)
@@ -651,17 +660,17 @@ class FramePipeline:
     def _step_people(self, color: NDArray[np.uint8], depth_m: NDArray[np.floating],
                      intrinsics: Intrinsics, stamp_s: float) -> FrameResult:
         multi = self.multi
-        clock = [(time.process_time(), time.perf_counter())]
+        clock = self._lap([])
         found, n, color_m, depth_mm = self.foreground.step_people(
             color, depth_m, intrinsics, multi.config.max_people)
-        clock.append((time.process_time(), time.perf_counter()))
+        self._lap(clock)
         parts = multi.detector.step(color, np.asarray(depth_m, np.float32), intrinsics, found,
                                     stamp_s=stamp_s)
-        clock.append((time.process_time(), time.perf_counter()))
+        self._lap(clock)
         tracked = multi.tracker.step(parts, stamp_s, intrinsics)
-        clock.append((time.process_time(), time.perf_counter()))
+        self._lap(clock)
         skeletons = multi.ik.step(tracked, depth_mm, intrinsics)
-        clock.append((time.process_time(), time.perf_counter()))
+        self._lap(clock)
         cpu_s, wall_s = ({stage: clock[k + 1][c] - clock[k][c] for k, stage in enumerate(STAGES)}
                          for c in (0, 1))
         fg = found[0] if found else None
@@ -672,6 +681,17 @@ class FramePipeline:
             skeletons[0] if skeletons else JointSet.missing(SKELETON_14), cpu_s, wall_s,
             people=tuple(skeletons), foregrounds=tuple(found), candidates=n,
             born=tuple(multi.tracker.born), ended=tuple(multi.tracker.ended))
+
+    def _lap(self, clock: list[tuple[float, float]]) -> list[tuple[float, float]]:
+        """`clock` with the times (CPU, wall) at a boundary between stages appended; with
+        `profilers`, the profiler of the stage that ends is stopped first and the one of the
+        stage that starts started after."""
+        if self.profilers is not None and clock:
+            self.profilers[STAGES[len(clock) - 1]].disable()
+        clock.append((time.process_time(), time.perf_counter()))
+        if self.profilers is not None and len(clock) <= len(STAGES):
+            self.profilers[STAGES[len(clock) - 1]].enable()
+        return clock
 
     def warm_up(self, intrinsics: Intrinsics) -> None:
         """Compile the kernels on a synthetic frame, twice (the second frame guided by the
