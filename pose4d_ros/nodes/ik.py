@@ -5,7 +5,9 @@ parameters, or learned per track); the swivel angle on the circle of possible el
 the depth image of the person, with a joint-limit prior where depth cannot tell. Tracked parts
 and depth are paired by stamp (exact, or nearest within `ik.depth_slop_s`).
 
-Several people: one IK per track id, each with its own learned bone lengths.
+Several people: one IK per track id, each with its own learned bone lengths. Frames are
+completed in a worker thread: an IK slower than its input works on the newest frame and drops
+the older ones (counted as `dropped` on /diagnostics), never queueing them.
 
 Subscriptions
     pose4d/parts/tracked/people (pose4d_msgs/SkeletonArray, every tracked person), or from a
