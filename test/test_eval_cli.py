@@ -146,8 +146,24 @@ def test_train_then_eval_and_bench(tiny_set: Path, tmp_path: Path, capsys) -> No
         for st in stages.values():
             assert 0 < st['p50'] <= st['p95']
         assert stages['total']['p50'] >= stages['detector']['p50']
+    # the Python calls per frame of each stage, from the profiled pass
+    calls = {k: v['calls_per_frame'] for k, v in timings['stages'].items()}
+    assert list(calls) == ['foreground', 'detector', 'tracker', 'ik', 'total']
+    assert min(calls.values()) > 0
+    assert calls['total'] == pytest.approx(sum(list(calls.values())[:4]), abs=0.3)
+    assert timings['people'] == 'one' and 'people_ms' not in timings
     text = capsys.readouterr().out
-    assert 'cores' in text and 'BLAS' in text
+    assert 'cores' in text and 'BLAS' in text and 'calls' in text
+    # several people: CPU per stage by the number of people tracked in the frame
+    assert pose4d_main(['bench', str(tiny_set), '--json', str(bench), '--model', str(model),
+                        '--frames', '4', '--warmup', '2', '--people', 'several',
+                        '--no-calls']) == 0
+    several = json.loads(bench.read_text())
+    assert several['people'] == 'several' and 'stages' not in several
+    groups = several['people_ms']
+    assert all(n.isdigit() for n in groups) and sum(g['frames'] for g in groups.values()) == 4
+    for g in groups.values():
+        assert g['total']['p50'] >= g['detector']['p50'] > 0
 
 
 def test_eval_on_an_lspet_layout_scores_elbows_and_knees(tmp_path: Path) -> None:

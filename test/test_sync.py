@@ -114,6 +114,57 @@ def test_frame_queue_works_on_the_newest_frame_and_counts_the_dropped(ros):
         queue.close()
 
 
+def test_people_inputs_are_processed_off_the_executor_on_the_newest_frame(ros):
+    """A stage fed by `PeopleInputs` alone (the tracker) processes in a worker thread: the
+    executor keeps taking messages while a frame is in hand, and only the newest waits."""
+    import threading
+
+    from pose4d_msgs.msg import JointArray
+    from std_msgs.msg import Header
+
+    from pose4d_ros.core.joints import JointSet
+    from pose4d_ros.core.skeleton import PARTS_10
+    from pose4d_ros.nodes import qos
+    from pose4d_ros.nodes.common import PeopleInputs
+    from pose4d_ros.nodes.convert import joints_to_msg, ns_to_stamp
+
+    done: list[int] = []
+    threads: list[threading.Thread] = []
+    busy = threading.Event()
+
+    def process(people: list, header: Header, _: tuple) -> None:
+        threads.append(threading.current_thread())
+        busy.wait(5.0)  # the stage is busy until the test lets it go
+        done.append(header.stamp.sec)
+
+    monitor = _Counter()
+    monitor.bad_input = lambda text: pytest.fail(text)
+    PeopleInputs(ros.node, 'queue_test/people', 'queue_test/single', [], process, monitor)
+    pub = ros.node.create_publisher(JointArray, 'queue_test/single', qos.OUTPUT_QOS)
+    joints = JointSet.missing(PARTS_10.names)
+
+    def send(sec: int) -> None:
+        pub.publish(joints_to_msg(joints, Header(stamp=ns_to_stamp(sec * 10 ** 9),
+                                                 frame_id='camera')))
+
+    try:
+        ros.spin_until(lambda: pub.get_subscription_count() > 0, 5.0, 'the subscription')
+        send(1)
+        ros.spin_until(lambda: threads, 5.0, 'frame 1 in hand')
+        for sec in range(2, 6):  # four frames while it is busy: taken, only the newest waits
+            send(sec)
+            ros.spin_for(0.05)
+        ros.spin_for(0.3)
+        busy.set()
+        ros.spin_until(lambda: len(done) == 2, 5.0, 'the newest frame')
+        ros.spin_for(0.2)
+        assert done == [1, 5] and monitor.drops == 3
+        assert threads[0] is not threading.current_thread()
+    finally:
+        for queue in ros.node.__dict__.get('frame_queues', []):
+            queue.close()
+
+
 def test_frame_queue_keeps_a_burst_in_order_up_to_its_size(ros):
     import threading
 

@@ -91,12 +91,14 @@ def test_a_loop_and_a_gap_start_the_tracker_and_the_ik_anew(ros, tmp_path):
             assert joint.source == cj.DETECTED, (frames[n], joint.name, joint.source)
             assert np.allclose((joint.u, joint.v), (by_name[joint.name].u,
                                                     by_name[joint.name].v), atol=1e-3)
-    # the IK follows the tracks: each skeleton has its tracked parts' id (in arrival order:
-    # the stamps repeat at each pass)
+    # the IK follows the tracks: each skeleton has its tracked parts' id, in arrival order (the
+    # stamps repeat at each pass); an IK slower than the 5x replay drops the older of the frames
+    # that came while it was busy, so the skeletons are the tracked frames with some left out
     def ids(msgs):
         return [(stamp_to_ns(m.header.stamp), m.track_id) for m in msgs]
 
-    assert ids(skeletons) == ids(tracked)[:len(skeletons)]
+    remaining = iter(ids(tracked))
+    assert all(frame in remaining for frame in ids(skeletons)), (ids(skeletons), ids(tracked))
     counts = {}
     for array in diagnostics:
         for status in array.status:

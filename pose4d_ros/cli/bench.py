@@ -12,6 +12,18 @@ and p95 of each stage's CPU time (this process's, `time.process_time`: `stages_m
 time (`wall_ms`), and of their sum over the four stages (`total`: one frame through all of
 them), are taken over the frames after `--warmup` (numba compilation and caches).
 
+Python-level calls per frame (`stages.<stage>.calls_per_frame`): the same frames run again
+through a fresh pipeline with a `cProfile` profiler per stage (`FramePipeline.profilers`), so
+the timed pass is not disturbed; its total call count over the frames after `--warmup`, per
+frame. Interpreter-bound work (many small numpy calls, Python loops) slows down most on a
+slower core, so the count tells how a stage will fare there (the timings do not: they are this
+machine's). It is deterministic: the same frames give the same count on any machine.
+
+Several people (`--people several`, the default for a source with several people's ground
+truth): the stages of `core.people` (`FramePipeline(people=...)`), and `people_ms`: each
+stage's CPU ms (p50, p95) over the frames with 1, 2, 3, ... confirmed people tracked
+(`len(FrameResult.people)`), with their count (`frames`).
+
 With `--peer mediapipe` (`make peer`), MediaPipe Pose then runs on the same frames in the same
 run (its own warm-up first), as a user tracking a video would run it (video mode, one video):
 `peer_ms` is its worker process's CPU time per frame (every thread of it) plus the 3-D look-up
@@ -31,9 +43,12 @@ BLAS is set to `--blas-threads` (1 by default, the measured best; see `core.thre
 from __future__ import annotations
 
 import argparse
+import cProfile
 import os
+import pstats
 import time
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -51,6 +66,9 @@ from pose4d_ros.models import model_path
 from pose4d_ros.peer import PEERS, MediaPipePeer
 from pose4d_ros.util.machine import machine
 from pose4d_ros.util.progress import progress
+
+if TYPE_CHECKING:
+    from pose4d_ros.core.pipeline import FramePipeline
 
 
 def add_parser(subparsers: argparse._SubParsersAction) -> None:
@@ -71,6 +89,11 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
                    metavar='F,F,...', help="factors on the depth-predicted person scale, one "
                    'chosen per track (core.dpm.scale); 1 = the predicted scale only')
     p.add_argument('--blas-threads', type=int, default=1, help='OpenBLAS threads')
+    p.add_argument('--people', choices=('auto', 'one', 'several'), default='auto',
+                   help='track one person (the paper) or several (core.people); auto: several '
+                   "when SOURCE has several people's ground truth")
+    p.add_argument('--no-calls', dest='calls', action='store_false',
+                   help='skip the profiled pass that counts the Python calls per stage')
     p.add_argument('--peer', choices=PEERS,
                    help='also time the peer on the same frames (needs `make peer`)')
     p.add_argument('--graph', action='store_true',
@@ -87,6 +110,7 @@ def run(args: argparse.Namespace) -> int:
     if args.frames < 1 or args.warmup < 0:
         raise ValueError(f'--frames must be >= 1 and --warmup >= 0, got {args.frames}, '
                          f'{args.warmup}')
+    from pose4d_ros.core.people import TrackingConfig
     from pose4d_ros.core.pipeline import STAGES, DetectorStage, FramePipeline
 
     threads = set_blas_threads(args.blas_threads)
@@ -101,10 +125,19 @@ def run(args: argparse.Namespace) -> int:
         use_depth = model.channels == 'rgbd'
         if use_depth and any(f.depth_m is None for f in frames):
             raise ValueError(f'{args.source}: no depth images for the rgbd model')
-        pipeline = FramePipeline(DetectorStage(model, search=SearchConfig(n_levels=args.levels),
-                                               scale=ScaleConfig(factors=args.person_scales)))
+        several = use_depth and (args.people == 'several' or (
+            args.people == 'auto' and any(len(f.people) > 1 for f in frames)))
+
+        def new_pipeline() -> FramePipeline:
+            return FramePipeline(
+                DetectorStage(model, search=SearchConfig(n_levels=args.levels),
+                              scale=ScaleConfig(factors=args.person_scales)),
+                people=TrackingConfig() if several else None)
+
+        pipeline = new_pipeline()
         # per clock: each stage's ms per frame, and their sum (one frame through all four)
         ms = {clock: {k: [] for k in (*STAGES, 'total')} for clock in ('cpu', 'wall')}
+        by_people: dict[int, dict[str, list[float]]] = {}  # people tracked -> stage -> CPU ms
         for i, f in enumerate(progress(frames, 'bench')):
             if i == min(args.warmup, len(frames) - 1):
                 threads = set_blas_threads(args.blas_threads)  # also the libraries loaded since
@@ -117,6 +150,13 @@ def run(args: argparse.Namespace) -> int:
                     if name != 'foreground' or use_depth:
                         ms[clock][name].append(times[name] * 1e3)
                 ms[clock]['total'].append(sum(times.values()) * 1e3)
+            if several:
+                group = by_people.setdefault(len(out.people), {k: [] for k in (*STAGES, 'total')})
+                for name in STAGES:
+                    group[name].append(out.cpu_s[name] * 1e3)
+                group['total'].append(sum(out.cpu_s.values()) * 1e3)
+        calls = count_calls(new_pipeline(), frames, args.warmup, use_depth) if args.calls \
+            else None
         if peer is not None:
             peer_cpu, peer_wall = time_peer(peer, frames, args.warmup)
     finally:
@@ -131,7 +171,14 @@ def run(args: argparse.Namespace) -> int:
     print(f'model: {model.channels}, {model.n_parts} parts x {model.n_types} types; '
           f'{len(ms["cpu"]["detector"])} frames of {w}x{h} after {args.warmup} warm-up')
     out: dict = {'stages_ms': {k: ms_stats(v) for k, v in ms['cpu'].items()},
-                 'wall_ms': {k: ms_stats(v) for k, v in ms['wall'].items()}}
+                 'wall_ms': {k: ms_stats(v) for k, v in ms['wall'].items()},
+                 'people': 'several' if several else 'one'}
+    if calls is not None:
+        out['stages'] = {k: {'calls_per_frame': v} for k, v in calls.items()}
+    if several:
+        out['people_ms'] = {str(n): {'frames': len(g['total']),
+                                     **{k: ms_stats(v) for k, v in g.items()}}
+                            for n, g in sorted(by_people.items())}
     lines = {k: (out['stages_ms'][k], out['wall_ms'][k]) for k in out['stages_ms']}
     if peer is not None:
         out['peer'] = peer.description
@@ -139,16 +186,44 @@ def run(args: argparse.Namespace) -> int:
         out['ratio_to_peer'] = round(out['stages_ms']['total']['p50']
                                      / out['peer_ms']['p50'], 3)
         lines[peer.name] = (out['peer_ms'], out['peer_wall_ms'])
-    print(f'{"ms per frame":<12} {"CPU p50":>9} {"CPU p95":>9} {"wall p50":>9} {"wall p95":>9}')
+    print(f'{"ms per frame":<12} {"CPU p50":>9} {"CPU p95":>9} {"wall p50":>9} {"wall p95":>9}'
+          + (f' {"calls":>9}' if calls is not None else ''))
     for name, stats in lines.items():
         print(f'{name:<12} ' + ' '.join(f'{v:9.2f}' if v is not None else f'{"-":>9}'
-                                        for st in stats for v in (st['p50'], st['p95'])))
+                                        for st in stats for v in (st['p50'], st['p95']))
+              + (f' {calls[name]:9.1f}' if calls is not None and name in calls else ''))
+    if several:
+        print(f'{"people":<6} {"frames":>6} ' + ' '.join(f'{k:>10}' for k in (*STAGES, 'total'))
+              + '   (CPU ms p50 per frame by people tracked)')
+        for n, g in out['people_ms'].items():
+            print(f'{n:<6} {g["frames"]:>6} ' + ' '.join(
+                f'{g[k]["p50"]:10.2f}' if g[k]['p50'] is not None else f'{"-":>10}'
+                for k in (*STAGES, 'total')))
     if peer is not None:
         print(f"ours / {peer.name} (CPU p50): {out['ratio_to_peer']:.3f} ({out['peer']})")
     if args.graph:
         out['graph'] = graph_bench(Path(args.source), args)
     write_json(args.json, out)
     return 0
+
+
+def count_calls(pipeline: FramePipeline, frames: list[Frame], warmup: int, use_depth: bool
+                ) -> dict[str, float]:
+    """Python-level calls per frame of each stage and of all of them (`total`): cProfile's
+    total call count over the frames after `warmup`, one profiler per stage."""
+    from pose4d_ros.core.pipeline import STAGES
+
+    profilers = {name: cProfile.Profile() for name in STAGES}
+    start = min(warmup, len(frames) - 1)
+    for i, f in enumerate(progress(frames, 'calls')):
+        pipeline.profilers = profilers if i >= start else None
+        pipeline.step(f.color, f.depth_m if use_depth else None, f.intrinsics,
+                      f.stamp_ns * 1e-9)
+    n = len(frames) - start
+    calls = {name: round(pstats.Stats(p).total_calls / n, 1) if p.getstats() else 0.0
+             for name, p in profilers.items()}
+    calls['total'] = round(sum(calls.values()), 1)
+    return calls
 
 
 def time_peer(peer: MediaPipePeer, frames: list[Frame], warmup: int

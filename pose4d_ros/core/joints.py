@@ -7,6 +7,7 @@ checks it). `check_joints` is the physical-sense check of a JointSet that came f
 
 from __future__ import annotations
 
+import functools
 from collections.abc import Sequence
 from dataclasses import dataclass, field, replace
 
@@ -108,6 +109,22 @@ class JointSet:
         return replace(self, **changes)
 
     @classmethod
+    def of_arrays(cls, names: tuple[str, ...], uv: NDArray[np.float64],
+                  xyz: NDArray[np.float64], confidence: NDArray[np.float32],
+                  source: NDArray[np.uint8], covariance: NDArray[np.float64], *,
+                  score: float = float('nan'), track_id: int = 0) -> JointSet:
+        """A JointSet that takes over arrays made for it, without the constructor's copies:
+        the per-frame path of the stages. The arrays must have the shapes and dtypes of the
+        attributes, and no other user that writes to them (they are made read-only, as the
+        constructor's; another JointSet's arrays may be shared)."""
+        self = object.__new__(cls)
+        for arr in (uv, xyz, confidence, source, covariance):
+            arr.setflags(write=False)
+        self.__dict__.update(names=names, uv=uv, xyz=xyz, confidence=confidence, source=source,
+                             covariance=covariance, score=score, track_id=track_id)
+        return self
+
+    @classmethod
     def missing(cls, names: tuple[str, ...] | list[str]) -> JointSet:
         """All joints MISSING."""
         n = len(names)
@@ -121,22 +138,32 @@ MAX_JOINTS = 64
 _MAX_PIXEL = 1e5
 
 
+# `ndarray.all` without its Python wrapper (the per-frame checks)
+_all = np.logical_and.reduce
+
+
+@functools.lru_cache(maxsize=16)
 def _pixel_bounds(intrinsics: Intrinsics | None) -> tuple[NDArray, NDArray, str]:
-    """(lo, hi) of the pixels accepted as on or near the image, and the rule in words."""
+    """(lo, hi) of the pixels accepted as on or near the image (read-only), and the rule in
+    words."""
     if intrinsics is None:
-        return (np.array([-_MAX_PIXEL] * 2), np.array([_MAX_PIXEL] * 2),
-                f'within +-{_MAX_PIXEL:g} px')
-    size = np.array([intrinsics.width, intrinsics.height], np.float64)
-    return (-size, 2 * size, f'on or near the {intrinsics.width}x{intrinsics.height} image '
-                             f'({-size[0]:g}..{2 * size[0]:g}, {-size[1]:g}..{2 * size[1]:g})')
+        lo, hi = np.array([-_MAX_PIXEL] * 2), np.array([_MAX_PIXEL] * 2)
+        where = f'within +-{_MAX_PIXEL:g} px'
+    else:
+        size = np.array([intrinsics.width, intrinsics.height], np.float64)
+        lo, hi = -size, 2 * size
+        where = (f'on or near the {intrinsics.width}x{intrinsics.height} image '
+                 f'({-size[0]:g}..{2 * size[0]:g}, {-size[1]:g}..{2 * size[1]:g})')
+    lo.setflags(write=False)
+    hi.setflags(write=False)
+    return lo, hi, where
 
 
 def near_image(uv: NDArray[np.floating], intrinsics: Intrinsics | None) -> NDArray[np.bool_]:
     """(N,) which pixels (N, 2) are on the image or within one image size of it (within
     +-1e5 px without intrinsics): the pixels `check_joints` accepts. NaN is not near."""
     lo, hi, _ = _pixel_bounds(intrinsics)
-    with np.errstate(invalid='ignore'):
-        return ((uv >= lo) & (uv <= hi)).all(axis=-1)
+    return _all((uv >= lo) & (uv <= hi), axis=-1)  # NaN compares False, quietly
 
 
 def check_joints(joints: JointSet, intrinsics: Intrinsics | None = None) -> None:
@@ -149,6 +176,17 @@ def check_joints(joints: JointSet, intrinsics: Intrinsics | None = None) -> None
     NaN score.
     """
     names = joints.names
+    lo, hi, where = _pixel_bounds(intrinsics)
+    uv, xyz, conf, cov = joints.uv, joints.xyz, joints.confidence, joints.covariance
+    with np.errstate(invalid='ignore'):
+        # every rule at once (ufuncs): the details below only for a set that breaks one
+        fine = (_all(np.isnan(uv) | ((uv >= lo) & (uv <= hi)), axis=None)
+                & _all(np.isnan(xyz) | (np.abs(xyz) <= MAX_DEPTH_M), axis=None)
+                & _all((conf >= 0) & (conf <= 1), axis=None)
+                & _all(np.abs(cov) <= MAX_DEPTH_M ** 2, axis=None))
+    if fine and len(names) <= MAX_JOINTS and len(set(names)) == len(names) \
+            and not np.isinf(joints.score):
+        return
     if len(names) > MAX_JOINTS:
         raise ValueError(f'{len(names)} joints, more than the {MAX_JOINTS} any skeleton has')
     if len(set(names)) != len(names):
@@ -161,16 +199,11 @@ def check_joints(joints: JointSet, intrinsics: Intrinsics | None = None) -> None
             i = int(bad[0])
             raise ValueError(f'joint {names[i]!r}: {what}, got {values[i].tolist()}')
 
-    uv = joints.uv
-    lo, hi, where = _pixel_bounds(intrinsics)
     with np.errstate(invalid='ignore'):
         first_bad(uv, np.isnan(uv) | ((uv >= lo) & (uv <= hi)), f'pixel must be NaN or {where}')
-        xyz = joints.xyz
         first_bad(xyz, np.isnan(xyz) | (np.abs(xyz) <= MAX_DEPTH_M),
                   f'position must be NaN or within {MAX_DEPTH_M:g} m of the camera')
-        conf = joints.confidence
         first_bad(conf, (conf >= 0) & (conf <= 1), 'confidence must be in [0, 1]')
-        cov = joints.covariance
         first_bad(cov, np.abs(cov) <= MAX_DEPTH_M ** 2,
                   f'covariance must be finite, within {MAX_DEPTH_M ** 2:g} m^2')
     if np.isinf(joints.score):

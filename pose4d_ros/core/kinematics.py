@@ -60,8 +60,17 @@ class IkFlag(IntEnum):
 
 
 def _unit(v: NDArray[np.float64]) -> NDArray[np.float64] | None:
-    n = float(np.linalg.norm(v))
-    return v / n if np.isfinite(n) and n > 1e-9 else None
+    n = math.sqrt(float(v @ v))  # np.linalg.norm's value (the same dot), without its wrapper
+    return v / n if math.isfinite(n) and n > 1e-9 else None
+
+
+def _cross(a: NDArray[np.float64], b: NDArray[np.float64]) -> NDArray[np.float64]:
+    """np.cross of two 3-vectors, the same products and differences, without its wrapper."""
+    out = np.empty(3)
+    out[0] = a[1] * b[2] - a[2] * b[1]
+    out[1] = a[2] * b[0] - a[0] * b[2]
+    out[2] = a[0] * b[1] - a[1] * b[0]
+    return out
 
 
 def body_frame(left_shoulder: NDArray[np.floating], right_shoulder: NDArray[np.floating],
@@ -95,8 +104,10 @@ def body_frame(left_shoulder: NDArray[np.floating], right_shoulder: NDArray[np.f
         up = _unit(np.array([0.0, -1.0, 0.0]) - (-left[1]) * left)
         if up is None:
             up = np.array([0.0, 0.0, -1.0])
-    forward = np.cross(left, up)
-    return np.stack([left, up, forward], axis=1)
+    forward = _cross(left, up)
+    frame = np.empty((3, 3))
+    frame[:, 0], frame[:, 1], frame[:, 2] = left, up, forward
+    return frame
 
 
 @dataclass(frozen=True)
@@ -629,9 +640,11 @@ def infer_middle_joints(depth_m: NDArray[np.floating] | None, points: NDArray[np
     def get(name: str) -> NDArray[np.float64]:
         return pts[index[name]] if name in index else np.full(3, np.nan)
 
+    solved = {limb: joints for limb, joints in LIMBS.items() if limbs is None or limb in limbs}
+    if not solved:  # every middle joint measured (a 14-part detector's frame)
+        return _NOTHING_SOLVED
     frame = body_frame(get('left_shoulder'), get('right_shoulder'), get('left_hip'),
                        get('right_hip'))
-    solved = {limb: joints for limb, joints in LIMBS.items() if limbs is None or limb in limbs}
     sols = []
     for limb, (a, _, b) in solved.items():
         upper, lower = (lengths.lengths(limb) if isinstance(lengths, LimbLengths)
@@ -646,3 +659,11 @@ def infer_middle_joints(depth_m: NDArray[np.floating] | None, points: NDArray[np
         pixels=np.array([s.pixel for s in sols], np.float64).reshape(-1, 2),
         confidence=np.array([s.confidence for s in sols], np.float32),
         flags=np.array([s.flag for s in sols], np.uint8))
+
+
+# `infer_middle_joints` with no limb to solve (its arrays read-only: shared)
+_NOTHING_SOLVED = IkResult(names=(), positions=np.zeros((0, 3)), pixels=np.zeros((0, 2)),
+                           confidence=np.zeros(0, np.float32), flags=np.zeros(0, np.uint8))
+for _a in (_NOTHING_SOLVED.positions, _NOTHING_SOLVED.pixels, _NOTHING_SOLVED.confidence,
+           _NOTHING_SOLVED.flags):
+    _a.setflags(write=False)

@@ -19,8 +19,8 @@ DEPTH_RADIUS_PX = 3
 
 def valid_xyz(xyz: NDArray[np.float64]) -> NDArray[np.bool_]:
     """Finite and in front of the camera."""
-    with np.errstate(invalid='ignore'):
-        return np.isfinite(xyz).all(axis=1) & (xyz[:, 2] > 0)
+    # ufuncs only (a comparison with NaN raises no floating-point error): the per-frame path
+    return np.logical_and.reduce(np.isfinite(xyz), axis=1) & (xyz[:, 2] > 0)
 
 
 def lift_parts(model: PartModel, depth_m: NDArray[np.floating], uv: NDArray[np.floating],

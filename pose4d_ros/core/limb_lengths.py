@@ -6,14 +6,14 @@ otherwise the longest observed reach split in the default ratio; otherwise the d
 
 from __future__ import annotations
 
-from collections import deque
+import functools
 from collections.abc import Mapping, Sequence
 
 import numpy as np
+from numba import njit
 from numpy.typing import NDArray
 
 from pose4d_ros.core.skeleton import LIMBS
-from pose4d_ros.core.stats import median
 
 # Default bone lengths (upper, lower), metres: medians of the Kinect v1 skeletons of UTKinect
 # subjects s01-s06 (shoulder-elbow, elbow-wrist, hip-knee, knee-ankle), rounded to 5 mm.
@@ -47,24 +47,55 @@ class LimbLengths:
                              f'reach_percentile ({reach_percentile}) in (0, 100]')
         self.min_samples = min_samples
         self.reach_percentile = reach_percentile
-        # upper and lower bone lengths, each a deque of floats (read back with np.fromiter)
-        self._upper: dict[str, deque[float]] = {k: deque(maxlen=window) for k in LIMBS}
-        self._lower: dict[str, deque[float]] = {k: deque(maxlen=window) for k in LIMBS}
-        self._reach: dict[str, deque[float]] = {k: deque(maxlen=window) for k in LIMBS}
+        self.window = window
+        # the last `window` upper, lower and reach lengths of each limb (rows `_UPPER + k`,
+        # `_LOWER + k`, `_REACH + k` for the k-th of LIMBS), each row a ring: `_count` values
+        # held, the next written at `_head`; the rows grow (doubling) up to `window`
+        self._values = np.empty((3 * len(LIMBS), min(window, 64)))
+        self._count = np.zeros(3 * len(LIMBS), np.int64)
+        self._head = np.zeros(3 * len(LIMBS), np.int64)
+
+    def _append(self, rows: NDArray[np.intp], values: NDArray[np.float64]) -> None:
+        """One more value in each of `rows` (distinct)."""
+        if not len(rows):
+            return
+        cap = self._values.shape[1]
+        if cap < self.window and np.maximum.reduce(self._count[rows]) >= cap:
+            grown = np.empty((len(self._values), min(2 * cap, self.window)))
+            grown[:, :cap] = self._values  # below the window no ring has wrapped yet
+            self._values = grown
+        self._values[rows, self._head[rows]] = values
+        self._head[rows] = (self._head[rows] + 1) % self.window
+        self._count[rows] = np.minimum(self._count[rows] + 1, self.window)
+
+    def _held(self, row: int) -> NDArray[np.float64]:
+        """The values of a row, oldest first."""
+        n, head = int(self._count[row]), int(self._head[row])
+        if n < self.window:
+            return self._values[row, :n].copy()
+        return np.roll(self._values[row, :n], -head)
 
     def observe(self, limb: str, root: NDArray[np.floating], middle: NDArray[np.floating] | None,
                 end: NDArray[np.floating]) -> None:
         """Record one frame of a limb (metres); NaN or None joints are skipped."""
         if limb not in LIMBS:
             raise ValueError(f'unknown limb {limb!r}; expected one of {tuple(LIMBS)}')
-        r0, e0 = np.asarray(root, float), np.asarray(end, float)
-        if middle is not None and np.isfinite(middle).all() and np.isfinite(r0).all() \
-                and np.isfinite(e0).all():
-            m0 = np.asarray(middle, float)
-            self._upper[limb].append(float(np.linalg.norm(m0 - r0)))
-            self._lower[limb].append(float(np.linalg.norm(e0 - m0)))
-        if np.isfinite(r0).all() and np.isfinite(e0).all():
-            self._reach[limb].append(float(np.linalg.norm(e0 - r0)))
+        nan3 = np.full(3, np.nan)
+        self._observe(np.array([_LIMB_ROW[limb]]), np.asarray(root, float).reshape(1, 3),
+                      (nan3 if middle is None else np.asarray(middle, float)).reshape(1, 3),
+                      np.asarray(end, float).reshape(1, 3))
+
+    def _observe(self, limbs: NDArray[np.intp], r0: NDArray[np.float64],
+                 m0: NDArray[np.float64], e0: NDArray[np.float64]) -> None:
+        """One frame of the limbs `limbs` (indices into LIMBS): roots, middles, ends (L, 3)."""
+        ends = _all(np.isfinite(r0), axis=1) & _all(np.isfinite(e0), axis=1)
+        both = ends & _all(np.isfinite(m0), axis=1)
+        # |v| as np.linalg.norm gives it (sqrt of the BLAS dot, which np.vecdot matches)
+        up = np.sqrt(np.vecdot(m0 - r0, m0 - r0))
+        lo = np.sqrt(np.vecdot(e0 - m0, e0 - m0))
+        reach = np.sqrt(np.vecdot(e0 - r0, e0 - r0))
+        rows = np.concatenate([_UPPER + limbs[both], _LOWER + limbs[both], _REACH + limbs[ends]])
+        self._append(rows, np.concatenate([up[both], lo[both], reach[ends]]))
 
     def observe_many(self, limb: str, roots: NDArray[np.floating],
                      middles: NDArray[np.floating] | None, ends: NDArray[np.floating]) -> None:
@@ -74,39 +105,94 @@ class LimbLengths:
         r0 = np.asarray(roots, float).reshape(-1, 3)
         e0 = np.asarray(ends, float).reshape(-1, 3)
         ok = np.isfinite(r0).all(axis=1) & np.isfinite(e0).all(axis=1)
+        k = _LIMB_ROW[limb]
         if middles is not None:
             m0 = np.asarray(middles, float).reshape(-1, 3)
             both = ok & np.isfinite(m0).all(axis=1)
-            up = np.linalg.norm(m0[both] - r0[both], axis=1)
-            lo = np.linalg.norm(e0[both] - m0[both], axis=1)
-            self._upper[limb].extend(up.tolist())
-            self._lower[limb].extend(lo.tolist())
-        self._reach[limb].extend(np.linalg.norm(e0[ok] - r0[ok], axis=1).tolist())
+            self._extend(_UPPER + k, np.linalg.norm(m0[both] - r0[both], axis=1))
+            self._extend(_LOWER + k, np.linalg.norm(e0[both] - m0[both], axis=1))
+        self._extend(_REACH + k, np.linalg.norm(e0[ok] - r0[ok], axis=1))
+
+    def _extend(self, row: int, values: NDArray[np.float64]) -> None:
+        """Many values into a row (the last `window` of what it held and them, kept)."""
+        kept = np.concatenate([self._held(row), values])[-self.window:]
+        if len(kept) > self._values.shape[1]:
+            grown = np.empty((len(self._values), len(kept)))
+            grown[:, :self._values.shape[1]] = self._values
+            self._values = grown
+        self._values[row, :len(kept)] = kept
+        self._count[row] = len(kept)
+        self._head[row] = len(kept) % self.window
 
     def observe_skeleton(self, names: Sequence[str], points: NDArray[np.floating]) -> None:
         """Record every limb of one frame: `points` (J, 3) metres named by `names`."""
         pts = np.asarray(points, dtype=np.float64)
-        index = {n: i for i, n in enumerate(names)}
-        for limb, (a, m, b) in LIMBS.items():
-            if a in index and b in index:
-                middle = pts[index[m]] if m in index else None
-                self.observe(limb, pts[index[a]], middle, pts[index[b]])
+        limbs, roots, middles, ends = _skeleton_rows(tuple(names))
+        if len(limbs):
+            padded = np.concatenate([pts, np.full((1, 3), np.nan)])  # row -1: no middle
+            self._observe(limbs, padded[roots], padded[middles], padded[ends])
 
     def lengths(self, limb: str) -> tuple[float, float]:
         """(upper, lower) metres for `limb`."""
         if limb not in LIMBS:
             raise ValueError(f'unknown limb {limb!r}; expected one of {tuple(LIMBS)}')
-        upper, lower = self._upper[limb], self._lower[limb]
-        if len(upper) >= self.min_samples:
-            # np.fromiter: converting the deque is most of the work of a median of 300
-            return (median(np.fromiter(upper, float, len(upper))),
-                    median(np.fromiter(lower, float, len(lower))))
+        k = _LIMB_ROW[limb]
+        if self._count[_UPPER + k] >= self.min_samples:
+            up, lo = _row_medians(self._values, self._count, np.array([_UPPER + k, _LOWER + k]))
+            return float(up), float(lo)
+        return self._fallback(limb)
+
+    def _fallback(self, limb: str) -> tuple[float, float]:
+        """The lengths of a limb whose bones are not observed often enough."""
         a, b = self.defaults[limb]
-        reach = self._reach[limb]
-        if len(reach) >= self.min_samples:
-            total = float(np.percentile(np.asarray(reach), self.reach_percentile))
+        row = _REACH + _LIMB_ROW[limb]
+        if self._count[row] >= self.min_samples:
+            reach = self._values[row, :self._count[row]]
+            total = float(np.percentile(reach, self.reach_percentile))
             return total * a / (a + b), total * b / (a + b)
         return a, b
 
     def as_dict(self) -> dict[str, tuple[float, float]]:
-        return {limb: self.lengths(limb) for limb in LIMBS}
+        """Every limb's (upper, lower), metres (the medians of all limbs in one pass)."""
+        medians = _row_medians(self._values, self._count, _MEDIAN_ROWS).tolist()
+        learned = (self._count[_UPPER:_UPPER + len(LIMBS)] >= self.min_samples).tolist()
+        n = len(LIMBS)
+        return {limb: ((medians[k], medians[n + k]) if learned[k] else self._fallback(limb))
+                for k, limb in enumerate(LIMBS)}
+
+
+# ndarray.all without its Python wrapper (the per-frame path)
+_all = np.logical_and.reduce
+# each limb's row in the rings of `LimbLengths`: upper bones, lower bones, reaches
+_LIMB_ROW = {limb: k for k, limb in enumerate(LIMBS)}
+_UPPER, _LOWER, _REACH = 0, len(LIMBS), 2 * len(LIMBS)
+_MEDIAN_ROWS = np.arange(2 * len(LIMBS))
+
+
+@functools.lru_cache(maxsize=16)
+def _skeleton_rows(names: tuple[str, ...]) -> tuple[NDArray[np.intp], ...]:
+    """The limbs `names` has the root and end of (indices into LIMBS), and the rows of their
+    roots, middles (-1: none) and ends in `names`."""
+    index = {n: i for i, n in enumerate(names)}
+    rows = [(k, index[a], index.get(m, -1), index[b])
+            for k, (a, m, b) in enumerate(LIMBS.values()) if a in index and b in index]
+    out = tuple(np.array([r[j] for r in rows], np.intp) for j in range(4))
+    for a in out:
+        a.setflags(write=False)
+    return out
+
+
+@njit(cache=True)
+def _row_medians(values: NDArray[np.float64], count: NDArray[np.int64],
+                 rows: NDArray[np.int64]) -> NDArray[np.float64]:
+    """The median of the first `count[r]` values of each row r of `rows` (NaN when none), as
+    `core.stats.median` gives it (the middle order statistic, or the mean of the two)."""
+    out = np.full(len(rows), np.nan)
+    for j in range(len(rows)):
+        n = count[rows[j]]
+        if n == 0:
+            continue
+        a = np.sort(values[rows[j], :n])
+        k = n // 2
+        out[j] = a[k] if n % 2 else (a[k - 1] + a[k]) / 2.0
+    return out

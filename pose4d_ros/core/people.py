@@ -29,9 +29,10 @@ the arms), matched to candidates by the 3-D centre of their regions.
 
 from __future__ import annotations
 
+import functools
 import math
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field
 
 import numpy as np
 from numpy.typing import NDArray
@@ -92,11 +93,22 @@ class TrackingConfig:
 def torso(joints: JointSet) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
     """A person's torso point: the mean 3-D position of the located `TORSO` joints (NaN if
     none has one) and the mean of their covariances ((3,), (3, 3))."""
-    idx = [k for name in TORSO if (k := joints.get(name)) is not None
-           and joints.source[k] != cj.MISSING and np.isfinite(joints.xyz[k]).all()]
-    if not idx:
+    rows = _torso_rows(joints.names)
+    idx = rows[(joints.source[rows] != cj.MISSING)
+               & np.logical_and.reduce(np.isfinite(joints.xyz[rows]), axis=1)]
+    if not len(idx):
         return np.full(3, np.nan), np.zeros((3, 3))
-    return joints.xyz[idx].mean(axis=0), joints.covariance[idx].mean(axis=0)
+    # np.mean's values (the sums in `TORSO` order over the count), without its Python wrapper
+    return (np.add.reduce(joints.xyz[idx], axis=0) / len(idx),
+            np.add.reduce(joints.covariance[idx], axis=0) / len(idx))
+
+
+@functools.lru_cache(maxsize=16)
+def _torso_rows(names: tuple[str, ...]) -> NDArray[np.intp]:
+    """The rows of the `TORSO` joints in `names`, in `TORSO` order (read-only)."""
+    rows = np.array([names.index(n) for n in TORSO if n in names], np.intp)
+    rows.setflags(write=False)
+    return rows
 
 
 def torso_px(joints: JointSet) -> tuple[NDArray[np.float64], float]:
@@ -130,6 +142,16 @@ def _mahalanobis2(d: NDArray[np.float64], s: NDArray[np.float64]) -> float:
         return float(d @ np.linalg.solve(s, d))
     except np.linalg.LinAlgError:
         return math.inf
+
+
+def _mahalanobis2_all(d: NDArray[np.float64], s: NDArray[np.float64]) -> NDArray[np.float64]:
+    """`_mahalanobis2` of each pair of `d` (K, 3) and `s` (K, 3, 3), in one solve (the same
+    LAPACK solve per pair, and np.vecdot is the dot's sum); one by one when a matrix is
+    singular (inf for it)."""
+    try:
+        return np.vecdot(d, np.linalg.solve(s, d[:, :, None])[:, :, 0])
+    except np.linalg.LinAlgError:
+        return np.array([_mahalanobis2(a, b) for a, b in zip(d, s, strict=True)])
 
 
 @dataclass
@@ -278,8 +300,8 @@ class PeopleTracker:
         for j, det in enumerate(detections):
             if j in matched and not self.tracks[matched[j]].id and not born(det):
                 del matched[j]  # a tentative track's detection must be a person's
-            if j not in matched and (np.isfinite(points[j][0]).all() or
-                                     np.isfinite(torso_px(det)[0]).all()) and born(det):
+            if j not in matched and (_finite(points[j][0]) or _finite(torso_px(det)[0])) \
+                    and born(det):
                 stage = self.make()
                 self.tracks.append(_Track(stage, names=stage.check(det, intrinsics).names))
                 matched[j] = len(self.tracks) - 1
@@ -293,7 +315,7 @@ class PeopleTracker:
                 if not track.id and (track.hits >= cfg.confirm_frames or not any_confirmed):
                     track.id, self.next_id = self.next_id, self.next_id + 1
                     self.born.append(track.id)
-            track.last = replace(out, track_id=track.id)
+            track.last = _with_track_id(out, track.id)
         keep = []
         for track in self.tracks:
             unseen = stamp_s - track.seen_s
@@ -314,20 +336,31 @@ class PeopleTracker:
         growing as in 3-D (at 2.5 m)."""
         cfg = self.config
         cost = np.full((len(self.tracks), len(points)), np.nan)
+        seen = [j for j, (p, _) in enumerate(points) if _finite(p)]
+        pairs, d, s = [], [], []
+        for i, t in enumerate(self.tracks):
+            if not _finite(t.point):
+                continue
+            dt = max(stamp_s - t.seen_s, 0.0)
+            predicted = t.point + t.velocity * min(dt, cfg.max_unseen_s)
+            spread = (cfg.torso_std_m ** 2 + (cfg.max_speed_mps * dt) ** 2) * _EYE3
+            for j in seen:
+                p, c = points[j]
+                pairs.append((i, j))
+                d.append(p - predicted)
+                s.append(t.cov + c + spread)
+        if pairs:
+            rows, cols = zip(*pairs, strict=True)
+            cost[rows, cols] = _mahalanobis2_all(np.array(d), np.array(s))
+        # where a track or a detection has no 3-D torso: in the image
         pixels = [torso_px(d) for d in detections]
         for i, t in enumerate(self.tracks):
-            dt = max(stamp_s - t.seen_s, 0.0)
-            drift = min(dt, cfg.max_unseen_s)
-            spread = (cfg.torso_std_m ** 2 + (cfg.max_speed_mps * dt) ** 2) * np.eye(3)
-            for j, (p, c) in enumerate(points):
-                if np.isfinite(p).all() and np.isfinite(t.point).all():
-                    cost[i, j] = _mahalanobis2(p - t.point - t.velocity * drift,
-                                               t.cov + c + spread)
-                    continue
-                uv, ref = pixels[j][0], t.size_px
-                if np.isfinite(uv).all() and np.isfinite(t.pixel).all() and ref > 0:
-                    sigma = 0.25 * ref * (1.0 + cfg.max_speed_mps * dt / 0.5)
-                    cost[i, j] = float(np.sum((uv - t.pixel) ** 2)) / sigma ** 2
+            if t.size_px > 0 and _finite(t.pixel):
+                dt = max(stamp_s - t.seen_s, 0.0)
+                sigma = 0.25 * t.size_px * (1.0 + cfg.max_speed_mps * dt / 0.5)
+                for j, (uv, _) in enumerate(pixels):
+                    if np.isnan(cost[i, j]) and _finite(uv):
+                        cost[i, j] = float(np.sum((uv - t.pixel) ** 2)) / sigma ** 2
         return cost
 
     def _seen(self, track: _Track, out: JointSet, stamp_s: float) -> None:
@@ -336,9 +369,9 @@ class PeopleTracker:
             track.pixel = pixel
             track.size_px = size if size > 0 else track.size_px
         point, cov = torso(out)
-        if np.isfinite(point).all():
+        if _finite(point):
             dt = stamp_s - track.seen_s
-            if np.isfinite(track.point).all() and 0 < dt <= self.config.max_unseen_s:
+            if _finite(track.point) and 0 < dt <= self.config.max_unseen_s:
                 track.velocity = 0.7 * track.velocity + 0.3 * (point - track.point) / dt
             track.point, track.cov = point, cov
         track.hits += 1
@@ -349,6 +382,22 @@ class PeopleTracker:
         seen = [t for t in confirmed if t.seen_s == stamp_s]
         primary = (seen or confirmed)[:1]
         return primary + [t for t in confirmed if t not in primary]
+
+
+def _finite(v: NDArray[np.float64]) -> bool:
+    """Every value finite (`np.isfinite(v).all()` without its Python wrapper)."""
+    return bool(np.logical_and.reduce(np.isfinite(v), axis=None))
+
+
+def _with_track_id(joints: JointSet, track_id: int) -> JointSet:
+    """`joints` with another `track_id`, sharing its (read-only) arrays."""
+    return JointSet.of_arrays(joints.names, joints.uv, joints.xyz, joints.confidence,
+                              joints.source, joints.covariance, score=joints.score,
+                              track_id=track_id)
+
+
+_EYE3 = np.eye(3)
+_EYE3.setflags(write=False)
 
 
 class PeopleIk:

@@ -21,10 +21,12 @@ offline evaluation and a live run of the graph give the same answers on the same
 
 from __future__ import annotations
 
+import functools
 import math
 import time
 from collections.abc import Mapping
 from dataclasses import dataclass, replace
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -72,21 +74,33 @@ def check_known(joints: JointSet, names: tuple[str, ...], intrinsics: Intrinsics
 
 
 def reorder(joints: JointSet, names: tuple[str, ...]) -> JointSet:
-    """`joints` in the order of `names`; names it lacks are MISSING."""
+    """`joints` in the order of `names`; names it lacks are MISSING (`joints` itself when it
+    is in that order already: a JointSet is immutable)."""
+    if joints.names == names:
+        return joints
     n = len(names)
+    rows, found = _reordering(joints.names, names)
     uv = np.full((n, 2), np.nan)
     xyz = np.full((n, 3), np.nan)
     conf = np.zeros(n, np.float32)
     src = np.full(n, cj.MISSING, np.uint8)
     cov = np.zeros((n, 3, 3))
-    for i, name in enumerate(names):
-        k = joints.get(name)
-        if k is not None:
-            uv[i], xyz[i], conf[i], src[i], cov[i] = (joints.uv[k], joints.xyz[k],
-                                                      joints.confidence[k], joints.source[k],
-                                                      joints.covariance[k])
-    return JointSet(names, uv, xyz, confidence=conf, source=src, covariance=cov,
-                    score=joints.score, track_id=joints.track_id)
+    uv[rows], xyz[rows], conf[rows], src[rows], cov[rows] = (
+        joints.uv[found], joints.xyz[found], joints.confidence[found], joints.source[found],
+        joints.covariance[found])
+    return JointSet.of_arrays(names, uv, xyz, conf, src, cov, score=joints.score,
+                              track_id=joints.track_id)
+
+
+@functools.lru_cache(maxsize=64)
+def _reordering(given: tuple[str, ...], names: tuple[str, ...]
+                ) -> tuple[NDArray[np.intp], NDArray[np.intp]]:
+    """The rows of `names` that `given` has, and where `given` has them (read-only)."""
+    pairs = [(i, given.index(name)) for i, name in enumerate(names) if name in given]
+    rows, found = (np.array([p[k] for p in pairs], np.intp) for k in (0, 1))
+    rows.setflags(write=False)
+    found.setflags(write=False)
+    return rows, found
 
 
 class ForegroundStage:
@@ -350,7 +364,7 @@ class TrackerStage:
 
     def check(self, parts: JointSet, intrinsics: Intrinsics | None) -> PartTree:
         """The tree `step` would track `parts` on; ValueError for parts it would refuse."""
-        tree = self.fixed_tree or tree_for(parts.names)
+        tree = self.fixed_tree or _tree_for(parts.names)
         check_known(parts, tree.names, intrinsics)
         return tree
 
@@ -370,7 +384,7 @@ class TrackerStage:
         parts = reorder(parts, self.tree.names)
         state = self.filter.state
         cfg = self.filter.config
-        new_track = not state.active.any() or (
+        new_track = not _any(state.active) or (
             state.stamp is not None and not 0.0 <= stamp_s - state.stamp <= cfg.max_dt_s)
         if new_track:
             self.depth[:] = np.nan
@@ -378,40 +392,68 @@ class TrackerStage:
         uv = np.where(detected[:, None], parts.uv, np.nan)
         out = self.filter.step(uv, np.where(detected, parts.confidence, 0.0), stamp_s,
                                person_scale_px(parts.xyz[detected], intrinsics))
-        if new_track and self.filter.state.active.any():
+        if new_track and _any(self.filter.state.active):
             self.track_id += 1
+        positions, source, confidence = out.positions, out.source, out.confidence
+        covariances = out.covariances
         # a part's depth is its accepted detection's: a rejected one lies elsewhere
-        measured = detected & (out.source == cj.DETECTED) & valid_xyz(parts.xyz)
+        measured = detected & (source == cj.DETECTED) & valid_xyz(parts.xyz)
         self.depth[measured] = parts.xyz[measured, 2]
         # an accepted detection lies on the image, and so does its filtered estimate (the
-        # prediction may overshoot an edge the part moves towards)
+        # prediction may overshoot an edge the part moves towards); np.clip's values
         if intrinsics is not None:
-            held = np.clip(out.positions, 0.0, [intrinsics.width - 1, intrinsics.height - 1])
-            on = (out.source == cj.DETECTED)[:, None]
-            out = replace(out, positions=np.where(on, held, out.positions))
+            held = np.minimum(np.maximum(positions, 0.0), _image_max(intrinsics))
+            positions = np.where((source == cj.DETECTED)[:, None], held, positions)
         # a part predicted off the image (coasting away) is lost: no stage takes such pixels
-        lost = (out.source != cj.MISSING) & ~cj.near_image(out.positions, intrinsics)
-        if lost.any():
-            out = replace(out, positions=np.where(lost[:, None], np.nan, out.positions),
-                          covariances=np.where(lost[:, None, None], np.nan, out.covariances),
-                          confidence=np.where(lost, 0, out.confidence).astype(np.float32),
-                          source=np.where(lost, cj.MISSING, out.source).astype(np.uint8))
-        missing = out.source == cj.MISSING
+        lost = (source != cj.MISSING) & ~cj.near_image(positions, intrinsics)
+        if _any(lost):
+            positions = np.where(lost[:, None], np.nan, positions)
+            covariances = np.where(lost[:, None, None], np.nan, covariances)
+            confidence = np.where(lost, 0, confidence).astype(np.float32)
+            source = np.where(lost, cj.MISSING, source).astype(np.uint8)
+        missing = source == cj.MISSING
         self.depth[missing] = np.nan
-        xyz = np.full((len(self.tree), 3), np.nan)
-        cov = np.zeros((len(self.tree), 3, 3))
+        n = len(self.tree)
         if intrinsics is not None:
-            xyz = backproject(out.positions, self.depth, intrinsics)
+            xyz = backproject(positions, self.depth, intrinsics)
             # pixel covariance -> metric x/y at the part's depth; z from the depth parameter
-            scale = np.stack([self.depth / intrinsics.fx, self.depth / intrinsics.fy], axis=1)
-            cov[:, :2, :2] = out.covariances * scale[:, :, None] * scale[:, None, :]
+            scale = np.empty((n, 2))
+            scale[:, 0] = self.depth / intrinsics.fx
+            scale[:, 1] = self.depth / intrinsics.fy
+            cov = np.zeros((n, 3, 3))
+            cov[:, :2, :2] = covariances * scale[:, :, None] * scale[:, None, :]
             cov[:, 2, 2] = self.depth_std_m ** 2
             cov[~valid_xyz(xyz)] = 0.0
-        live = ~missing
-        score = float(np.mean(out.confidence[live])) if live.any() else float('nan')
-        return JointSet(self.tree.names, out.positions, xyz, confidence=out.confidence,
-                        source=out.source, covariance=np.nan_to_num(cov), score=score,
-                        track_id=self.track_id if live.any() else 0)
+            if not _all(np.isfinite(cov), axis=None):
+                cov = np.nan_to_num(cov)
+        else:
+            xyz, cov = np.full((n, 3), np.nan), np.zeros((n, 3, 3))
+        live = confidence[~missing]
+        # np.mean's value (float32 sum over the count), without its Python wrapper
+        score = float(np.add.reduce(live) / len(live)) if len(live) else float('nan')
+        return JointSet.of_arrays(self.tree.names, positions, xyz, confidence, source, cov,
+                                  score=score, track_id=self.track_id if len(live) else 0)
+
+
+# each limb and the row of its middle joint in SKELETON_14
+_MIDDLE_ROWS = tuple((limb, SKELETON_14.index(middle)) for limb, (_, middle, _) in LIMBS.items())
+# `ndarray.any` and `ndarray.all` without their Python wrappers (the per-frame path)
+_any = np.logical_or.reduce
+_all = np.logical_and.reduce
+
+
+@functools.lru_cache(maxsize=16)
+def _tree_for(names: tuple[str, ...]) -> PartTree:
+    """`skeleton.tree_for`, remembered per set of names (the same parts every frame)."""
+    return tree_for(names)
+
+
+@functools.lru_cache(maxsize=16)
+def _image_max(intrinsics: Intrinsics) -> NDArray[np.float64]:
+    """The largest pixel (u, v) of the image (read-only)."""
+    hi = np.array([intrinsics.width - 1, intrinsics.height - 1], np.float64)
+    hi.setflags(write=False)
+    return hi
 
 
 class IkStage:
@@ -529,8 +571,7 @@ class IkStage:
             self.learner.observe_skeleton(SKELETON_14, points)
         # elbows and knees measured by a 14-part detector are kept: only the others are solved
         measured = (src != cj.MISSING) & valid
-        unmeasured = [limb for limb, (_, middle, _) in LIMBS.items()
-                      if not measured[SKELETON_14.index(middle)]]
+        unmeasured = [limb for limb, k in _MIDDLE_ROWS if not measured[k]]
         extra = {'limits': self.limits} if self.method == 'dh' else {}
         solver = infer_middle_joints_dh if self.method == 'dh' else infer_middle_joints
         result = solver(
@@ -551,10 +592,11 @@ class IkStage:
             # kinematics' confidence is exp(-sigma / confidence_scale_m): invert it for sigma
             sigma = -self.config.confidence_scale_m * math.log(max(float(conf[i]), 1e-3))
             cov[i] = np.eye(3) * sigma ** 2
-        live = src != cj.MISSING
-        score = float(np.mean(conf[live])) if live.any() else math.nan
-        return JointSet(SKELETON_14, uv, xyz, confidence=conf, source=src, covariance=cov,
-                        score=score, track_id=tracked.track_id)
+        live = conf[src != cj.MISSING]
+        # np.mean's value (float32 sum over the count), without its Python wrapper
+        score = float(np.add.reduce(live) / len(live)) if len(live) else math.nan
+        return JointSet.of_arrays(SKELETON_14, uv, xyz, conf, src, cov, score=score,
+                                  track_id=tracked.track_id)
 
 
 # The stages of `FramePipeline.step`, in order (the keys of `FrameResult.cpu_s` and `wall_s`)
@@ -593,6 +635,11 @@ class FramePipeline:
         person tracked and completed on their own (the stages above are the first person's
         and the template of the others'); `FrameResult.people` holds every confirmed track's
         skeleton and `skeleton` the primary person's. None: one person, as the paper.
+
+    Attributes
+    ----------
+    profilers : None, or per name of `STAGES` an object with ``enable()`` and ``disable()``
+        (a `cProfile.Profile`), enabled only while that stage runs.
     """
 
     def __init__(self, detector: DetectorStage, *, foreground: ForegroundStage | None = None,
@@ -607,6 +654,9 @@ class FramePipeline:
             self.detector, self.tracker, self.ik, people)
         # several people: stamps that jump start every stage anew, as the nodes do
         self._jumps = StampJumps(TIME_JUMP_S)
+        # per name of `STAGES`, a profiler (enable(), disable(): `cProfile.Profile`) that runs
+        # only while that stage does (`pose4d bench` counts the Python calls of each stage)
+        self.profilers: Mapping[str, Any] | None = None
 
     def reset(self) -> None:
         """Forget the previous frames (the next one starts a new track)."""
@@ -626,20 +676,20 @@ class FramePipeline:
         """
         if self.multi is not None and depth_m is not None:
             return self._step_people(color, depth_m, intrinsics, stamp_s)
-        clock = [(time.process_time(), time.perf_counter())]
+        clock = self._lap([])
         fg, color_m, depth_mm = None, color, None
         if depth_m is not None:
             fg, color_m, depth_mm = self.foreground.step(color, depth_m, intrinsics)
-        clock.append((time.process_time(), time.perf_counter()))
+        self._lap(clock)
         # the detector sees what the detector node receives: the masked frame and the mask
         parts = self.detector.step(color_m, depth_mm, intrinsics,
                                    mask=fg.mask if fg is not None else None, stamp_s=stamp_s,
                                    blanked=fg is not None)
-        clock.append((time.process_time(), time.perf_counter()))
+        self._lap(clock)
         tracked = self.tracker.step(parts, stamp_s, intrinsics)
-        clock.append((time.process_time(), time.perf_counter()))
+        self._lap(clock)
         skeleton = self.ik.step(tracked, depth_mm, intrinsics)
-        clock.append((time.process_time(), time.perf_counter()))
+        self._lap(clock)
         cpu_s, wall_s = ({stage: clock[k + 1][c] - clock[k][c] for k, stage in enumerate(STAGES)}
                          for c in (0, 1))
         return FrameResult(fg, color_m, depth_mm, parts, tracked, skeleton, cpu_s, wall_s)
@@ -649,17 +699,17 @@ class FramePipeline:
         multi = self.multi
         if self._jumps.jump_s(round(stamp_s * 1e9)) is not None:
             self.reset()
-        clock = [(time.process_time(), time.perf_counter())]
+        clock = self._lap([])
         found, n, color_m, depth_mm = self.foreground.step_people(
             color, depth_m, intrinsics, multi.config.max_people)
-        clock.append((time.process_time(), time.perf_counter()))
+        self._lap(clock)
         parts = multi.detector.step(color, np.asarray(depth_m, np.float32), intrinsics, found,
                                     stamp_s=stamp_s)
-        clock.append((time.process_time(), time.perf_counter()))
+        self._lap(clock)
         tracked = multi.tracker.step(parts, stamp_s, intrinsics)
-        clock.append((time.process_time(), time.perf_counter()))
+        self._lap(clock)
         skeletons = multi.ik.step(tracked, depth_mm, intrinsics)
-        clock.append((time.process_time(), time.perf_counter()))
+        self._lap(clock)
         cpu_s, wall_s = ({stage: clock[k + 1][c] - clock[k][c] for k, stage in enumerate(STAGES)}
                          for c in (0, 1))
         fg = found[0] if found else None
@@ -670,6 +720,17 @@ class FramePipeline:
             skeletons[0] if skeletons else JointSet.missing(SKELETON_14), cpu_s, wall_s,
             people=tuple(skeletons), foregrounds=tuple(found), candidates=n,
             born=tuple(multi.tracker.born), ended=tuple(multi.tracker.ended))
+
+    def _lap(self, clock: list[tuple[float, float]]) -> list[tuple[float, float]]:
+        """`clock` with the times (CPU, wall) at a boundary between stages appended; with
+        `profilers`, the profiler of the stage that ends is stopped first and the one of the
+        stage that starts started after."""
+        if self.profilers is not None and clock:
+            self.profilers[STAGES[len(clock) - 1]].disable()
+        clock.append((time.process_time(), time.perf_counter()))
+        if self.profilers is not None and len(clock) <= len(STAGES):
+            self.profilers[STAGES[len(clock) - 1]].enable()
+        return clock
 
     def warm_up(self, intrinsics: Intrinsics) -> None:
         """Compile the kernels on a synthetic frame, twice (the second frame guided by the

@@ -383,6 +383,10 @@ class PeopleInputs:
     of JointSets. A single-person message is taken as a list of one, unless a several-person
     message came in the last `PEOPLE_FRESH_S` seconds: then the upstream stage publishes both,
     and the single-person one (its primary person) is left out.
+
+    Frames are processed in a `FrameQueue`'s worker, never in the executor's thread: a stage
+    slower than its input works on the newest frame and drops the older ones (counted on the
+    monitor, shown on /diagnostics) instead of letting them wait in its DDS reader queues.
     """
 
     PEOPLE_FRESH_S = 1.0
@@ -400,6 +404,7 @@ class PeopleInputs:
         self._monitor = monitor
         self._paired = (PairedInputs(node, [(None, people_topic, None), *extra],
                                      self._frame, monitor, slop_ns=slop_ns) if extra else None)
+        self._queue = None if extra else FrameQueue(node, self._frame, monitor)
 
         def on_people(msg: SkeletonArray) -> None:
             self._last_people = time.monotonic()
@@ -416,7 +421,7 @@ class PeopleInputs:
         if self._paired is not None:
             self._paired.push(0, pivot)
         else:
-            self._frame((pivot,))
+            self._queue.submit((pivot,))
 
     def _frame(self, items: tuple) -> None:
         header = items[0].header

@@ -1,8 +1,9 @@
 """`foreground`: the person's mask from the depth image (floor removal + MSER), applied.
 
 Colour, depth and camera_info are paired by stamp (exact, or nearest within
-`foreground.slop_s`), never "the latest depth", and processed in order; at most 3 frames wait,
-so a stage slower than the camera drops the oldest (drops are counted).
+`foreground.slop_s`), never "the latest depth", and processed in order; one frame at most
+waits to be processed, so a stage slower than the camera works on the newest frame and drops
+the older ones (counted on /diagnostics).
 
 Subscriptions
     camera/color/image_raw (sensor_msgs/Image, rgb8/bgr8/mono8)

@@ -6,7 +6,9 @@ the depth image of the person, with a joint-limit prior where depth cannot tell;
 picks the law-of-cosines circle or the paper's Denavit-Hartenberg chains. Tracked parts
 and depth are paired by stamp (exact, or nearest within `ik.depth_slop_s`).
 
-Several people: one IK per track id, each with its own learned bone lengths.
+Several people: one IK per track id, each with its own learned bone lengths. Frames are
+completed in a worker thread: an IK slower than its input works on the newest frame and drops
+the older ones (counted as `dropped` on /diagnostics), never queueing them.
 
 Subscriptions
     pose4d/parts/tracked/people (pose4d_msgs/SkeletonArray, every tracked person), or from a

@@ -2,7 +2,9 @@
 
 Several people: one SLQE per track, the detections assigned to tracks each frame, tracks
 confirmed after `tracker.confirm_frames` frames and kept `tracker.max_unseen_s` unseen, ids
-never reused (`core.people.PeopleTracker`).
+never reused (`core.people.PeopleTracker`). Frames are tracked in a worker thread: a tracker
+slower than its input works on the newest frame and drops the older ones (counted as `dropped`
+on /diagnostics; the filters predict through them from the stamps), never queueing them.
 
 Subscriptions
     pose4d/parts/people (pose4d_msgs/SkeletonArray, every person's detected parts), or, from a

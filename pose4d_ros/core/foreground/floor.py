@@ -80,8 +80,8 @@ def fit_floor(depth_m: NDArray[np.floating], intrinsics: Intrinsics, *,
 
     idx = _ransac_draws(config.seed, n_pts, config.floor_iterations)
     p0, p1, p2 = pts[idx[:, 0]], pts[idx[:, 1]], pts[idx[:, 2]]
-    normal = np.cross(p1 - p0, p2 - p0)
-    norm = np.linalg.norm(normal, axis=1)
+    normal = _cross(p1 - p0, p2 - p0)
+    norm = np.sqrt(np.add.reduce(normal * normal, axis=1))  # np.linalg.norm's, unwrapped
     good = norm > 1e-9
     normal = normal[good] / norm[good, None]
     p0 = p0[good]
@@ -99,14 +99,14 @@ def fit_floor(depth_m: NDArray[np.floating], intrinsics: Intrinsics, *,
         return None
     normal, d = normal[plausible], d[plausible]
     dist = np.abs(pts @ normal.T + d[None, :])
-    counts = np.count_nonzero(dist < tol[:, None], axis=0)
+    counts = np.add.reduce(dist < tol[:, None], axis=0, dtype=np.intp)  # count_nonzero's
     best = int(np.argmax(counts))
     if counts[best] < config.floor_min_inliers:
         return None
-    plane = np.append(normal[best], d[best])
+    plane = np.array([*normal[best], d[best]])
     for _ in range(2):  # least-squares refinement on the inliers
         inl = np.abs(pts @ plane[:3] + plane[3]) < tol
-        if np.count_nonzero(inl) < 3:
+        if np.add.reduce(inl, dtype=np.intp) < 3:
             break
         # weighted total least squares, weights 1 / sigma^2 with sigma ~ z^2
         q = pts[inl]
@@ -118,8 +118,17 @@ def fit_floor(depth_m: NDArray[np.floating], intrinsics: Intrinsics, *,
         n = vecs[:, 0] * (-1.0 if vecs[1, 0] > 0 else 1.0)
         if -n[1] < cos_tilt:
             break
-        plane = np.append(n, -float(n @ c))
+        plane = np.array([*n, -float(n @ c)])
     return plane
+
+
+def _cross(a: NDArray[np.float64], b: NDArray[np.float64]) -> NDArray[np.float64]:
+    """np.cross of (N, 3) rows: the same products and differences, without its wrapper."""
+    out = np.empty(a.shape)
+    out[:, 0] = a[:, 1] * b[:, 2] - a[:, 2] * b[:, 1]
+    out[:, 1] = a[:, 2] * b[:, 0] - a[:, 0] * b[:, 2]
+    out[:, 2] = a[:, 0] * b[:, 1] - a[:, 1] * b[:, 0]
+    return out
 
 
 def floor_height(depth_m: NDArray[np.floating], intrinsics: Intrinsics,

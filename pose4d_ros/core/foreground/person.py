@@ -10,12 +10,16 @@ import math
 from dataclasses import dataclass, field
 
 import numpy as np
+from numba import njit
 from numpy.typing import NDArray
 
 from pose4d_ros.core.camera import Intrinsics
 from pose4d_ros.core.foreground.config import ForegroundConfig, PersonConfig
 from pose4d_ros.core.foreground.regions import StableRegions, trace_region
 from pose4d_ros.core.stats import median
+
+# `ndarray.any` without its Python wrapper (the per-frame path)
+_any = np.logical_or.reduce
 
 
 @dataclass(frozen=True)
@@ -113,7 +117,7 @@ def depth_parts(g: NDArray[np.uint8], regions: StableRegions, order: NDArray[np.
         gl = g[bx[1]:bx[3], bx[0]:bx[2]]
         hl = None if above is None else above[bx[1]:bx[3], bx[0]:bx[2]]
         hist = np.bincount(gl[crop], minlength=256)
-        present = np.flatnonzero(hist)
+        present = hist.nonzero()[0]
         for lo, hi in _depth_parts(hist, gap_levels):
             ranges = [(lo, hi)]
             if _extent_levels(hist[lo:hi + 1]) > extent_levels:
@@ -135,15 +139,38 @@ def _distinct(order: NDArray[np.int64], x0: NDArray, y0: NDArray, x1: NDArray, y
               size: NDArray, n: int) -> NDArray[np.int64]:
     """The first `n` regions of `order` (best first) that are not nested copies of one picked
     before: the regions of one chain are often the same pixels at several levels."""
-    picked: list[int] = []
-    for i in order[:8 * n].tolist():
-        if any(_overlap((x0[i], y0[i], x1[i], y1[i]), (x0[j], y0[j], x1[j], y1[j])) > 0.9
-               and min(size[i], size[j]) > 0.9 * max(size[i], size[j]) for j in picked):
+    return _distinct_kernel(order.astype(np.int64), x0, y0, x1, y1, size, n)
+
+
+@njit(cache=True)
+def _distinct_kernel(order: NDArray[np.int64], x0: NDArray, y0: NDArray, x1: NDArray,
+                     y1: NDArray, size: NDArray, n: int) -> NDArray[np.int64]:
+    """`_distinct`, one pass in numba (the same box overlaps and size ratios)."""
+    picked = np.empty(max(min(n, len(order)), 0), np.int64)
+    k = 0
+    for t in range(min(8 * n, len(order))):
+        i = order[t]
+        nested = False
+        for q in range(k):
+            j = picked[q]
+            iw = min(x1[i], x1[j]) - max(x0[i], x0[j])
+            ih = min(y1[i], y1[j]) - max(y0[i], y0[j])
+            if iw <= 0 or ih <= 0:
+                continue
+            inter = np.int64(iw) * np.int64(ih)
+            union = (np.int64(x1[i] - x0[i]) * np.int64(y1[i] - y0[i])
+                     + np.int64(x1[j] - x0[j]) * np.int64(y1[j] - y0[j]) - inter)
+            if inter / float(union) > 0.9 and \
+                    min(size[i], size[j]) > 0.9 * max(size[i], size[j]):
+                nested = True
+                break
+        if nested:
             continue
-        picked.append(i)
-        if len(picked) == n:
+        picked[k] = i
+        k += 1
+        if k == n:
             break
-    return np.array(picked, np.int64)
+    return picked[:k]
 
 
 def _describe(part: NDArray[np.bool_], hist: NDArray[np.int64], lo: int, hi: int,
@@ -151,21 +178,22 @@ def _describe(part: NDArray[np.bool_], hist: NDArray[np.int64], lo: int, hi: int
               intrinsics: Intrinsics, size: tuple[int, int], config: ForegroundConfig
               ) -> Part | None:
     """Measure one depth part; None when it is too small to be anything."""
-    n = int(hist.sum())
+    cum = hist.cumsum()
+    n = int(cum[-1])
     if n < config.mser_min_area_px:
         return None
     # median level -> depth; level l is at depth near + (255 - l) * metres_per_level
-    med = lo + int(np.searchsorted(np.cumsum(hist), (n + 1) // 2))
+    med = lo + int(cum.searchsorted((n + 1) // 2))
     z = config.depth_near_m + (255.0 - med) * config.metres_per_level
-    rows = np.flatnonzero(part.any(axis=1))
-    cols = np.flatnonzero(part.any(axis=0))
+    rows = _any(part, axis=1).nonzero()[0]
+    cols = _any(part, axis=0).nonzero()[0]
     r0, r1, c0, c1 = int(rows[0]), int(rows[-1]) + 1, int(cols[0]), int(cols[-1]) + 1
     bh, bw = r1 - r0, c1 - c0
     box = (origin[0] + c0, origin[1] + r0, origin[0] + c1, origin[1] + r1)
     cut = box[3] == size[1]
     height_m, width_m = bh * z / intrinsics.fy, bw * z / intrinsics.fx
     area, fill = n * z * z / (intrinsics.fx * intrinsics.fy), n / (bh * bw)
-    extent = _extent_levels(hist) * config.metres_per_level
+    extent = _extent_levels(hist, cum) * config.metres_per_level
     top = bottom = math.nan
     # the heights above the floor decide only among parts of a person's size
     if above is not None and size_rules(height_m, width_m, area, fill, extent, cut, config):
@@ -226,11 +254,12 @@ def part_score(part: Part, config: PersonConfig,
     return score
 
 
-def _extent_levels(hist: NDArray[np.int64]) -> int:
-    """Levels between the 5th and 95th percentiles of a histogram."""
-    cum = np.cumsum(hist)
+def _extent_levels(hist: NDArray[np.int64], cum: NDArray[np.int64] | None = None) -> int:
+    """Levels between the 5th and 95th percentiles of a histogram (`cum` its cumulative sum,
+    if known)."""
+    cum = hist.cumsum() if cum is None else cum
     n = cum[-1]
-    return int(np.searchsorted(cum, 0.95 * n) - np.searchsorted(cum, 0.05 * n))
+    return int(cum.searchsorted(0.95 * n) - cum.searchsorted(0.05 * n))
 
 
 def _otsu(hist: NDArray[np.int64]) -> int:
@@ -249,12 +278,12 @@ def _otsu(hist: NDArray[np.int64]) -> int:
 def _depth_parts(hist: NDArray[np.int64], gap_levels: float) -> list[tuple[int, int]]:
     """Level ranges [lo, hi] of a region's histogram separated by more than `gap_levels`
     empty levels (all of it when `gap_levels` is 0)."""
-    levels = np.flatnonzero(hist)
+    levels = hist.nonzero()[0]
     if levels.size == 0:
         return []
     if gap_levels <= 0:
         return [(int(levels[0]), int(levels[-1]))]
-    cuts = np.flatnonzero(np.diff(levels) > gap_levels).tolist()
+    cuts = ((levels[1:] - levels[:-1]) > gap_levels).nonzero()[0].tolist()
     lv = levels.tolist()
     starts = [lv[0]] + [lv[i + 1] for i in cuts]
     ends = [lv[i] for i in cuts] + [lv[-1]]

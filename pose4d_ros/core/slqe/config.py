@@ -206,6 +206,15 @@ class UpdateInfo:
     nis: NDArray[np.float64]
 
 
+def evolve(obj: TrackState | TrackOutput, **changes: object) -> TrackState | TrackOutput:
+    """`dataclasses.replace` for the per-frame path: a copy of a `TrackState` or `TrackOutput`
+    (frozen, no checks to rerun) with `changes`, without replace's per-field work."""
+    new = object.__new__(type(obj))
+    new.__dict__.update(obj.__dict__)
+    new.__dict__.update(changes)
+    return new
+
+
 def initial_state(n_parts: int, config: SlqeConfig) -> TrackState:
     """A state with no part tracked yet."""
     if n_parts <= 0:

@@ -5,13 +5,15 @@ from __future__ import annotations
 
 import functools
 import math
-from dataclasses import replace
 
 import numpy as np
 from numpy.typing import NDArray
 
 from pose4d_ros.core.skeleton import PartTree
-from pose4d_ros.core.slqe.config import NOMINAL_DT_S, SlqeConfig, TrackState
+from pose4d_ros.core.slqe.config import NOMINAL_DT_S, SlqeConfig, TrackState, evolve
+
+# `ndarray.any` without its Python wrapper (the per-frame path)
+_any = np.logical_or.reduce
 
 
 def _kron_i2(m: NDArray[np.float64]) -> NDArray[np.float64]:
@@ -143,18 +145,18 @@ def predict(state: TrackState, dt: float, config: SlqeConfig, tree: PartTree,
         raise ValueError(f'dt must be >= 0 seconds, got {dt}')
     if state.n_parts != len(tree):
         raise ValueError(f'state has {state.n_parts} parts, tree {len(tree)}')
-    if dt == 0.0 or not state.active.any():
+    if dt == 0.0 or not _any(state.active):
         return state
     a, q = _prediction_matrices(dt, config, tree, tuple(state.active.tolist()))
     x = a @ state.x
     cov = a @ state.cov @ a.T + (px_gain * px_gain) * q
-    inactive = np.repeat(~state.active, config.block)
+    inactive = (~state.active).repeat(config.block)
     # Inactive parts carry no information: keep their blocks zero rather than growing noise.
     x[inactive] = 0.0
     cov[inactive, :] = 0.0
     cov[:, inactive] = 0.0
     shadow_x, shadow_cov = state.shadow_x, state.shadow_cov
-    kept = np.flatnonzero(state.shadow_left > 0)
+    kept = (state.shadow_left > 0).nonzero()[0]
     if len(kept):
         # a kept track moves on by its own kinematics (its parent's pull was in the old state)
         b = config.block
@@ -163,5 +165,5 @@ def predict(state: TrackState, dt: float, config: SlqeConfig, tree: PartTree,
         shadow_x, shadow_cov = shadow_x.copy(), shadow_cov.copy()
         shadow_x[kept] = shadow_x[kept] @ f.T
         shadow_cov[kept] = f @ shadow_cov[kept] @ f.T + q_own
-    return replace(state, x=x, cov=0.5 * (cov + cov.T), shadow_x=shadow_x,
-                   shadow_cov=shadow_cov, dt=dt)
+    return evolve(state, x=x, cov=0.5 * (cov + cov.T), shadow_x=shadow_x,
+                  shadow_cov=shadow_cov, dt=dt)

@@ -4,7 +4,7 @@
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field
 
 import numpy as np
 from numpy.typing import NDArray
@@ -15,10 +15,11 @@ from pose4d_ros.core.slqe.config import (
     SlqeConfig,
     TrackOutput,
     TrackState,
+    evolve,
     initial_state,
 )
 from pose4d_ros.core.slqe.motion import predict
-from pose4d_ros.core.slqe.update import output, update
+from pose4d_ros.core.slqe.update import output, update_arrays
 
 
 @dataclass
@@ -64,9 +65,9 @@ class SlqeTracker:
             last = None
         dt = 0.0 if last is None else stamp_s - last
         state = predict(self.state, dt, self.config, self.tree, px_gain)
-        state, info = update(state, uv, confidence, self.config, self.tree, px_gain,
-                             before=self.state)
-        self.state = replace(state, stamp=stamp_s)
+        w, info = update_arrays(state, uv, confidence, self.config, self.tree, px_gain,
+                          before=self.state)
+        self.state = evolve(state, stamp=stamp_s, **vars(w))
         return output(self.state, info, uv, confidence, self.config, px_gain)
 
 

@@ -3,8 +3,8 @@ step; see `core.slqe` for the gate and the restart hypotheses."""
 
 from __future__ import annotations
 
+import functools
 import math
-from dataclasses import fields, replace
 from types import SimpleNamespace
 
 import numpy as np
@@ -18,6 +18,7 @@ from pose4d_ros.core.slqe.config import (
     TrackOutput,
     TrackState,
     UpdateInfo,
+    evolve,
 )
 
 # Smallest confidence that scales a detection's R (R / confidence): at most 1000 R.
@@ -35,7 +36,7 @@ def _check_measurement(uv: NDArray, confidence: NDArray | None, n_parts: int
         c = np.asarray(confidence, dtype=np.float64)
         if c.shape != (n_parts,):
             raise ValueError(f'confidence must have shape ({n_parts},), got {c.shape}')
-        if np.any(c[np.isfinite(c)] < 0) or np.any(c[np.isfinite(c)] > 1):
+        if _any(np.isfinite(c) & ((c < 0) | (c > 1))):
             raise ValueError(f'confidence must be in [0, 1], got {c}')
     return z, c
 
@@ -77,9 +78,16 @@ def _keeps_length(z: NDArray[np.float64], before: TrackState, i: int, parent: in
     return abs(math.dist(z[i], z[parent]) - was) <= tolerance * was
 
 
-# The arrays of a `TrackState`: `update` works on copies of them (a namespace `w`, which its
-# steps change in place) and returns a new state made of them
-_ARRAYS = tuple(f.name for f in fields(TrackState) if f.name not in ('stamp', 'dt'))
+# `ndarray.any` and `ndarray.all` without their Python wrappers (the per-frame path)
+_any = np.logical_or.reduce
+_all = np.logical_and.reduce
+# the sources as uint8 scalars (an enum member's look-up is a Python call)
+_TRACKED, _MISSING = np.uint8(Source.TRACKED), np.uint8(Source.MISSING)
+# the (x, y) offsets of a part's position in its state block, and the 2 x 2 identity
+_XY = np.arange(2)
+_EYE2 = np.eye(2)
+for _a in (_XY, _EYE2):
+    _a.setflags(write=False)
 
 
 def update(state: TrackState, uv: NDArray[np.floating], confidence: NDArray[np.floating] | None,
@@ -102,32 +110,47 @@ def update(state: TrackState, uv: NDArray[np.floating], confidence: NDArray[np.f
     -------
     The updated state and what happened to each detection.
     """
+    w, info = update_arrays(state, uv, confidence, config, tree, px_gain, before)
+    return evolve(state, **vars(w)), info
+
+
+def update_arrays(state: TrackState, uv: NDArray[np.floating],
+            confidence: NDArray[np.floating] | None, config: SlqeConfig, tree: PartTree,
+            px_gain: float, before: TrackState | None) -> tuple[SimpleNamespace, UpdateInfo]:
+    """`update`'s work: the new state's arrays (a namespace) and the `UpdateInfo`."""
     n_parts = state.n_parts
     if n_parts != len(tree):
         raise ValueError(f'state has {n_parts} parts, tree {len(tree)}')
     z, conf = _check_measurement(uv, confidence, n_parts)
-    valid = np.isfinite(z).all(axis=1) & np.isfinite(conf) & (conf > 0) & \
+    valid = _all(np.isfinite(z), axis=1) & np.isfinite(conf) & (conf > 0) & \
         (conf >= config.min_confidence)
     # R / confidence, the confidence floored: a detection of confidence 1e-6 would otherwise
     # start a part with a variance of millions of pixels (metres squared beyond any camera's
     # range once lifted to 3-D, which the next stage rightly refuses)
     safe_conf = np.where(valid, np.maximum(conf, MIN_WEIGHT), 1.0)
     r_var = (px_gain * config.measurement_noise_px) ** 2 / safe_conf
-    w = SimpleNamespace(**{name: getattr(state, name).copy() for name in _ARRAYS})
-    w.shadow_left = np.maximum(state.shadow_left - 1, 0)
-    source = np.full(n_parts, Source.MISSING, np.uint8)
-    source[w.active] = Source.TRACKED
-    nis = np.full(n_parts, np.nan)
+    # the state's arrays, which the steps below change in place (copies: `state` stays)
+    w = SimpleNamespace(x=state.x.copy(), cov=state.cov.copy(), active=state.active.copy(),
+                        missed=state.missed.copy(), rejected=state.rejected.copy(),
+                        last_rejected=state.last_rejected.copy(),
+                        confidence=state.confidence.copy(), shadow_x=state.shadow_x.copy(),
+                        shadow_cov=state.shadow_cov.copy(),
+                        shadow_left=np.maximum(state.shadow_left - 1, 0))
+    source = np.where(w.active, _TRACKED, _MISSING)
+    nis = np.empty(n_parts)
+    nis.fill(np.nan)
     accepted, restart = _gate(w, nis, state, before, z, valid, r_var, config, tree, px_gain)
     if accepted:
         _kalman_update(w, z[accepted], r_var[accepted], accepted, config.block)
         source[accepted] = Source.DETECTED
         w.missed[accepted] = 0
         w.confidence[accepted] = conf[accepted]
-    starts = sorted(set(np.flatnonzero(valid & ~state.active)) | set(restart))
-    _start_parts(w, starts, restart, z, conf, r_var, source, config, tree, px_gain)
+    new = (valid & ~state.active).nonzero()[0].tolist()
+    starts = sorted(set(new) | set(restart)) if restart else new
+    if starts:
+        _start_parts(w, starts, restart, z, conf, r_var, source, config, tree, px_gain)
     _coast(w, source, config)
-    return replace(state, **vars(w)), UpdateInfo(source=source, nis=nis)
+    return w, UpdateInfo(source=source, nis=nis)
 
 
 def _gate(w: SimpleNamespace, nis: NDArray[np.float64], state: TrackState,
@@ -139,25 +162,33 @@ def _gate(w: SimpleNamespace, nis: NDArray[np.float64], state: TrackState,
     (`_back_to_kept_track`, accepted) or rejected, counting towards the drift hypothesis.
     Writes each gated part's squared innovation into `nis`; returns (accepted, restarted)."""
     b = config.block
-    accepted: list[int] = []
+    gated = (valid & w.active).nonzero()[0]
+    if not len(gated):
+        return [], []
+    pos = gated[:, None] * b + _XY
+    y_all = z[gated] - w.x[pos]
+    s_all = w.cov[pos[:, :, None], pos[:, None, :]] + r_var[gated, None, None] * _EYE2
+    d2_all = _mahalanobis2(y_all, s_all)
+    nis[gated] = d2_all
+    # within the gate: accepted (all at once); the others one by one, in the parts' order
+    # (parents before children: a child's limb hypothesis sees its parent's decision)
+    inside = d2_all <= config.gate_chi2
+    within = gated[inside]
+    w.rejected[within] = 0
+    w.last_rejected[within] = np.nan
+    accepted: list[int] = within.tolist()
     restart: list[int] = []
+    if _all(inside):
+        return accepted, restart
     drift_radius = px_gain * config.drift_radius_px * max(1.0, state.dt / NOMINAL_DT_S)
-    gated = np.flatnonzero(valid & w.active)
-    if len(gated):
-        pos = gated[:, None] * b + np.arange(2)[None, :]
-        y_all = z[gated] - w.x[pos]
-        s_all = w.cov[pos[:, :, None], pos[:, None, :]] + r_var[gated, None, None] * np.eye(2)
-        d2_all = _mahalanobis2(y_all, s_all)
-        nis[gated] = d2_all
     limb = ({i for i, name in enumerate(tree.names) if name in config.limb_parts}
             if config.limb_tolerance > 0 and before is not None else set())
-    for i, d2 in zip(gated, d2_all if len(gated) else [], strict=True):
+    for i, d2 in zip(gated[~inside], d2_all[~inside], strict=True):
         if d2 > config.gate_chi2 and _restarts(i, z, r_var[i], state, before, accepted,
                                                i in limb, config, tree):
             restart.append(int(i))
             continue
-        if d2 <= config.gate_chi2 or (state.shadow_left[i] > 0 and
-                                      _back_to_kept_track(w, i, z[i], r_var[i], config)):
+        if state.shadow_left[i] > 0 and _back_to_kept_track(w, i, z[i], r_var[i], config):
             accepted.append(int(i))
             w.rejected[i] = 0
             w.last_rejected[i] = np.nan
@@ -168,7 +199,7 @@ def _gate(w: SimpleNamespace, nis: NDArray[np.float64], state: TrackState,
         w.last_rejected[i] = z[i]
         if config.drift_frames > 0 and w.rejected[i] >= config.drift_frames:
             restart.append(int(i))
-    return accepted, restart
+    return sorted(accepted), restart
 
 
 def _restarts(i: int, z: NDArray[np.float64], r: float, state: TrackState,
@@ -208,17 +239,19 @@ def _back_to_kept_track(w: SimpleNamespace, i: int, z: NDArray[np.float64], r: f
 def _kalman_update(w: SimpleNamespace, z: NDArray[np.float64], r_var: NDArray[np.float64],
                    accepted: list[int], b: int) -> None:
     """Eqs. (14)-(15) with the accepted parts' detections `z` (N, 2), variances `r_var` (N,)."""
-    idx = np.concatenate([np.arange(i * b, i * b + 2) for i in accepted])
+    idx = (np.array(accepted)[:, None] * b + _XY).reshape(-1)
     y = (z - w.x[idx].reshape(-1, 2)).reshape(-1)
-    r = np.diag(np.repeat(r_var, 2))
+    r_diag = r_var.repeat(2)
+    r = np.zeros((len(idx), len(idx)))
+    r.flat[::len(idx) + 1] = r_diag
     ph = w.cov[:, idx]
-    s = w.cov[np.ix_(idx, idx)] + r
+    s = w.cov[idx[:, None], idx] + r
     gain = np.linalg.solve(s, ph.T).T
     w.x = w.x + gain @ y
     # Joseph form (I - K H) P (I - K H)^T + K R K^T, with H picking the rows `idx`: the
     # same products restricted to the columns H touches (K H P = K P[idx])
     m = w.cov - gain @ w.cov[idx, :]
-    cov = m - m[:, idx] @ gain.T + (gain * np.diag(r)) @ gain.T
+    cov = m - m[:, idx] @ gain.T + (gain * r_diag) @ gain.T
     w.cov = 0.5 * (cov + cov.T)
 
 
@@ -251,7 +284,7 @@ def _coast(w: SimpleNamespace, source: NDArray[np.uint8], config: SlqeConfig) ->
     w.missed[coasting] += 1
     w.confidence[coasting] *= config.confidence_decay
     lost = coasting & (w.missed > config.max_missed_frames)
-    if lost.any():
+    if _any(lost):
         drop = np.repeat(lost, config.block)
         w.x[drop] = 0.0
         w.cov[drop, :] = 0.0
@@ -277,7 +310,8 @@ def output(state: TrackState, info: UpdateInfo, uv: NDArray[np.floating],
     xs = state.x.reshape(n_parts, b)
     pos = xs[:, 0:2].copy()
     vel = xs[:, 2:4].copy()
-    covs = np.stack([state.cov[i * b:i * b + 2, i * b:i * b + 2] for i in range(n_parts)])
+    at = _block_xy(n_parts, b)
+    covs = state.cov[at[:, :, None], at[:, None, :]]
     if config.output == 'detection':
         z, conf = _check_measurement(uv, confidence, n_parts)
         det = info.source == Source.DETECTED
@@ -289,7 +323,17 @@ def output(state: TrackState, info: UpdateInfo, uv: NDArray[np.floating],
     pos[missing] = np.nan
     vel[missing] = np.nan
     covs[missing] = np.nan
-    conf_out = np.where(missing, 0.0, np.clip(state.confidence, 0.0, 1.0)).astype(np.float32)
+    # np.clip's values, without its Python wrapper
+    clipped = np.minimum(np.maximum(state.confidence, 0.0), 1.0)
+    conf_out = np.where(missing, 0.0, clipped).astype(np.float32)
     return TrackOutput(positions=pos, covariances=covs, velocities=vel,
                        source=info.source.astype(np.uint8), confidence=conf_out,
                        stamp=float(state.stamp) if state.stamp is not None else math.nan)
+
+
+@functools.lru_cache(maxsize=8)
+def _block_xy(n_parts: int, b: int) -> NDArray[np.intp]:
+    """(P, 2) the state indices of each part's position (read-only)."""
+    at = np.arange(n_parts)[:, None] * b + _XY
+    at.setflags(write=False)
+    return at
