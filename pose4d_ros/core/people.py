@@ -18,9 +18,9 @@ predicted, TRACKED, as long as the SLQE keeps them) and is matched again when th
 back; ids count up from 1 in a run and are never reused. One track and one detection are
 always paired: the SLQE's own gate then judges each part, as it does for a single person.
 
-The primary person (the one `/pose4d/skeleton` carries): the confirmed track seen this frame
-that was confirmed first (the longest tracked); when none is seen, the longest-tracked one
-still predicted. Outputs are ordered primary first, then by id.
+The primary person (the one `/pose4d/skeleton` carries): of the confirmed tracks seen this
+frame, the longest tracked (matched in most frames; the first confirmed on a tie); when none is
+seen, the longest-tracked one still predicted. Outputs are ordered primary first, then by id.
 
 The same detector slots do the same for candidates before detection (`PeopleDetector`): each
 slot keeps one person's detector state (their scale, the previous frame's parts that guide
@@ -380,7 +380,8 @@ class PeopleTracker:
     def _ordered(self, stamp_s: float) -> list[_Track]:
         confirmed = sorted((t for t in self.tracks if t.id), key=lambda t: t.id)
         seen = [t for t in confirmed if t.seen_s == stamp_s]
-        primary = (seen or confirmed)[:1]
+        # the longest tracked: seen in most frames (the first confirmed on a tie)
+        primary = sorted(seen or confirmed, key=lambda t: -t.hits)[:1]
         return primary + [t for t in confirmed if t not in primary]
 
 

@@ -20,10 +20,11 @@ import numpy as np
 
 from pose4d_ros.core.joints import MISSING, JointSet
 from pose4d_ros.datasets import bag, cad60_bag
-from pose4d_ros.datasets.messages import stamp_to_ns
+from pose4d_ros.datasets.messages import joints_from_msg, stamp_to_ns
 
 STAGES = ('foreground', 'detector', 'tracker', 'ik')
-RECORDED = ('pose4d/skeleton', 'pose4d/parts', 'pose4d/parts/tracked', '/tf')
+RECORDED = ('pose4d/skeleton', 'pose4d/skeletons', 'pose4d/parts', 'pose4d/parts/tracked',
+            '/tf')
 # topic -> subscribers that must be connected before the bag plays
 PIPELINE_CONNECTIONS = {
     'camera/color/image_raw': 1, 'camera/depth/image_raw': 1, 'pose4d/skeleton': 2}
@@ -238,18 +239,27 @@ def run_graph(bag_path: Path, out: Path, *, rate: float = 1.0, model: str = 'rgb
 def tf_per_skeleton(recorded: Path, skeletons: dict[int, JointSet], *,
                     prefix: str = 'pose4d') -> dict[str, int]:
     """The recorded /tf against the recorded skeletons: `matching` counts the skeletons whose
-    stamp has exactly one transform per located joint (`<prefix>/<track>/<joint>`) on /tf."""
+    stamp has exactly one transform per located joint (`<prefix>/<track>/<joint>`) of every
+    person of that frame (/pose4d/skeletons, where recorded; else the skeleton's own) on /tf."""
     from pose4d_ros.nodes.convert import joint_frame
 
     frames: dict[int, list[str]] = {}
     for m in bag.read_messages(recorded, ['/tf']):
         for t in bag.deserialize(m).transforms:
             frames.setdefault(stamp_to_ns(t.header.stamp), []).append(t.child_frame_id)
+    everyone: dict[int, list[JointSet]] = {}
+    if '/pose4d/skeletons' in bag.topics(recorded):
+        for m in bag.read_messages(recorded, ['/pose4d/skeletons']):
+            msg = bag.deserialize(m)
+            everyone.setdefault(stamp_to_ns(msg.header.stamp),
+                                [joints_from_msg(s) for s in msg.skeletons])
     matching = 0
     for stamp, joints in skeletons.items():
-        located = (joints.source != MISSING) & np.isfinite(joints.xyz).all(axis=1)
-        want = [joint_frame(prefix, joints.track_id, name)
-                for name, ok in zip(joints.names, located, strict=True) if ok]
+        want = []
+        for person in everyone.get(stamp, [joints]):
+            located = (person.source != MISSING) & np.isfinite(person.xyz).all(axis=1)
+            want += [joint_frame(prefix, person.track_id, name)
+                     for name, ok in zip(person.names, located, strict=True) if ok]
         matching += sorted(frames.get(stamp, [])) == sorted(want)
     return {'skeletons': len(skeletons), 'matching': matching,
             'transforms': sum(len(f) for f in frames.values())}
