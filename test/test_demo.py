@@ -22,8 +22,13 @@ def test_demo_runs_the_graph_and_scores_it(tmp_path):
     assert run.returncode == 0, run.stdout[-3000:] + run.stderr[-3000:]
     results = json.loads((tmp_path / 'results.json').read_text())
     assert results['frames_in'] == 45
-    assert 0 < results['skeletons_out'] <= 45
-    assert results['frames_lost'] == 45 - results['skeletons_out']
+    # every frame out, the first included (every node warmed up before it subscribes)
+    assert results['skeletons_out'] == 45 and results['frames_lost'] == 0
+    # live = offline: the nodes run the core the offline tools run, on the same frames in the
+    # same order; 0.5 point of average7 (one joint of 14 in 2 of 45 frames) allows one frame
+    # whose pairing of depth or timing differed live
+    live, offline = results['graph']['pck'], results['offline']['rgbd_kf_ik']['pck']
+    assert abs(live['average7'] - offline['average7']) <= 0.5, (live, offline)
     assert results['latency_ms']['n'] == results['skeletons_out']
     # every skeleton's located joints on /tf, stamped like it (read back from the recorded bag)
     assert results['tf']['matching'] == results['skeletons_out']
