@@ -158,7 +158,7 @@ def test_ik_stage_dh_method() -> None:
     from pose4d_ros.core import joints as cj
     from pose4d_ros.core.camera import project
     from pose4d_ros.core.joints import JointSet
-    from pose4d_ros.core.pipeline import IkStage
+    from pose4d_ros.core.stages import IkStage
 
     names = ('left_shoulder', 'right_shoulder', 'left_wrist', 'right_wrist', 'left_hip',
              'right_hip', 'left_ankle', 'right_ankle')

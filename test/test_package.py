@@ -266,8 +266,8 @@ def core_defaults() -> dict[str, object]:
     from pose4d_ros.core.dpm.scale import ScaleConfig
     from pose4d_ros.core.foreground import ForegroundConfig
     from pose4d_ros.core.limb_lengths import DEFAULT_LIMB_LENGTHS_M
-    from pose4d_ros.core.pipeline import DetectorStage, ForegroundStage, IkStage, TrackerStage
     from pose4d_ros.core.slqe import SlqeConfig
+    from pose4d_ros.core.stages import DetectorStage, ForegroundStage, IkStage, TrackerStage
 
     def keyword(stage: type, name: str) -> object:
         return inspect.signature(stage).parameters[name].default

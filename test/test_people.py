@@ -12,8 +12,8 @@ from pose4d_ros.core.camera import project
 from pose4d_ros.core.foreground import segment_people
 from pose4d_ros.core.joints import JointSet
 from pose4d_ros.core.people import PeopleTracker, TrackingConfig, assign, torso
-from pose4d_ros.core.pipeline import TrackerStage
 from pose4d_ros.core.skeleton import PARTS_10
+from pose4d_ros.core.stages import TrackerStage
 
 DT = 1 / 30
 
@@ -141,7 +141,8 @@ def test_segment_people_finds_both_people():
 
 def test_pipeline_tracks_two_rendered_people():
     from pose4d_ros.core.dpm.model import load_model
-    from pose4d_ros.core.pipeline import DetectorStage, FramePipeline
+    from pose4d_ros.core.pipeline import FramePipeline
+    from pose4d_ros.core.stages import DetectorStage
     from pose4d_ros.models import model_path
 
     rgb, depth, truths = _two_people()
@@ -159,7 +160,8 @@ def test_pipeline_tracks_two_rendered_people():
 
 def test_one_person_the_several_person_path_gives_the_single_persons_skeleton():
     from pose4d_ros.core.dpm.model import load_model
-    from pose4d_ros.core.pipeline import DetectorStage, FramePipeline
+    from pose4d_ros.core.pipeline import FramePipeline
+    from pose4d_ros.core.stages import DetectorStage
     from pose4d_ros.core.warm_up import warm_up_frame
     from pose4d_ros.models import model_path
 

@@ -1,4 +1,4 @@
-"""The tracker and IK stages that nodes and offline tools share (core/pipeline.py)."""
+"""The tracker and IK stages that nodes and offline tools share (core/stages.py)."""
 
 from __future__ import annotations
 
@@ -14,7 +14,6 @@ from pose4d_ros.core.camera import backproject, cad60_intrinsics, project
 from pose4d_ros.core.dpm import load_model
 from pose4d_ros.core.joints import JointSet
 from pose4d_ros.core.lifting import medoid_parts, person_scale_px
-from pose4d_ros.core.pipeline import PRIOR_MAX_GAP_S, DetectorStage, IkStage, TrackerStage, reorder
 from pose4d_ros.core.skeleton import (
     MIDPOINTS,
     PARTS_10,
@@ -24,6 +23,7 @@ from pose4d_ros.core.skeleton import (
     limb_bones,
 )
 from pose4d_ros.core.slqe import SlqeConfig
+from pose4d_ros.core.stages import PRIOR_MAX_GAP_S, DetectorStage, IkStage, TrackerStage, reorder
 from pose4d_ros.core.warm_up import warm_up_frame
 from pose4d_ros.models import model_path
 
@@ -235,8 +235,8 @@ def test_reorder_and_bones():
 
 def test_foreground_holds_the_person_through_a_frame_or_two_without_one(monkeypatch):
     from pose4d_ros.core import foreground
-    from pose4d_ros.core import pipeline as pl
-    from pose4d_ros.core.pipeline import ForegroundStage
+    from pose4d_ros.core import stages as pl
+    from pose4d_ros.core.stages import ForegroundStage
 
     color, depth, person = warm_up_frame(INTR)
     stage = ForegroundStage()

@@ -11,7 +11,6 @@ from numpy.testing import assert_allclose
 
 from pose4d_ros.core.boost import BoostedTrees, fit, predict_stacked
 from pose4d_ros.core.dpm import load_model, save_model
-from pose4d_ros.core.pipeline import DetectorStage
 from pose4d_ros.core.refine import (
     MAX_DEPTH_M,
     MAX_SHIFT_SCALES,
@@ -25,6 +24,7 @@ from pose4d_ros.core.refine import (
     targets,
 )
 from pose4d_ros.core.skeleton import PARTS_14
+from pose4d_ros.core.stages import DetectorStage
 from pose4d_ros.core.warm_up import warm_up_frame
 from pose4d_ros.models import model_path
 

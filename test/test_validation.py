@@ -17,8 +17,8 @@ from pose4d_ros.core.camera import Intrinsics, cad60_intrinsics, depth_to_metres
 from pose4d_ros.core.dpm.infer import Detector
 from pose4d_ros.core.dpm.model import load_model
 from pose4d_ros.core.joints import JointSet, check_joints
-from pose4d_ros.core.pipeline import DetectorStage, IkStage, TrackerStage
 from pose4d_ros.core.skeleton import PARTS_10
+from pose4d_ros.core.stages import DetectorStage, IkStage, TrackerStage
 from pose4d_ros.core.warm_up import warm_up_frame
 from pose4d_ros.models import model_path
 

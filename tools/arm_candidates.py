@@ -32,7 +32,7 @@ from pose4d_ros.core.dpm.dp import (  # noqa: E402
 )
 from pose4d_ros.core.dpm.infer import Detector  # noqa: E402
 from pose4d_ros.core.dpm.model import load_model  # noqa: E402
-from pose4d_ros.core.pipeline import ForegroundStage  # noqa: E402
+from pose4d_ros.core.stages import ForegroundStage  # noqa: E402
 from pose4d_ros.core.threads import set_blas_threads  # noqa: E402
 from pose4d_ros.datasets.sources import load_frames  # noqa: E402
 from pose4d_ros.models import model_path  # noqa: E402

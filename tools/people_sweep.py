@@ -23,8 +23,9 @@ import numpy as np
 
 from pose4d_ros.core.dpm.model import load_model
 from pose4d_ros.core.people import PeopleIk, PeopleTracker, TrackingConfig
-from pose4d_ros.core.pipeline import DetectorStage, FramePipeline, IkStage, TrackerStage
+from pose4d_ros.core.pipeline import FramePipeline
 from pose4d_ros.core.skeleton import SKELETON_14
+from pose4d_ros.core.stages import DetectorStage, IkStage, TrackerStage
 from pose4d_ros.datasets.sources import load_frames
 from pose4d_ros.evaluation.pipeline import Row, people_scores
 from pose4d_ros.models import model_path

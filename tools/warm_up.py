@@ -12,7 +12,8 @@ import time
 from pose4d_ros.core.camera import cad60_intrinsics
 from pose4d_ros.core.convnet import is_convnet
 from pose4d_ros.core.dpm.model import load_model
-from pose4d_ros.core.pipeline import DetectorStage, ForegroundStage, FramePipeline
+from pose4d_ros.core.pipeline import FramePipeline
+from pose4d_ros.core.stages import DetectorStage, ForegroundStage
 from pose4d_ros.models import model_path, shipped_models
 
 

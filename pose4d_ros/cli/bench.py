@@ -111,7 +111,8 @@ def run(args: argparse.Namespace) -> int:
         raise ValueError(f'--frames must be >= 1 and --warmup >= 0, got {args.frames}, '
                          f'{args.warmup}')
     from pose4d_ros.core.people import TrackingConfig
-    from pose4d_ros.core.pipeline import STAGES, DetectorStage, FramePipeline
+    from pose4d_ros.core.pipeline import STAGES, FramePipeline
+    from pose4d_ros.core.stages import DetectorStage
 
     threads = set_blas_threads(args.blas_threads)
     kind = source_kind(args.source)

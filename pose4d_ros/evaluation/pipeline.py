@@ -36,9 +36,10 @@ from pose4d_ros.core.dpm.scale import ScaleConfig
 from pose4d_ros.core.joints import MISSING, JointSet
 from pose4d_ros.core.metrics import curves, joint_arrays, score_groups
 from pose4d_ros.core.people import TrackingConfig
-from pose4d_ros.core.pipeline import STAGES, DetectorStage, FramePipeline
+from pose4d_ros.core.pipeline import STAGES, FramePipeline
 from pose4d_ros.core.skeleton import SKELETON_14
 from pose4d_ros.core.slqe import SlqeConfig
+from pose4d_ros.core.stages import DetectorStage
 from pose4d_ros.datasets.frame import Frame
 from pose4d_ros.evaluation.tracking_metrics import score_people
 from pose4d_ros.peer import MediaPipePeer

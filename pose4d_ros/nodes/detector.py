@@ -44,7 +44,7 @@ from pose4d_ros.core.dpm.model import load_model
 from pose4d_ros.core.dpm.scale import ScaleConfig
 from pose4d_ros.core.joints import JointSet
 from pose4d_ros.core.people import PeopleDetector, TrackingConfig, people_from_labels
-from pose4d_ros.core.pipeline import DetectorStage
+from pose4d_ros.core.stages import DetectorStage
 from pose4d_ros.core.warm_up import warm_up_frame
 from pose4d_ros.models import model_path
 from pose4d_ros.nodes import qos

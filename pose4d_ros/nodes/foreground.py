@@ -41,7 +41,7 @@ from std_msgs.msg import Header
 from pose4d_ros.core.camera import backproject, cad60_intrinsics, depth_to_millimetres
 from pose4d_ros.core.foreground import ForegroundConfig
 from pose4d_ros.core.people import people_labels
-from pose4d_ros.core.pipeline import ForegroundStage
+from pose4d_ros.core.stages import ForegroundStage
 from pose4d_ros.nodes import qos
 from pose4d_ros.nodes.common import PairedInputs, StageMonitor, run
 from pose4d_ros.nodes.convert import (

@@ -48,8 +48,8 @@ from pose4d_ros.core.camera import cad60_intrinsics
 from pose4d_ros.core.joints import MISSING, JointSet
 from pose4d_ros.core.kinematics import DEFAULT_LIMB_LENGTHS_M
 from pose4d_ros.core.people import PeopleIk
-from pose4d_ros.core.pipeline import IkStage
 from pose4d_ros.core.skeleton import SKELETON_14, limb_bones
+from pose4d_ros.core.stages import IkStage
 from pose4d_ros.nodes import qos
 from pose4d_ros.nodes.common import LatestIntrinsics, PeopleInputs, StageMonitor, run
 from pose4d_ros.nodes.convert import (

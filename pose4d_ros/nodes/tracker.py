@@ -34,8 +34,8 @@ from rclpy.node import Node
 from pose4d_ros.core.camera import cad60_intrinsics
 from pose4d_ros.core.joints import JointSet
 from pose4d_ros.core.people import PeopleTracker, TrackingConfig
-from pose4d_ros.core.pipeline import TrackerStage
 from pose4d_ros.core.slqe import CvConfig, SlqeConfig
+from pose4d_ros.core.stages import TrackerStage
 from pose4d_ros.nodes import qos
 from pose4d_ros.nodes.common import LatestIntrinsics, PeopleInputs, StageMonitor, run
 from pose4d_ros.nodes.convert import joints_to_cdr, skeletons_to_msg, stamp_to_ns

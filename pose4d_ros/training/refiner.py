@@ -12,9 +12,9 @@ from numpy.typing import NDArray
 
 from pose4d_ros.core.camera import Intrinsics
 from pose4d_ros.core.dpm.model import PartModel
-from pose4d_ros.core.pipeline import DetectorStage, ForegroundStage
 from pose4d_ros.core.refine import OUTPUTS, PartRefiner, fit_refiner, known_parts, targets
 from pose4d_ros.core.refine import features as refine_features
+from pose4d_ros.core.stages import DetectorStage, ForegroundStage
 from pose4d_ros.datasets.frame import Frame
 from pose4d_ros.util.progress import progress
 
