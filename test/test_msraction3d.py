@@ -11,10 +11,10 @@ from helpers import J, write_msr
 from numpy.testing import assert_allclose
 
 from pose4d_ros.cli.main import main as pose4d_main
-from pose4d_ros.cli.synth import select_sources
 from pose4d_ros.datasets import msraction3d as msr
 from pose4d_ros.datasets.utkinect import UTKINECT_JOINTS, to_optical
 from pose4d_ros.synth import video
+from pose4d_ros.synth.takes import select_sources
 
 MSR = Path(__file__).resolve().parents[2] / 'shared' / 'data' / 'msraction3d'
 

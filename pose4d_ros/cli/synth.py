@@ -25,7 +25,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import re
 import shutil
 import sys
 import tempfile
@@ -34,13 +33,8 @@ from pathlib import Path
 
 from pose4d_ros import __version__
 from pose4d_ros.core.camera import cad60_intrinsics
-
-_TAKE = re.compile(r'^s(\d{2})_e(\d{2})$')
-_MSR_TAKE = re.compile(r'^a(\d{2})_s(\d{2})_e(\d{2})$')
-# subject and take of a take name: UTKinect 'sNN_eMM' or MSR Action3D 'aAA_sSS_eEE'
-_FIELDS = re.compile(r'(?:^|_)s(\d{2})_e(\d{2})$')
-_SUBJECT = re.compile(r'^s(\d{2})$')
-_RANGE = re.compile(r'^s(\d{2})-s(\d{2})$')
+from pose4d_ros.core.files import replace_dir
+from pose4d_ros.synth.takes import parse_takes, plan_actions, select_sources
 
 
 def add_parser(subparsers: argparse._SubParsersAction) -> None:
@@ -112,104 +106,6 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     p.set_defaults(func=run)
 
 
-def parse_takes(spec: str, available: list[str]) -> list[str]:
-    """Expand a --takes value into take names, in order, without repeats.
-
-    `available` lists the takes present ('sNN_eMM'); every requested one must be there.
-    """
-    if spec.strip() == 'all':
-        if not available:
-            raise ValueError('no joints_sNN_eMM.txt files in the UTKinect directory')
-        return sorted(available)
-    out: list[str] = []
-    for item, names in match_takes(spec, available).items():
-        if not names or any(n not in available for n in names):
-            missing = [n for n in names if n not in available] or [item]
-            raise ValueError(f'--takes: no UTKinect take for {", ".join(missing)}')
-        out += [n for n in names if n not in out]
-    return out
-
-
-def match_takes(spec: str, available: list[str]) -> dict[str, list[str]]:
-    """Each item of a --takes value (not 'all') and the take names it stands for.
-
-    Names are UTKinect's 'sNN_eMM' or MSR Action3D's 'aAA_sSS_eEE'. sNN_eMM stands for that
-    UTKinect take, which need not be in `available`, and for take MM of every MSR Action3D
-    action of subject NN; aAA_sSS_eEE for that sequence (even if not available); sNN and
-    sNN-sMM for every available take of those subjects.
-    """
-    fields = {t: (int(m.group(1)), int(m.group(2)))
-              for t in available if (m := _FIELDS.search(t))}
-    out: dict[str, list[str]] = {}
-    for item in (s.strip() for s in spec.split(',')):
-        if m := _TAKE.match(item):
-            key = (int(m.group(1)), int(m.group(2)))
-            names = [item] + sorted(t for t, f in fields.items()
-                                    if f == key and _MSR_TAKE.match(t))
-        elif _MSR_TAKE.match(item):
-            names = [item]
-        elif m := _SUBJECT.match(item):
-            names = sorted(t for t, f in fields.items() if f[0] == int(m.group(1)))
-        elif m := _RANGE.match(item):
-            lo, hi = int(m.group(1)), int(m.group(2))
-            if lo > hi:
-                raise ValueError(f'--takes: empty subject range {item!r}')
-            names = sorted(t for t, f in fields.items() if lo <= f[0] <= hi)
-        else:
-            raise ValueError(f"--takes: {item!r} is not sNN_eMM, sNN, sNN-sMM or aAA_sSS_eEE")
-        out[item] = names
-    return out
-
-
-def select_sources(takes: str, actions: str | None, utkinect: list[str], msr: list[str]
-                   ) -> tuple[list[str], list[str]]:
-    """The UTKinect takes and MSR Action3D sequences a run uses (names, sorted as asked).
-
-    `utkinect`, `msr`: the names available in each source given. Every --takes item must stand
-    for a take of one source at least; --actions items that name MSR Action3D actions (a01-a20
-    or their names) keep only those sequences (none named: no MSR Action3D sequence).
-    """
-    from pose4d_ros.datasets.msraction3d import action_number
-
-    if takes.strip() == 'all':
-        ut, ms = sorted(utkinect), sorted(msr)
-    else:
-        ut, ms = [], []
-        for item, names in match_takes(takes, utkinect + msr).items():
-            found_ut = [n for n in names if n in utkinect]
-            found_ms = [n for n in names if n in msr]
-            if not found_ut and not found_ms:
-                source = 'UTKinect take' if not msr else 'MSR Action3D sequence' if not \
-                    utkinect else 'UTKinect take or MSR Action3D sequence'
-                raise ValueError(f'--takes: no {source} for {item}')
-            ut += [n for n in found_ut if n not in ut]
-            ms += [n for n in found_ms if n not in ms]
-    if actions is not None:
-        wanted = set()
-        for a in actions.split(','):
-            try:
-                wanted.add(action_number(a))
-            except ValueError:
-                continue  # a UTKinect action
-        ms = [n for n in ms if int(n[1:3]) in wanted]
-    return ut, ms
-
-
-def plan_actions(actions: str | None) -> list[str] | None:
-    """--actions for `video.plan_videos`: MSR Action3D actions given as a01-a20 by name."""
-    from pose4d_ros.datasets.msraction3d import ACTIONS, action_number
-
-    if actions is None:
-        return None
-    out = []
-    for a in (x.strip() for x in actions.split(',')):
-        try:
-            out.append(ACTIONS[action_number(a) - 1])
-        except ValueError:
-            out.append(a)
-    return out
-
-
 def _check(args: argparse.Namespace) -> None:
     if args.utkinect is None and args.msraction3d is None:
         raise ValueError('give --utkinect DIR, --msraction3d DIR or both')
@@ -246,119 +142,44 @@ def _check(args: argparse.Namespace) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    # heavy imports here, so that `pose4d --help` stays fast
-    import numpy as np
-
     from pose4d_ros.datasets import cad60
-    from pose4d_ros.datasets.msraction3d import list_sequences
-    from pose4d_ros.datasets.utkinect import list_takes
     from pose4d_ros.synth import people, video
-    from pose4d_ros.synth.render import HC, Body
     from pose4d_ros.util.progress import progress
 
     _check(args)
-    default = video.Staging()
     several = args.people > 1
-    staging = video.Staging(
-        stature_m=tuple(args.stature or default.stature_m),
-        distance_m=tuple(args.distance or (people.PEOPLE_DISTANCE_M if several
-                                           else default.distance_m)),
-        turn_deg=tuple(args.turn or default.turn_deg), arm_jitter_deg=args.arm_jitter)
+    staging = _staging(args)
     intrinsics = cad60_intrinsics(args.width, args.height)
-    skipped: list[str] = []
-    if args.msraction3d is None:  # as it always was
-        available = [p.name[len('joints_'):-len('.txt')] for p in list_takes(args.utkinect)]
-        names = parse_takes(args.takes, available)
-        motions = video.load_takes(args.utkinect, names)
-    else:
-        ut = [] if args.utkinect is None else [
-            p.name[len('joints_'):-len('.txt')] for p in list_takes(args.utkinect)]
-        msr = [p.name[:-len('_skeleton3D.txt')] for p in list_sequences(args.msraction3d)]
-        if not msr:
-            raise ValueError(f'--msraction3d {args.msraction3d}: no '
-                             'aAA_sSS_eEE_skeleton3D.txt files')
-        ut_names, msr_names = select_sources(args.takes, args.actions, ut, msr)
-        motions = video.load_takes(args.utkinect, ut_names) if ut_names else []
-        msr_motions, skipped = video.load_msr_takes(args.msraction3d, msr_names)
-        motions += msr_motions
-        names = ut_names + [m.name for m in msr_motions]
+    motions, names, skipped = _motions(args)
     plans = [plan for m in motions for plan in video.plan_videos(
         m, seed=args.seed, videos=args.videos_per_take, frames=args.frames, stride=args.stride,
         start_s=args.start, actions=plan_actions(args.actions))]
     if not plans:
         raise ValueError(f'--actions {args.actions}: none of the takes has any of them')
-    by_take = {m.name: m for m in motions}
     total = sum(p.n_frames for p in plans)
     crossing = 0.34 if args.crossing is None else args.crossing
     crossings = people.crossing_videos(plans, crossing) if several else [False] * len(plans)
-
     out = args.out.resolve()
     tmp = Path(tempfile.mkdtemp(prefix=f'.{out.name}.', suffix='.partial', dir=out.parent))
     t0 = time.perf_counter()
     n_bytes = 0
     try:
         labels: dict[int, dict[str, str]] = {}
-        bodies: dict[int, Body] = {}
+        bodies: dict = {}
         records = []
         with progress(desc='pose4d synth', total=total, disable=args.quiet) as bar:
             for plan, crosses in zip(plans, crossings, strict=True):
-                body = None
-                if args.body_per == 'subject':
-                    if plan.subject not in bodies:
-                        bodies[plan.subject] = video.subject_body(
-                            args.seed, plan.subject, stature_m=staging.stature_m)
-                    body = bodies[plan.subject]
-                if several:
-                    job = people.prepare_people_video(
-                        plan, motions, intrinsics, people=args.people, crossing=crosses,
-                        body=body, occluder_prob=args.occluders,
-                        kinect_noise=not args.no_noise, staging=staging)
-                    if args.alone is not None:
-                        job = video.alone(job, args.alone)
-                else:
-                    job = video.prepare_video(plan, by_take[plan.take], intrinsics,
-                                              body=body, occluder_prob=args.occluders,
-                                              kinect_noise=not args.no_noise, staging=staging)
+                job = _job(args, plan, crosses, motions, intrinsics, staging, bodies)
                 person_dir = tmp / f'data{plan.subject}'
                 person_dir.mkdir(exist_ok=True)
                 n_bytes += video.write_video(job, person_dir, progress=bar.update)
                 labels.setdefault(plan.subject, {})[plan.video_id] = plan.activity
-                record = {
-                    'video': f'data{plan.subject}/{plan.video_id}', 'take': plan.take,
-                    'activity': plan.activity, 'start_frame_30fps': plan.start,
-                    'stride': plan.stride, 'frames': plan.n_frames,
-                    'stature_m': round(job.body.stature_m, 3),
-                    'distance_m': round(float(np.median(job.poses[:, HC, 2])), 3),
-                    'occluder': any(b.kind == 'occluder' for b in job.scene.boxes),
-                    'camera_height_m': round(job.scene.cam_height_m, 3),
-                }
-                if several and job.companions:
-                    record.update(_people_record(job, person_dir))
-                records.append(record)
+                records.append(_record(job, person_dir, several))
         for subject, videos in labels.items():
             cad60.write_activity_labels(tmp / f'data{subject}' / 'activityLabel.txt', videos)
-        info = {
-            'generator': f'pose4d synth {__version__}',
-            'command': ' '.join(sys.argv),
-            'seed': args.seed, 'takes': names, 'frames': args.frames, 'stride': args.stride,
-            'start_s': args.start, 'videos_per_take': args.videos_per_take,
-            'actions': args.actions,
-            'body_per': args.body_per, 'occluders': args.occluders,
-            'stature_m': list(staging.stature_m), 'distance_m': list(staging.distance_m),
-            'turn_deg': list(staging.turn_deg), 'arm_jitter_deg': staging.arm_jitter_deg,
-            'size': [args.width, args.height], 'kinect_noise': not args.no_noise,
-            'videos': records,
-        }
-        if args.msraction3d is not None:
-            info = {**{k: v for k, v in info.items() if k != 'videos'},
-                    'utkinect': None if args.utkinect is None else str(args.utkinect),
-                    'msraction3d': str(args.msraction3d), 'msraction3d_skipped': skipped,
-                    'videos': records}
-        if several:  # a one-person set's synth.json stays as it always was
-            info = {**{k: v for k, v in info.items() if k != 'videos'},
-                    'people': args.people, 'crossing': crossing, 'videos': records}
+        info = _info(args, names, staging, records, skipped, crossing)
         (tmp / 'synth.json').write_text(json.dumps(info, indent=1) + '\n')
-        _replace_dir(tmp, out)
+        replace_dir(tmp, out)
     except BaseException:
         shutil.rmtree(tmp, ignore_errors=True)
         raise
@@ -367,6 +188,104 @@ def run(args: argparse.Namespace) -> int:
           f'({n_bytes / max(total, 1) / 1e3:.1f} kB/frame) in {elapsed:.1f} s '
           f'({total / elapsed:.1f} frames/s incl. PNG writing) -> {out}')
     return 0
+
+
+def _staging(args: argparse.Namespace):
+    from pose4d_ros.synth import people, video
+
+    default = video.Staging()
+    return video.Staging(
+        stature_m=tuple(args.stature or default.stature_m),
+        distance_m=tuple(args.distance or (people.PEOPLE_DISTANCE_M if args.people > 1
+                                           else default.distance_m)),
+        turn_deg=tuple(args.turn or default.turn_deg), arm_jitter_deg=args.arm_jitter)
+
+
+def _motions(args: argparse.Namespace) -> tuple[list, list[str], list[str]]:
+    """The takes' motion, their names, and the MSR Action3D sequences skipped (empty)."""
+    from pose4d_ros.datasets.msraction3d import list_sequences
+    from pose4d_ros.datasets.utkinect import list_takes
+    from pose4d_ros.synth import video
+
+    if args.msraction3d is None:  # as it always was
+        available = [p.name[len('joints_'):-len('.txt')] for p in list_takes(args.utkinect)]
+        names = parse_takes(args.takes, available)
+        return video.load_takes(args.utkinect, names), names, []
+    ut = [] if args.utkinect is None else [
+        p.name[len('joints_'):-len('.txt')] for p in list_takes(args.utkinect)]
+    msr = [p.name[:-len('_skeleton3D.txt')] for p in list_sequences(args.msraction3d)]
+    if not msr:
+        raise ValueError(f'--msraction3d {args.msraction3d}: no '
+                         'aAA_sSS_eEE_skeleton3D.txt files')
+    ut_names, msr_names = select_sources(args.takes, args.actions, ut, msr)
+    motions = video.load_takes(args.utkinect, ut_names) if ut_names else []
+    msr_motions, skipped = video.load_msr_takes(args.msraction3d, msr_names)
+    return motions + msr_motions, ut_names + [m.name for m in msr_motions], skipped
+
+
+def _job(args: argparse.Namespace, plan, crosses: bool, motions: list, intrinsics, staging,
+         bodies: dict):
+    """A planned video, prepared to render (its body the subject's with --body-per subject)."""
+    from pose4d_ros.synth import people, video
+
+    body = None
+    if args.body_per == 'subject':
+        if plan.subject not in bodies:
+            bodies[plan.subject] = video.subject_body(args.seed, plan.subject,
+                                                      stature_m=staging.stature_m)
+        body = bodies[plan.subject]
+    if args.people == 1:
+        motion = next(m for m in motions if m.name == plan.take)
+        return video.prepare_video(plan, motion, intrinsics, body=body,
+                                   occluder_prob=args.occluders,
+                                   kinect_noise=not args.no_noise, staging=staging)
+    job = people.prepare_people_video(
+        plan, motions, intrinsics, people=args.people, crossing=crosses, body=body,
+        occluder_prob=args.occluders, kinect_noise=not args.no_noise, staging=staging)
+    return job if args.alone is None else video.alone(job, args.alone)
+
+
+def _record(job, person_dir: Path, several: bool) -> dict:
+    """synth.json's account of a video."""
+    import numpy as np
+
+    from pose4d_ros.synth.render import HC
+
+    plan = job.plan
+    record = {
+        'video': f'data{plan.subject}/{plan.video_id}', 'take': plan.take,
+        'activity': plan.activity, 'start_frame_30fps': plan.start,
+        'stride': plan.stride, 'frames': plan.n_frames,
+        'stature_m': round(job.body.stature_m, 3),
+        'distance_m': round(float(np.median(job.poses[:, HC, 2])), 3),
+        'occluder': any(b.kind == 'occluder' for b in job.scene.boxes),
+        'camera_height_m': round(job.scene.cam_height_m, 3),
+    }
+    if several and job.companions:
+        record.update(_people_record(job, person_dir))
+    return record
+
+
+def _info(args: argparse.Namespace, names: list[str], staging, records: list[dict],
+          skipped: list[str], crossing: float) -> dict:
+    """synth.json: the command's parameters and every video's record."""
+    info = {
+        'generator': f'pose4d synth {__version__}',
+        'command': ' '.join(sys.argv),
+        'seed': args.seed, 'takes': names, 'frames': args.frames, 'stride': args.stride,
+        'start_s': args.start, 'videos_per_take': args.videos_per_take,
+        'actions': args.actions,
+        'body_per': args.body_per, 'occluders': args.occluders,
+        'stature_m': list(staging.stature_m), 'distance_m': list(staging.distance_m),
+        'turn_deg': list(staging.turn_deg), 'arm_jitter_deg': staging.arm_jitter_deg,
+        'size': [args.width, args.height], 'kinect_noise': not args.no_noise,
+    }
+    if args.msraction3d is not None:
+        info.update({'utkinect': None if args.utkinect is None else str(args.utkinect),
+                     'msraction3d': str(args.msraction3d), 'msraction3d_skipped': skipped})
+    if args.people > 1:  # a one-person set's synth.json stays as it always was
+        info.update({'people': args.people, 'crossing': crossing})
+    return {**info, 'videos': records}
 
 
 def _people_record(job, person_dir: Path) -> dict:
@@ -388,15 +307,3 @@ def _people_record(job, person_dir: Path) -> dict:
                     'distance_m': round(float(np.median(poses[:, HC, 2])), 3),
                     'unseen_frames': int((skeleton.joint_conf[:, 0] == 0).sum())})
     return {'crossing': job.crossing, 'people': out}
-
-
-def _replace_dir(tmp: Path, out: Path) -> None:
-    """Move the finished set into place (replacing an old one only once the new one exists)."""
-    if out.exists():
-        trash = Path(tempfile.mkdtemp(prefix=f'.{out.name}.', suffix='.old', dir=out.parent))
-        trash.rmdir()
-        out.rename(trash)
-        tmp.rename(out)
-        shutil.rmtree(trash, ignore_errors=True)
-    else:
-        tmp.rename(out)

@@ -6,6 +6,7 @@ from __future__ import annotations
 import io
 import json
 import os
+import shutil
 import tempfile
 import zipfile
 import zlib
@@ -64,3 +65,16 @@ def read_npz(path: str | Path, what: str) -> dict[str, np.ndarray]:
     except NPZ_ERRORS as exc:
         raise ValueError(f'{path}: not a {what}: damaged or not a NumPy .npz archive '
                          f'({type(exc).__name__}: {exc})') from exc
+
+
+def replace_dir(tmp: Path, out: Path) -> None:
+    """Move the finished directory `tmp` to `out` (replacing an old one only once the new one
+    is in place, so a reader never finds `out` half-written)."""
+    if out.exists():
+        trash = Path(tempfile.mkdtemp(prefix=f'.{out.name}.', suffix='.old', dir=out.parent))
+        trash.rmdir()
+        out.rename(trash)
+        tmp.rename(out)
+        shutil.rmtree(trash, ignore_errors=True)
+    else:
+        tmp.rename(out)
