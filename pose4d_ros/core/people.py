@@ -12,10 +12,11 @@ its velocity, its covariance the SLQE's covariance of the torso joints plus the 
 plus `TrackingConfig.torso_std_m` and a spread growing with the time the track went unseen
 (`max_speed_mps`). A pair beyond `gate_chi2` is never assigned. A detection left over starts a
 tentative track, confirmed (and given its id) after `confirm_frames` frames matched, or at
-once when no confirmed track exists (the first person in view is trusted, as the
-single-person tracker always did). A confirmed track survives `max_unseen_s` unseen (its parts
-predicted, TRACKED, as long as the SLQE keeps them) and is matched again when the person comes
-back; ids count up from 1 in a run and are never reused. One track and one detection are
+once for the first person in view when no track is confirmed (the foreground's best region,
+trusted as the single-person tracker always trusted its one detection). A confirmed track
+survives `max_unseen_s` unseen (its parts predicted, TRACKED, as long as the SLQE keeps them)
+and is matched again when the person comes back, and every track ends at a gap in the stream
+(`max_gap_s`); ids count up from 1 in a run and are never reused. One track and one detection are
 always paired: the SLQE's own gate then judges each part, as it does for a single person.
 
 The primary person (the one `/pose4d/skeleton` carries): of the confirmed tracks seen this
@@ -60,6 +61,8 @@ class TrackingConfig:
     max_speed_mps : how fast an unseen person may have gone, metres a second (the spread of an
         unseen track's position grows with it).
     gate_chi2 : largest squared Mahalanobis distance of an assigned pair (3 degrees of freedom).
+    max_gap_s : a gap between two frames longer than this (or a stamp going back) ends every
+        track, seconds: `SlqeConfig.max_dt_s`, after which each SLQE restarts anyway.
     birth_score : while another track is confirmed, a detection starts or grows a tentative
         track only when its part model score (`JointSet.score`, the SVM's: 0 is its boundary)
         is at least this; a confirmed track takes any. A region that passes the person-size
@@ -80,12 +83,13 @@ class TrackingConfig:
     max_speed_mps: float = 1.5
     gate_chi2: float = 16.0
     birth_score: float = 2.0
+    max_gap_s: float = 0.5
 
     def __post_init__(self) -> None:
         if self.max_people < 1 or self.confirm_frames < 1:
             raise ValueError(f'max_people and confirm_frames must be >= 1, got '
                              f'{self.max_people} and {self.confirm_frames}')
-        for name in ('max_unseen_s', 'torso_std_m', 'max_speed_mps', 'gate_chi2'):
+        for name in ('max_unseen_s', 'torso_std_m', 'max_speed_mps', 'gate_chi2', 'max_gap_s'):
             if not getattr(self, name) > 0:
                 raise ValueError(f'{name} must be > 0, got {getattr(self, name)}')
 
@@ -253,6 +257,7 @@ class PeopleTracker:
         self.make = make
         self.config = config or TrackingConfig()
         self.tracks: list[_Track] = []
+        self.last_s: float | None = None
         self.next_id = 1
         self.born: list[int] = []
         self.ended: list[int] = []
@@ -261,6 +266,7 @@ class PeopleTracker:
         """End every track (ids still count on)."""
         self.ended = [t.id for t in self.tracks if t.id]
         self.tracks = []
+        self.last_s = None
 
     def warm_up(self, intrinsics: Intrinsics) -> None:
         """Track two people for a few frames (the first frames' paths run once), then forget
@@ -291,17 +297,27 @@ class PeopleTracker:
         for det in detections:
             checker.check(det, intrinsics)
         self.born, self.ended = [], []
+        # a gap in the stream (no frame for over `max_gap_s`: a new video, a paused camera)
+        # ends every track, as the SLQE restarts after one; a track unseen longer than
+        # `max_unseen_s` while frames came has ended and is matched no more
+        gap = self.last_s is not None and not 0.0 <= stamp_s - self.last_s <= cfg.max_gap_s
+        self.last_s = stamp_s
+        ended = [t for t in self.tracks if gap or stamp_s - t.seen_s > cfg.max_unseen_s]
+        self.ended = [t.id for t in ended if t.id]
+        self.tracks = [t for t in self.tracks if t not in ended]
         points = [torso(d) for d in detections]
         pairs = assign(self._cost(detections, points, stamp_s), cfg.gate_chi2)
         matched = {j: i for i, j in pairs}
-        any_confirmed = any(t.id for t in self.tracks)
-        # with nobody tracked, the first person in view is trusted (as a single-person tracker)
-        born = self._born if any_confirmed else (lambda det: True)
+        # with nobody tracked, the first person in view (the foreground's best region) is
+        # trusted at once, as the single-person tracker trusts its one detection; the others
+        # are born as beside a tracked person
+        trusted = -1 if any(t.id for t in self.tracks) else min(
+            (j for j in range(len(detections)) if j not in matched), default=-1)
         for j, det in enumerate(detections):
-            if j in matched and not self.tracks[matched[j]].id and not born(det):
+            if j in matched and not self.tracks[matched[j]].id and not self._born(det):
                 del matched[j]  # a tentative track's detection must be a person's
             if j not in matched and (_finite(points[j][0]) or _finite(torso_px(det)[0])) \
-                    and born(det):
+                    and (j == trusted or self._born(det)):
                 stage = self.make()
                 self.tracks.append(_Track(stage, names=stage.check(det, intrinsics).names))
                 matched[j] = len(self.tracks) - 1
@@ -312,7 +328,7 @@ class PeopleTracker:
             track.names = out.names
             if i in seen:
                 self._seen(track, out, stamp_s)
-                if not track.id and (track.hits >= cfg.confirm_frames or not any_confirmed):
+                if not track.id and (track.hits >= cfg.confirm_frames or seen[i] == trusted):
                     track.id, self.next_id = self.next_id, self.next_id + 1
                     self.born.append(track.id)
             track.last = _with_track_id(out, track.id)
