@@ -140,7 +140,6 @@ def place_people(joints: Sequence[NDArray[np.float64]], scene: Scene, rng: np.ra
     furniture = scene.footprints(('furniture',))
     occluders = scene.footprints(('occluder',))
     x0, x1, y0, y1 = people_zone(staging)
-    intr = scene.intrinsics
     t = np.arange(f) / FPS if times is None else np.asarray(times, dtype=np.float64)
     d_lo, d_hi = staging.distance_m
     edges = np.linspace(d_lo, d_hi, n + 1)
@@ -179,18 +178,7 @@ def place_people(joints: Sequence[NDArray[np.float64]], scene: Scene, rng: np.ra
             rot = np.array([[c, -s], [s, c]])
             p = (hips[k] - centres[k]) @ rot.T + np.array([lateral[k], dist[k]])
             p[:, 0] += drift[k]
-            bad = ~((p[:, 0] > x0) & (p[:, 0] < x1) & (p[:, 1] > y0) & (p[:, 1] < y1))
-            for fx0, fx1, fy0, fy1 in furniture:
-                bad |= ((p[:, 0] > fx0 - 0.35) & (p[:, 0] < fx1 + 0.35)
-                        & (p[:, 1] > fy0 - 0.35) & (p[:, 1] < fy1 + 0.35))
-            for _, _, _, oy1 in occluders:
-                bad |= p[:, 1] < oy1 + 0.45
-            for side in (-HALF_WIDTH_M, HALF_WIDTH_M):
-                edge = np.column_stack([p[:, 0] + side, p[:, 1], np.full(f, hip_z)])
-                o = scene.to_optical(edge)
-                u = intr.cx + intr.fx * o[:, 0] / np.maximum(o[:, 2], 1e-3)
-                bad |= (o[:, 2] < 0.5) | (u < 0) | (u > intr.width - 1)
-            cost += int(bad.sum())
+            cost += _misplaced(p, (x0, x1, y0, y1), furniture, occluders, scene, hip_z)
             placed.append((rot, p))
         for a in range(n):
             for b in range(a + 1, n):
@@ -210,6 +198,26 @@ def place_people(joints: Sequence[NDArray[np.float64]], scene: Scene, rng: np.ra
         room[..., 0] += drift[k][:, None]
         out.append(room)
     return out
+
+
+def _misplaced(p: NDArray[np.float64], zone: tuple[float, float, float, float],
+               furniture: list, occluders: list, scene: Scene, hip_z: float) -> int:
+    """Frames in which a person's hips `p` ((F, 2) room x, y) leave `zone`, come within
+    0.35 m of furniture or 0.45 m behind an occluder, or their body leaves the view."""
+    x0, x1, y0, y1 = zone
+    intr = scene.intrinsics
+    bad = ~((p[:, 0] > x0) & (p[:, 0] < x1) & (p[:, 1] > y0) & (p[:, 1] < y1))
+    for fx0, fx1, fy0, fy1 in furniture:
+        bad |= ((p[:, 0] > fx0 - 0.35) & (p[:, 0] < fx1 + 0.35)
+                & (p[:, 1] > fy0 - 0.35) & (p[:, 1] < fy1 + 0.35))
+    for _, _, _, oy1 in occluders:
+        bad |= p[:, 1] < oy1 + 0.45
+    for side in (-HALF_WIDTH_M, HALF_WIDTH_M):
+        edge = np.column_stack([p[:, 0] + side, p[:, 1], np.full(len(p), hip_z)])
+        o = scene.to_optical(edge)
+        u = intr.cx + intr.fx * o[:, 0] / np.maximum(o[:, 2], 1e-3)
+        bad |= (o[:, 2] < 0.5) | (u < 0) | (u > intr.width - 1)
+    return int(bad.sum())
 
 
 def _on_floor(joints: NDArray[np.float64], body: Body) -> NDArray[np.float64]:
