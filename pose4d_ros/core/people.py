@@ -70,10 +70,11 @@ class TrackingConfig:
         become a second person.
 
     `confirm_frames` and `birth_score` were chosen on validation renders of two people
-    (training subjects s01-s06, `pose4d synth --people 2 --seed 201`, 720 frames) by
-    `tools/people_sweep.py`: IDF1 0.974 and no false skeleton at (2, 2.0) and (3, 2.0), 0.973
-    at birth scores 1-3 with 2-3 frames; 0.945 and 114 false skeletons per 1000 frames at
-    birth score 0, 0.955 and twice the misses at 4 or more (pose4d_ros/models/README.md).
+    (training subjects s01-s06, `valid60_people2` of `make results`, 720 frames) by
+    `tools/people_sweep.py` (`docs/results/people_sweep_valid60_people2.json`): 2 frames and
+    1.0 gave IDF1 0.954, MOTA 0.924, no false skeleton (2.0: 0.954, 0.919; 0: 140 false
+    skeletons per 1000 frames; 4 and more, or 3-5 frames: more people missed at a track's
+    start); on renders of one person no setting made a second track.
     """
 
     max_people: int = 4
@@ -82,7 +83,7 @@ class TrackingConfig:
     torso_std_m: float = 0.15
     max_speed_mps: float = 1.5
     gate_chi2: float = 16.0
-    birth_score: float = 2.0
+    birth_score: float = 1.0
     max_gap_s: float = 0.5
 
     def __post_init__(self) -> None:

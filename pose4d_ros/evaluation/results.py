@@ -179,11 +179,12 @@ def pose4d_executable() -> str:
 
 
 def _run(cmd: Sequence[str]) -> float:
-    """Run a `pose4d ...` command, its output passed through; its wall time, seconds.
-    RuntimeError when it fails."""
+    """Run a `pose4d ...` command (or another program's), its output passed through; its wall
+    time, seconds. RuntimeError when it fails."""
     log('$ ' + shlex.join(cmd))
     t0 = time.monotonic()
-    done = subprocess.run([pose4d_executable(), *cmd[1:]], check=False)
+    argv = [pose4d_executable(), *cmd[1:]] if cmd[0] == 'pose4d' else list(cmd)
+    done = subprocess.run(argv, check=False)
     if done.returncode != 0:
         raise RuntimeError(f'{shlex.join(cmd)}: exit status {done.returncode}')
     return time.monotonic() - t0
