@@ -69,7 +69,6 @@ def test_each_stage_killed_and_restarted_mid_replay(ros, tmp_path):
     from rclpy.qos import QoSProfile, ReliabilityPolicy
     from sensor_msgs.msg import Image
 
-    from pose4d_ros.nodes import qos
     from pose4d_ros.nodes.convert import joints_from_msg, stamp_to_ns
 
     sample = default_bag()
@@ -80,7 +79,8 @@ def test_each_stage_killed_and_restarted_mid_replay(ros, tmp_path):
             else Image
         ros.node.create_subscription(
             kind, topic, lambda m, t=topic: arrivals[t].append((time.time(), m)),
-            qos.OUTPUT_QOS if kind is JointArray else QoSProfile(
+            QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE) if kind is JointArray
+            else QoSProfile(
                 depth=10, reliability=ReliabilityPolicy.BEST_EFFORT))
     skeletons = arrivals['pose4d/skeleton']
     recorded = tmp_path / 'recorded'
@@ -148,16 +148,18 @@ def test_each_stage_killed_and_restarted_mid_replay(ros, tmp_path):
     hit, counted = correct(pred, gt, visible, alpha=0.1)
     pck = hit[counted].mean()
     assert pck >= 0.9, pck
-    # the recorder lost nothing it was sent: its bag holds the skeletons this test received, in
-    # order, from its first to its last, except those a restarted ik published before the
-    # recorder had matched the new publisher (within 2 s of the ik being up again)
+    # the recorder lost nothing it was sent: every skeleton this test received from the
+    # recorder's first on is in its bag, in order, except those a restarted ik published before
+    # the recorder had matched the new publisher (within 2 s of the ik being up again); the bag
+    # may hold more (this test's own reader may miss one under load)
     kept = [stamp_to_ns(bag.deserialize(m).header.stamp) for m in bag.read_messages(recorded)]
     sent = [(t, stamp_to_ns(m.header.stamp)) for t, m in skeletons]
     first = next(i for i, (_, s) in enumerate(sent) if s == kept[0])
-    k = 0
+    j = 0
     for t, stamp in sent[first:]:
-        if k < len(kept) and kept[k] == stamp:
-            k += 1
-        elif k < len(kept):
+        ahead = kept[j:j + 30]  # the bag loops over 45 stamps: look only a little ahead
+        if stamp in ahead:
+            j += ahead.index(stamp) + 1
+        else:
             assert 0 <= t - restarted['ik'] <= 2.0, f'the recorder lost {stamp} ns'
-    assert k == len(kept), f'the recorder kept {len(kept) - k} skeletons out of order'
+
