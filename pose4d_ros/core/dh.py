@@ -52,6 +52,7 @@ from pose4d_ros.core.kinematics import (
     IkResult,
     body_frame,
     circle_points,
+    ik_inputs,
     middle_joint_circle,
     prior_direction,
     solve_limb,
@@ -305,20 +306,7 @@ def infer_middle_joints_dh(depth_m: NDArray[np.floating] | None, points: NDArray
                            limbs: Sequence[str] | None = None) -> DhResult:
     """Both elbows and both knees of one frame by the DH chains: the arguments and the result
     as `kinematics.infer_middle_joints`, plus `limits` and the joint angles."""
-    pts = np.asarray(points, dtype=np.float64)
-    if pts.ndim != 2 or pts.shape != (len(names), 3):
-        raise ValueError(f'points must have shape ({len(names)}, 3), got {pts.shape}')
-    if depth_m is not None:
-        depth_m = np.asarray(depth_m)
-        if depth_m.ndim != 2:
-            raise ValueError(f'depth image must be 2-D, got shape {depth_m.shape}')
-        if mask is not None and np.shape(mask) != depth_m.shape:
-            raise ValueError(f'mask {np.shape(mask)} and depth {depth_m.shape} differ in shape')
-    index = {n: i for i, n in enumerate(names)}
-    for limb, (a, _, b) in LIMBS.items():
-        for joint in (a, b):
-            if joint not in index:
-                raise ValueError(f'joint {joint!r} (needed for {limb}) not in names {names}')
+    pts, depth_m, index = ik_inputs(points, depth_m, names, mask)
 
     def get(name: str) -> NDArray[np.float64]:
         return pts[index[name]] if name in index else np.full(3, np.nan)

@@ -601,6 +601,29 @@ class IkResult:
     flags: NDArray[np.uint8]
 
 
+def ik_inputs(points: NDArray[np.floating], depth_m: NDArray[np.floating] | None,
+              names: Sequence[str], mask: NDArray[np.bool_] | None
+              ) -> tuple[NDArray[np.float64], NDArray | None, dict[str, int]]:
+    """The checked inputs of an IK solver (`infer_middle_joints`, `dh.infer_middle_joints_dh`):
+    the points as float64, the depth image as an array, each name's row; ValueError naming what
+    is wrong (shapes, a shoulder, wrist, hip or ankle missing from `names`)."""
+    pts = np.asarray(points, dtype=np.float64)
+    if pts.ndim != 2 or pts.shape != (len(names), 3):
+        raise ValueError(f'points must have shape ({len(names)}, 3), got {pts.shape}')
+    if depth_m is not None:
+        depth_m = np.asarray(depth_m)
+        if depth_m.ndim != 2:
+            raise ValueError(f'depth image must be 2-D, got shape {depth_m.shape}')
+        if mask is not None and np.shape(mask) != depth_m.shape:
+            raise ValueError(f'mask {np.shape(mask)} and depth {depth_m.shape} differ in shape')
+    index = {n: i for i, n in enumerate(names)}
+    for limb, (a, _, b) in LIMBS.items():
+        for joint in (a, b):
+            if joint not in index:
+                raise ValueError(f'joint {joint!r} (needed for {limb}) not in names {names}')
+    return pts, depth_m, index
+
+
 def infer_middle_joints(depth_m: NDArray[np.floating] | None, points: NDArray[np.floating],
                         intrinsics: Intrinsics | None,
                         lengths: LimbLengths | Mapping[str, tuple[float, float]], *,
@@ -622,20 +645,7 @@ def infer_middle_joints(depth_m: NDArray[np.floating] | None, points: NDArray[np
     config : parameters.
     limbs : the limbs to solve (`LIMBS` keys, in `LIMBS` order in the result); default all.
     """
-    pts = np.asarray(points, dtype=np.float64)
-    if pts.ndim != 2 or pts.shape != (len(names), 3):
-        raise ValueError(f'points must have shape ({len(names)}, 3), got {pts.shape}')
-    if depth_m is not None:
-        depth_m = np.asarray(depth_m)
-        if depth_m.ndim != 2:
-            raise ValueError(f'depth image must be 2-D, got shape {depth_m.shape}')
-        if mask is not None and np.shape(mask) != depth_m.shape:
-            raise ValueError(f'mask {np.shape(mask)} and depth {depth_m.shape} differ in shape')
-    index = {n: i for i, n in enumerate(names)}
-    for limb, (a, _, b) in LIMBS.items():
-        for joint in (a, b):
-            if joint not in index:
-                raise ValueError(f'joint {joint!r} (needed for {limb}) not in names {names}')
+    pts, depth_m, index = ik_inputs(points, depth_m, names, mask)
 
     def get(name: str) -> NDArray[np.float64]:
         return pts[index[name]] if name in index else np.full(3, np.nan)
