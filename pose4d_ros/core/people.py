@@ -259,6 +259,7 @@ class PeopleTracker:
         self.config = config or TrackingConfig()
         self.tracks: list[_Track] = []
         self.last_s: float | None = None
+        self._spare: object | None = None
         self.next_id = 1
         self.born: list[int] = []
         self.ended: list[int] = []
@@ -294,7 +295,7 @@ class PeopleTracker:
         cfg = self.config
         # every detection checked before anything changes: a frame with one the SLQE would
         # refuse is refused whole (ValueError), and the tracks are untouched
-        checker = self.tracks[0].stage if self.tracks else self.make()
+        checker = self.tracks[0].stage if self.tracks else self._checker()
         for det in detections:
             checker.check(det, intrinsics)
         self.born, self.ended = [], []
@@ -333,15 +334,16 @@ class PeopleTracker:
                     track.id, self.next_id = self.next_id, self.next_id + 1
                     self.born.append(track.id)
             track.last = _with_track_id(out, track.id)
-        keep = []
-        for track in self.tracks:
-            unseen = stamp_s - track.seen_s
-            if track.id and unseen > cfg.max_unseen_s:
-                self.ended.append(track.id)
-            elif track.id or unseen <= 0.0:  # a tentative track must be matched every frame
-                keep.append(track)
-        self.tracks = keep
+        # a tentative track must be matched every frame (confirmed ones end at the next step
+        # once unseen over `max_unseen_s`)
+        self.tracks = [t for t in self.tracks if t.id or t.seen_s == stamp_s]
         return [t.last for t in self._ordered(stamp_s)]
+
+    def _checker(self) -> object:
+        """A stage to check detections with while there is no track (made once)."""
+        if self._spare is None:
+            self._spare = self.make()
+        return self._spare
 
     def _born(self, det: JointSet) -> bool:
         return not det.score < self.config.birth_score  # NaN: no score to judge by

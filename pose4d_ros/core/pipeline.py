@@ -117,8 +117,7 @@ class FramePipeline:
         self._lap(clock)
         skeleton = self.ik.step(tracked, depth_mm, intrinsics)
         self._lap(clock)
-        cpu_s, wall_s = ({stage: clock[k + 1][c] - clock[k][c] for k, stage in enumerate(STAGES)}
-                         for c in (0, 1))
+        cpu_s, wall_s = _stage_times(clock)
         return FrameResult(fg, color_m, depth_mm, parts, tracked, skeleton, cpu_s, wall_s)
 
     def _step_people(self, color: NDArray[np.uint8], depth_m: NDArray[np.floating],
@@ -137,8 +136,7 @@ class FramePipeline:
         self._lap(clock)
         skeletons = multi.ik.step(tracked, depth_mm, intrinsics)
         self._lap(clock)
-        cpu_s, wall_s = ({stage: clock[k + 1][c] - clock[k][c] for k, stage in enumerate(STAGES)}
-                         for c in (0, 1))
+        cpu_s, wall_s = _stage_times(clock)
         fg = found[0] if found else None
         return FrameResult(
             fg, color_m, depth_mm,
@@ -209,3 +207,9 @@ class PeopleStages:
                                   depth_std_m=tracker.depth_std_m)
         for stage in self.ik.stages.values():
             stage.configure(lengths=ik.defaults, learn=ik.learn)
+
+
+def _stage_times(clock: list[tuple[float, float]]) -> tuple[dict[str, float], dict[str, float]]:
+    """Each stage's CPU and wall seconds from the (CPU, wall) times at their boundaries."""
+    return tuple({stage: clock[k + 1][c] - clock[k][c] for k, stage in enumerate(STAGES)}
+                 for c in (0, 1))
