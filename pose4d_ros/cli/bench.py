@@ -43,12 +43,8 @@ BLAS is set to `--blas-threads` (1 by default, the measured best; see `core.thre
 from __future__ import annotations
 
 import argparse
-import cProfile
 import os
-import pstats
-import time
 from pathlib import Path
-from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -58,17 +54,12 @@ from pose4d_ros.core.dpm.model import load_model
 from pose4d_ros.core.dpm.scale import ScaleConfig
 from pose4d_ros.core.files import write_json
 from pose4d_ros.core.threads import set_blas_threads
-from pose4d_ros.datasets.frame import Frame
 from pose4d_ros.datasets.sources import load_frames, source_kind
 from pose4d_ros.evaluation.pipeline import ms_stats
 from pose4d_ros.evaluation.tables import default_models
 from pose4d_ros.models import model_path
 from pose4d_ros.peer import PEERS, MediaPipePeer
 from pose4d_ros.util.machine import machine
-from pose4d_ros.util.progress import progress
-
-if TYPE_CHECKING:
-    from pose4d_ros.core.pipeline import FramePipeline
 
 
 def add_parser(subparsers: argparse._SubParsersAction) -> None:
@@ -113,6 +104,7 @@ def run(args: argparse.Namespace) -> int:
     from pose4d_ros.core.people import TrackingConfig
     from pose4d_ros.core.pipeline import STAGES, FramePipeline
     from pose4d_ros.core.stages import DetectorStage
+    from pose4d_ros.evaluation.bench import count_calls, time_peer, time_stages
 
     threads = set_blas_threads(args.blas_threads)
     kind = source_kind(args.source)
@@ -135,27 +127,9 @@ def run(args: argparse.Namespace) -> int:
                               scale=ScaleConfig(factors=args.person_scales)),
                 people=TrackingConfig() if several else None)
 
-        pipeline = new_pipeline()
-        # per clock: each stage's ms per frame, and their sum (one frame through all four)
-        ms = {clock: {k: [] for k in (*STAGES, 'total')} for clock in ('cpu', 'wall')}
-        by_people: dict[int, dict[str, list[float]]] = {}  # people tracked -> stage -> CPU ms
-        for i, f in enumerate(progress(frames, 'bench')):
-            if i == min(args.warmup, len(frames) - 1):
-                threads = set_blas_threads(args.blas_threads)  # also the libraries loaded since
-            out = pipeline.step(f.color, f.depth_m if use_depth else None, f.intrinsics,
-                                f.stamp_ns * 1e-9)
-            if i < args.warmup:
-                continue
-            for clock, times in (('cpu', out.cpu_s), ('wall', out.wall_s)):
-                for name in STAGES:
-                    if name != 'foreground' or use_depth:
-                        ms[clock][name].append(times[name] * 1e3)
-                ms[clock]['total'].append(sum(times.values()) * 1e3)
-            if several:
-                group = by_people.setdefault(len(out.people), {k: [] for k in (*STAGES, 'total')})
-                for name in STAGES:
-                    group[name].append(out.cpu_s[name] * 1e3)
-                group['total'].append(sum(out.cpu_s.values()) * 1e3)
+        timed = time_stages(new_pipeline(), frames, args.warmup, use_depth=use_depth,
+                            several=several, after_warmup=lambda: threads.update(
+                                set_blas_threads(args.blas_threads)))
         calls = count_calls(new_pipeline(), frames, args.warmup, use_depth) if args.calls \
             else None
         if peer is not None:
@@ -170,16 +144,10 @@ def run(args: argparse.Namespace) -> int:
     print(f"threads: numba {m['numba_threads']} (no parallel kernels), BLAS {m['blas_threads']}"
           f" (set to {args.blas_threads}: {', '.join(f'{v}' for v in threads.values())})")
     print(f'model: {model.channels}, {model.n_parts} parts x {model.n_types} types; '
-          f'{len(ms["cpu"]["detector"])} frames of {w}x{h} after {args.warmup} warm-up')
-    out: dict = {'stages_ms': {k: ms_stats(v) for k, v in ms['cpu'].items()},
-                 'wall_ms': {k: ms_stats(v) for k, v in ms['wall'].items()},
-                 'people': 'several' if several else 'one'}
+          f'{max(len(frames) - args.warmup, 0)} frames of {w}x{h} after {args.warmup} warm-up')
+    out: dict = {**timed, 'people': 'several' if several else 'one'}
     if calls is not None:
         out['stages'] = {k: {'calls_per_frame': v} for k, v in calls.items()}
-    if several:
-        out['people_ms'] = {str(n): {'frames': len(g['total']),
-                                     **{k: ms_stats(v) for k, v in g.items()}}
-                            for n, g in sorted(by_people.items())}
     lines = {k: (out['stages_ms'][k], out['wall_ms'][k]) for k in out['stages_ms']}
     if peer is not None:
         out['peer'] = peer.description
@@ -206,38 +174,6 @@ def run(args: argparse.Namespace) -> int:
         out['graph'] = graph_bench(Path(args.source), args)
     write_json(args.json, out)
     return 0
-
-
-def count_calls(pipeline: FramePipeline, frames: list[Frame], warmup: int, use_depth: bool
-                ) -> dict[str, float]:
-    """Python-level calls per frame of each stage and of all of them (`total`): cProfile's
-    total call count over the frames after `warmup`, one profiler per stage."""
-    from pose4d_ros.core.pipeline import STAGES
-
-    profilers = {name: cProfile.Profile() for name in STAGES}
-    start = min(warmup, len(frames) - 1)
-    for i, f in enumerate(progress(frames, 'calls')):
-        pipeline.profilers = profilers if i >= start else None
-        pipeline.step(f.color, f.depth_m if use_depth else None, f.intrinsics,
-                      f.stamp_ns * 1e-9)
-    n = len(frames) - start
-    calls = {name: round(pstats.Stats(p).total_calls / n, 1) if p.getstats() else 0.0
-             for name, p in profilers.items()}
-    calls['total'] = round(sum(calls.values()), 1)
-    return calls
-
-
-def time_peer(peer: MediaPipePeer, frames: list[Frame], warmup: int
-              ) -> tuple[list[float], list[float]]:
-    """The peer's CPU and wall ms per frame after `warmup` frames, the frames one video."""
-    cpu, wall = [], []
-    for i, f in enumerate(progress(frames, peer.name)):
-        start = time.perf_counter()
-        peer.step(f.color, f.depth_m, f.intrinsics, new_video=i == 0)
-        if i >= warmup:
-            wall.append((time.perf_counter() - start) * 1e3)
-            cpu.append(peer.last_cpu_s * 1e3)
-    return cpu, wall
 
 
 def graph_bench(bag_path: Path, args: argparse.Namespace) -> dict:

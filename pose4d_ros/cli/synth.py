@@ -34,7 +34,7 @@ from pathlib import Path
 from pose4d_ros import __version__
 from pose4d_ros.core.camera import cad60_intrinsics
 from pose4d_ros.core.files import replace_dir
-from pose4d_ros.synth.takes import parse_takes, plan_actions, select_sources
+from pose4d_ros.synth.takes import plan_actions
 
 
 def add_parser(subparsers: argparse._SubParsersAction) -> None:
@@ -150,7 +150,8 @@ def run(args: argparse.Namespace) -> int:
     several = args.people > 1
     staging = _staging(args)
     intrinsics = cad60_intrinsics(args.width, args.height)
-    motions, names, skipped = _motions(args)
+    motions, names, skipped = video.load_motions(args.utkinect, args.msraction3d,
+                                                 args.takes, args.actions)
     plans = [plan for m in motions for plan in video.plan_videos(
         m, seed=args.seed, videos=args.videos_per_take, frames=args.frames, stride=args.stride,
         start_s=args.start, actions=plan_actions(args.actions))]
@@ -174,7 +175,7 @@ def run(args: argparse.Namespace) -> int:
                 person_dir.mkdir(exist_ok=True)
                 n_bytes += video.write_video(job, person_dir, progress=bar.update)
                 labels.setdefault(plan.subject, {})[plan.video_id] = plan.activity
-                records.append(_record(job, person_dir, several))
+                records.append(video.video_record(job, person_dir))
         for subject, videos in labels.items():
             cad60.write_activity_labels(tmp / f'data{subject}' / 'activityLabel.txt', videos)
         info = _info(args, names, staging, records, skipped, crossing)
@@ -201,28 +202,6 @@ def _staging(args: argparse.Namespace):
         turn_deg=tuple(args.turn or default.turn_deg), arm_jitter_deg=args.arm_jitter)
 
 
-def _motions(args: argparse.Namespace) -> tuple[list, list[str], list[str]]:
-    """The takes' motion, their names, and the MSR Action3D sequences skipped (empty)."""
-    from pose4d_ros.datasets.msraction3d import list_sequences
-    from pose4d_ros.datasets.utkinect import list_takes
-    from pose4d_ros.synth import video
-
-    if args.msraction3d is None:  # as it always was
-        available = [p.name[len('joints_'):-len('.txt')] for p in list_takes(args.utkinect)]
-        names = parse_takes(args.takes, available)
-        return video.load_takes(args.utkinect, names), names, []
-    ut = [] if args.utkinect is None else [
-        p.name[len('joints_'):-len('.txt')] for p in list_takes(args.utkinect)]
-    msr = [p.name[:-len('_skeleton3D.txt')] for p in list_sequences(args.msraction3d)]
-    if not msr:
-        raise ValueError(f'--msraction3d {args.msraction3d}: no '
-                         'aAA_sSS_eEE_skeleton3D.txt files')
-    ut_names, msr_names = select_sources(args.takes, args.actions, ut, msr)
-    motions = video.load_takes(args.utkinect, ut_names) if ut_names else []
-    msr_motions, skipped = video.load_msr_takes(args.msraction3d, msr_names)
-    return motions + msr_motions, ut_names + [m.name for m in msr_motions], skipped
-
-
 def _job(args: argparse.Namespace, plan, crosses: bool, motions: list, intrinsics, staging,
          bodies: dict):
     """A planned video, prepared to render (its body the subject's with --body-per subject)."""
@@ -245,27 +224,6 @@ def _job(args: argparse.Namespace, plan, crosses: bool, motions: list, intrinsic
     return job if args.alone is None else video.alone(job, args.alone)
 
 
-def _record(job, person_dir: Path, several: bool) -> dict:
-    """synth.json's account of a video."""
-    import numpy as np
-
-    from pose4d_ros.synth.render import HC
-
-    plan = job.plan
-    record = {
-        'video': f'data{plan.subject}/{plan.video_id}', 'take': plan.take,
-        'activity': plan.activity, 'start_frame_30fps': plan.start,
-        'stride': plan.stride, 'frames': plan.n_frames,
-        'stature_m': round(job.body.stature_m, 3),
-        'distance_m': round(float(np.median(job.poses[:, HC, 2])), 3),
-        'occluder': any(b.kind == 'occluder' for b in job.scene.boxes),
-        'camera_height_m': round(job.scene.cam_height_m, 3),
-    }
-    if several and job.companions:
-        record.update(_people_record(job, person_dir))
-    return record
-
-
 def _info(args: argparse.Namespace, names: list[str], staging, records: list[dict],
           skipped: list[str], crossing: float) -> dict:
     """synth.json: the command's parameters and every video's record."""
@@ -286,24 +244,3 @@ def _info(args: argparse.Namespace, names: list[str], staging, records: list[dic
     if args.people > 1:  # a one-person set's synth.json stays as it always was
         info.update({'people': args.people, 'crossing': crossing})
     return {**info, 'videos': records}
-
-
-def _people_record(job, person_dir: Path) -> dict:
-    """synth.json's account of a several-person video: the crossing, and per person its take,
-    window, body, distance and the frames in which it is not seen."""
-    import numpy as np
-
-    from pose4d_ros.datasets import cad60
-    from pose4d_ros.synth.render import HC
-
-    persons = [(job.plan.take, job.plan.start, job.body, job.poses)] + [
-        (c.take, c.start, c.body, c.poses) for c in job.companions]
-    out = []
-    for k, (take, start, body, poses) in enumerate(persons, start=1):
-        skeleton = cad60.read_skeleton(
-            cad60.person_skeleton_path(person_dir, job.plan.video_id, k))
-        out.append({'person': k, 'take': take, 'start_frame_30fps': int(start),
-                    'stature_m': round(body.stature_m, 3),
-                    'distance_m': round(float(np.median(poses[:, HC, 2])), 3),
-                    'unseen_frames': int((skeleton.joint_conf[:, 0] == 0).sum())})
-    return {'crossing': job.crossing, 'people': out}

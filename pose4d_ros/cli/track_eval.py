@@ -15,13 +15,10 @@ import argparse
 import math
 import sys
 import time
-from dataclasses import replace
 from pathlib import Path
 
 from pose4d_ros import __version__
 from pose4d_ros.core.files import write_json
-from pose4d_ros.core.kinematics import IkConfig
-from pose4d_ros.core.slqe import CvConfig, SlqeConfig
 from pose4d_ros.evaluation import ik, tracking
 
 
@@ -122,45 +119,20 @@ def run(args: argparse.Namespace) -> int:
     say(f'{len(train)} training segments ({sum(len(s.times) for s in train)} frames), '
         f'{len(test)} test segments ({sum(len(s.times) for s in test)} frames)')
 
-    # The shipped defaults were tuned on subjects s01-s06, seed 0 (`--tune` redoes it).
-    slqe, cv, cvg = SlqeConfig(), CvConfig(), tracking.GATED_CV
     report: dict = {'version': __version__, 'seed': args.seed, 'utkinect': str(args.utkinect),
                     'train_subjects': train_s, 'test_subjects': test_s,
                     'corruption': tracking.config_dict(tracking.Corruption())}
-    if args.tune:
-        say('tuning the trackers on the training subjects (minutes)')
-        slqe, cv, cvg, log = tracking.tune_tracking(train, seed=args.seed, progress=say)
-        report['tracking_tuning_log'] = log
-    report['tracker_configs'] = {'slqe': tracking.config_dict(slqe),
-                                 'cv': tracking.config_dict(cv),
-                                 'cv_gated': tracking.config_dict(cvg)}
-    methods = tracking.default_methods(slqe, cv, cvg, ablations=not args.no_ablations)
-    tables = {}
-    for name, segs in () if args.no_tracking else (('train', train), ('test', test)):
-        say(f'tracking on the {name} subjects')
-        tables[name] = tracking.evaluate_tracking(segs, methods, seed=args.seed)
+    report.update(tracking={}, tracking_targets={})
     if not args.no_tracking:
-        say('tracking on the test subjects at the recorded, irregular frame times')
         native = tracking.load_segments(args.utkinect, test_s, native=True)
-        tables['test_native_dt'] = tracking.evaluate_tracking(native, methods, seed=args.seed)
-    report['tracking'] = tables
-    for name, res in tables.items():
-        _print_tracking(f'Tracking, {name}: mean pixel error on the detected part-frames',
-                        res['detected_frames'])
-        _print_tracking(f'Tracking, {name}: mean pixel error on all part-frames',
-                        res['all_frames'])
-    targets = {}
-    for name in () if args.no_tracking else ('train', 'test'):
-        det = tables[name]['detected_frames']
-        red = tracking.reduction(det['slqe'], det['input'])
-        targets[name] = {'slqe_reduction_vs_input': red,
-                         'slqe_beats_cv': det['slqe']['average'] < det['cv']['average'],
-                         'slqe_beats_cv_gated':
-                             det['slqe']['average'] < det['cv_gated']['average'],
-                         'meets_target': red >= 0.25 and
-                         det['slqe']['average'] < det['cv']['average']}
-    report['tracking_targets'] = targets
-
+        report.update(tracking.tracking_report(
+            train, test, native, seed=args.seed, tune=args.tune,
+            ablations=not args.no_ablations, progress=say))
+        for name, res in report['tracking'].items():
+            _print_tracking(f'Tracking, {name}: mean pixel error on the detected part-frames',
+                            res['detected_frames'])
+            _print_tracking(f'Tracking, {name}: mean pixel error on all part-frames',
+                            res['all_frames'])
     if not args.no_ik:
         sets = {'train': train, 'test': test}
         if args.msraction3d is not None:
@@ -168,75 +140,14 @@ def run(args: argparse.Namespace) -> int:
             sets['msr_test'] = tracking.load_msr_segments(args.msraction3d, test_s)
             say(f"MSR Action3D: {len(sets['msr_train'])} training and "
                 f"{len(sets['msr_test'])} test segments")
-        report['ik'] = _run_ik(args, sets, say)
+        methods = ik.IK_METHODS if args.ik_method == 'both' else (args.ik_method,)
+        report['ik'] = ik.ik_tables(sets, methods=methods, tune=args.tune, seed=args.seed,
+                                    stride=args.ik_stride, depth_stride=args.depth_stride,
+                                    render=not args.no_render, progress=say)
+        for name in sets:
+            _print_ik(f'IK, {name} subjects: mean 3-D error of the inferred joints, mm',
+                      report['ik'][name])
     report['seconds'] = time.perf_counter() - t0
     write_json(args.json, report, indent=1, default=_jsonable)
     say(f'wrote {args.json} ({report["seconds"]:.0f} s)')
     return 0
-
-
-def _run_ik(args: argparse.Namespace, sets: dict[str, list], say) -> dict:
-    config = IkConfig()
-    out: dict = {}
-    train = sets['train']
-    lengths = {name: {mode: ik.take_lengths(segs, mode) for mode in ('take', 'fixed')}
-               for name, segs in sets.items()}
-    out['lengths'] = {'take': 'per take: medians of the bone lengths over the take\'s frames '
-                              '(elbows/knees visible there)',
-                      'fixed': 'DEFAULT_LIMB_LENGTHS_M (medians of subjects s01-s06)',
-                      'render': 'the rendered body\'s bones (= the take\'s median bones)'}
-    if args.tune:
-        say('fitting the IK prior on the training subjects')
-        prior = ik.fit_swivel_prior(train, lengths['train']['take'], shrink=False)
-        config = replace(config, arm_prior=prior['arm'][0], leg_prior=prior['leg'][0])
-        out['prior_fit'] = prior
-        say('tuning the depth cost on training frames (minutes)')
-        frames = list(ik.ik_frames(train, depth='capsules', stride=30, seed=args.seed))
-        config, log = ik.tune_ik_depth(frames, lengths['train']['take'], config,
-                                       progress=say)
-        out['tuning_log'] = log
-    shrink = ik.SHRUNK_PRIOR
-    if args.tune:
-        fit = ik.fit_swivel_prior(train, lengths['train']['take'], directions={
-            'arm': config.arm_prior, 'leg': config.leg_prior})
-        shrink = (fit['arm'][1], fit['leg'][1])
-    out['config'] = tracking.config_dict(config)
-    out['prior_shrink'] = shrink
-    shrunk = replace(config, prior_shrink=shrink)
-    renderer = None if args.no_render else {
-        name: ik.synth_renderer(segs, seed=args.seed) for name, segs in sets.items()}
-    methods = ik.IK_METHODS if args.ik_method == 'both' else (args.ik_method,)
-    out['methods'] = {'geometric': 'kinematics.infer_middle_joints (rows without prefix)',
-                      'dh': "dh.infer_middle_joints_dh, DhLimits() (rows 'dh: ...')"}
-    for name, segs in sets.items():
-        rows: dict = {}
-        for method in methods:
-            pre = 'dh: ' if method == 'dh' else ''
-            for mode in ('take', 'fixed'):
-                say(f'IK ({method}) on the {name} subjects, prior only, lengths {mode}')
-                rows[f'{pre}prior, lengths {mode}'] = ik.evaluate_ik(
-                    segs, lengths[name][mode], config=config, stride=args.ik_stride,
-                    method=method)
-            if method == 'geometric':
-                rows['prior shrunk, lengths take'] = ik.evaluate_ik(
-                    segs, lengths[name]['take'], config=shrunk, stride=args.ik_stride)
-            say(f'IK ({method}) on the {name} subjects, depth (capsules ray-cast on the real '
-                'skeleton)')
-            rows[f'{pre}depth capsules, lengths take'] = ik.evaluate_ik(
-                segs, lengths[name]['take'], depth='capsules', config=config,
-                stride=args.depth_stride, seed=args.seed, method=method)
-        if renderer is not None:
-            render, render_lengths = renderer[name]
-            say(f'IK on the {name} subjects, synthetic renderer (prior only and depth)')
-            frames = list(ik.ik_frames(segs, depth='render', stride=args.depth_stride,
-                                       seed=args.seed, renderer=render))
-            no_depth = [(take, None, None, truth) for take, _, _, truth in frames]
-            for method in methods:
-                pre = 'dh: ' if method == 'dh' else ''
-                rows[f'{pre}render: prior'] = ik.score_ik(no_depth, render_lengths,
-                                                          config=config, method=method)
-                rows[f'{pre}render: depth'] = ik.score_ik(frames, render_lengths,
-                                                          config=config, method=method)
-        out[name] = rows
-        _print_ik(f'IK, {name} subjects: mean 3-D error of the inferred joints, mm', rows)
-    return out

@@ -28,7 +28,13 @@ from pose4d_ros.core.kinematics import (
 from pose4d_ros.core.limb_lengths import LimbLengths
 from pose4d_ros.core.skeleton import LIMBS, PARTS_10
 from pose4d_ros.datasets.utkinect import UTKINECT_JOINTS
-from pose4d_ros.evaluation.tracking import Segment, name_numbers, part_indices, segment_rng
+from pose4d_ros.evaluation.tracking import (
+    Segment,
+    config_dict,
+    name_numbers,
+    part_indices,
+    segment_rng,
+)
 from pose4d_ros.synth.render import PARENTS, capsule_depth, random_body, render
 
 # Index of each UTKinect joint by name.
@@ -359,3 +365,77 @@ def tune_ik_depth(frames: Sequence[IkFrame], lengths: dict[str, dict[str, tuple]
         for key, values in grids.items():
             best = min((replace(best, **{key: v}) for v in values), key=value)
     return best, log
+
+
+def ik_tables(sets: dict[str, Sequence[Segment]], *, methods: Sequence[str] = IK_METHODS,
+              tune: bool = False, seed: int = 0, stride: int = 3, depth_stride: int = 15,
+              render: bool = True, progress: Callable[[str], None] = lambda msg: None) -> dict:
+    """`pose4d track-eval`'s IK tables: for each named set of segments (its first, 'train', the
+    one `tune` fits the swivel prior and the depth cost on), each solver of `methods` with the
+    prior alone (lengths of the take and fixed), with depth (capsules ray-cast on the real
+    skeleton, every `depth_stride`-th frame) and, if `render`, on the synthetic renderer; with
+    the configuration, the shrunk prior and the lengths used."""
+    say = progress
+    config = IkConfig()
+    out: dict = {}
+    first = next(iter(sets))
+    train = sets[first]
+    lengths = {name: {mode: take_lengths(segs, mode) for mode in ('take', 'fixed')}
+               for name, segs in sets.items()}
+    out['lengths'] = {'take': 'per take: medians of the bone lengths over the take\'s frames '
+                              '(elbows/knees visible there)',
+                      'fixed': 'DEFAULT_LIMB_LENGTHS_M (medians of subjects s01-s06)',
+                      'render': 'the rendered body\'s bones (= the take\'s median bones)'}
+    if tune:
+        say('fitting the IK prior on the training subjects')
+        prior = fit_swivel_prior(train, lengths[first]['take'], shrink=False)
+        config = replace(config, arm_prior=prior['arm'][0], leg_prior=prior['leg'][0])
+        out['prior_fit'] = prior
+        say('tuning the depth cost on training frames (minutes)')
+        frames = list(ik_frames(train, depth='capsules', stride=30, seed=seed))
+        config, log = tune_ik_depth(frames, lengths[first]['take'], config,
+                                       progress=say)
+        out['tuning_log'] = log
+    shrink = SHRUNK_PRIOR
+    if tune:
+        fit = fit_swivel_prior(train, lengths[first]['take'], directions={
+            'arm': config.arm_prior, 'leg': config.leg_prior})
+        shrink = (fit['arm'][1], fit['leg'][1])
+    out['config'] = config_dict(config)
+    out['prior_shrink'] = shrink
+    shrunk = replace(config, prior_shrink=shrink)
+    renderer = None if not render else {
+        name: synth_renderer(segs, seed=seed) for name, segs in sets.items()}
+    out['methods'] = {'geometric': 'kinematics.infer_middle_joints (rows without prefix)',
+                      'dh': "dh.infer_middle_joints_dh, DhLimits() (rows 'dh: ...')"}
+    for name, segs in sets.items():
+        rows: dict = {}
+        for method in methods:
+            pre = 'dh: ' if method == 'dh' else ''
+            for mode in ('take', 'fixed'):
+                say(f'IK ({method}) on the {name} subjects, prior only, lengths {mode}')
+                rows[f'{pre}prior, lengths {mode}'] = evaluate_ik(
+                    segs, lengths[name][mode], config=config, stride=stride,
+                    method=method)
+            if method == 'geometric':
+                rows['prior shrunk, lengths take'] = evaluate_ik(
+                    segs, lengths[name]['take'], config=shrunk, stride=stride)
+            say(f'IK ({method}) on the {name} subjects, depth (capsules ray-cast on the real '
+                'skeleton)')
+            rows[f'{pre}depth capsules, lengths take'] = evaluate_ik(
+                segs, lengths[name]['take'], depth='capsules', config=config,
+                stride=depth_stride, seed=seed, method=method)
+        if renderer is not None:
+            render, render_lengths = renderer[name]
+            say(f'IK on the {name} subjects, synthetic renderer (prior only and depth)')
+            frames = list(ik_frames(segs, depth='render', stride=depth_stride,
+                                       seed=seed, renderer=render))
+            no_depth = [(take, None, None, truth) for take, _, _, truth in frames]
+            for method in methods:
+                pre = 'dh: ' if method == 'dh' else ''
+                rows[f'{pre}render: prior'] = score_ik(no_depth, render_lengths,
+                                                          config=config, method=method)
+                rows[f'{pre}render: depth'] = score_ik(frames, render_lengths,
+                                                          config=config, method=method)
+        out[name] = rows
+    return out

@@ -423,3 +423,37 @@ def config_dict(config: object) -> dict:
     for k, v in asdict(config).items():  # type: ignore[call-overload]
         out[k] = 'inf' if isinstance(v, float) and math.isinf(v) else v
     return out
+
+
+def tracking_report(train: Sequence[Segment], test: Sequence[Segment],
+                    native: Sequence[Segment], *, seed: int = 0, tune: bool = False,
+                    ablations: bool = True, progress: Callable[[str], None] = lambda msg: None
+                    ) -> dict:
+    """`pose4d track-eval`'s tracking tables: the methods (`default_methods`, with the shipped
+    defaults, tuned on subjects s01-s06 with seed 0, or tuned again on `train`) on the training
+    and test segments and on the test takes at their recorded frame times (`native`), and
+    whether SLQE meets its target (a quarter less error than its input, below the plain filter).
+    """
+    slqe, cv, cvg = SlqeConfig(), CvConfig(), GATED_CV
+    report: dict = {}
+    if tune:
+        progress('tuning the trackers on the training subjects (minutes)')
+        slqe, cv, cvg, report['tracking_tuning_log'] = tune_tracking(train, seed=seed,
+                                                                     progress=progress)
+    report['tracker_configs'] = {'slqe': config_dict(slqe), 'cv': config_dict(cv),
+                                 'cv_gated': config_dict(cvg)}
+    methods = default_methods(slqe, cv, cvg, ablations=ablations)
+    tables, targets = {}, {}
+    for name, segs in (('train', train), ('test', test), ('test_native_dt', native)):
+        progress(f'tracking on the {name} segments')
+        tables[name] = evaluate_tracking(segs, methods, seed=seed)
+    for name in ('train', 'test'):
+        det = tables[name]['detected_frames']
+        red = reduction(det['slqe'], det['input'])
+        targets[name] = {'slqe_reduction_vs_input': red,
+                         'slqe_beats_cv': det['slqe']['average'] < det['cv']['average'],
+                         'slqe_beats_cv_gated':
+                             det['slqe']['average'] < det['cv_gated']['average'],
+                         'meets_target': red >= 0.25 and
+                         det['slqe']['average'] < det['cv']['average']}
+    return {**report, 'tracking': tables, 'tracking_targets': targets}

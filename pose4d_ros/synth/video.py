@@ -596,3 +596,54 @@ def write_video(job: VideoJob, person_dir: str | Path, *,
         cad60.write_skeleton(paths[p], skeleton)
     return sum(p.stat().st_size for p in frame_dir.iterdir()) + \
         sum(path.stat().st_size for path in paths)
+
+
+def load_motions(utkinect: Path | None, msraction3d: Path | None, takes: str,
+                 actions: str | None) -> tuple[list[TakeMotion], list[str], list[str]]:
+    """The motion of `pose4d synth --takes T --actions A` over a UTKinect and/or an MSR
+    Action3D directory: the motions, their names, and the MSR Action3D sequences skipped as
+    empty or too short."""
+    from pose4d_ros.datasets.msraction3d import list_sequences
+    from pose4d_ros.datasets.utkinect import list_takes
+    from pose4d_ros.synth.takes import parse_takes, select_sources
+
+    ut = [] if utkinect is None else [
+        p.name[len('joints_'):-len('.txt')] for p in list_takes(utkinect)]
+    if msraction3d is None:  # as it always was
+        names = parse_takes(takes, ut)
+        return load_takes(utkinect, names), names, []
+    msr = [p.name[:-len('_skeleton3D.txt')] for p in list_sequences(msraction3d)]
+    if not msr:
+        raise ValueError(f'--msraction3d {msraction3d}: no aAA_sSS_eEE_skeleton3D.txt files')
+    ut_names, msr_names = select_sources(takes, actions, ut, msr)
+    motions = load_takes(utkinect, ut_names) if ut_names else []
+    msr_motions, skipped = load_msr_takes(msraction3d, msr_names)
+    return motions + msr_motions, ut_names + [m.name for m in msr_motions], skipped
+
+
+def video_record(job: VideoJob, person_dir: Path) -> dict:
+    """synth.json's account of a video: its take, window, body, distance, room; of a
+    several-person video also the crossing and per person its take, window, body, distance
+    and the frames in which it is not seen."""
+    plan = job.plan
+    record = {
+        'video': f'data{plan.subject}/{plan.video_id}', 'take': plan.take,
+        'activity': plan.activity, 'start_frame_30fps': plan.start,
+        'stride': plan.stride, 'frames': plan.n_frames,
+        'stature_m': round(job.body.stature_m, 3),
+        'distance_m': round(float(np.median(job.poses[:, HC, 2])), 3),
+        'occluder': any(b.kind == 'occluder' for b in job.scene.boxes),
+        'camera_height_m': round(job.scene.cam_height_m, 3),
+    }
+    if not job.companions:
+        return record
+    persons = [(plan.take, plan.start, job.body, job.poses)] + [
+        (c.take, c.start, c.body, c.poses) for c in job.companions]
+    people = []
+    for k, (take, start, body, poses) in enumerate(persons, start=1):
+        skeleton = cad60.read_skeleton(cad60.person_skeleton_path(person_dir, plan.video_id, k))
+        people.append({'person': k, 'take': take, 'start_frame_30fps': int(start),
+                       'stature_m': round(body.stature_m, 3),
+                       'distance_m': round(float(np.median(poses[:, HC, 2])), 3),
+                       'unseen_frames': int((skeleton.joint_conf[:, 0] == 0).sum())})
+    return {**record, 'crossing': job.crossing, 'people': people}
