@@ -13,6 +13,7 @@ from numpy.testing import assert_allclose, assert_array_equal
 
 from pose4d_ros.cli.main import main as pose4d_main
 from pose4d_ros.core.dpm import PartModel, load_model, save_model
+from pose4d_ros.core.dpm.model import colour_channel
 from pose4d_ros.core.skeleton import PARTS_10, PARTS_14
 from pose4d_ros.evaluation import draw as _draw
 from pose4d_ros.evaluation import plot as _plot
@@ -194,6 +195,20 @@ def test_eval_on_an_lspet_layout_scores_elbows_and_knees(tmp_path: Path) -> None
     row = json.loads(out.read_text())['rows']['rgb']
     assert list(row['pck']) == GROUPS_14 + ['average7'] and row['cpu_ms']['p50'] > 0
     assert len(list((tmp_path / 'draw' / 'rgb').glob('*.jpg'))) == 3
+    # an RGB-D model on photographs: its colour channel alone, in a row named after it, scored
+    # exactly as the rgb model made of its filters' colour halves
+    rgbd = random_model(PARTS_14, 'rgbd', 2)
+    colour = colour_channel(rgbd)
+    assert colour.channels == 'rgb' and colour.depth_lookup is None
+    np.testing.assert_array_equal(colour.filters, rgbd.filters[..., :colour.filters.shape[-1]])
+    save_model(rgbd, tmp_path / 'both14.npz')
+    save_model(colour, model)
+    assert pose4d_main(['eval', str(root), '--range', '2-4', '--json', str(out),
+                        '--model', str(tmp_path / 'both14.npz'), '--model', str(model)]) == 0
+    rows = json.loads(out.read_text())['rows']
+    assert list(rows) == ['both14', 'rgb']
+    for key in ('pck', 'pck@0.2', 'error_px'):
+        assert rows['both14'][key] == rows['rgb'][key]
 
 
 @pytest.mark.parametrize(('argv', 'message'), [

@@ -31,7 +31,10 @@ cad60-to-bag`) or an LSPET root (with --range). Every row runs the live pipeline
 
 - `rgb` on LSPET: the photograph network (`core.convnet`, `lspet_convnet`): each joint's heat
   map over the photograph, read at `--photo-scales`, no part model (`--model lspet_rgb_14` gives
-  the HOG mixture of parts).
+  the HOG mixture of parts). An RGB-D model (`--model rgbd_14`, what the nodes run) on
+  photographs gives one row named after it: its colour channel alone
+  (`core.dpm.model.colour_channel`: the depth half of every filter dropped, the search without
+  depth over its training people's scales), the real-appearance test of the nodes' detector.
 
 Default models: the shipped `rgbd_14` (what the nodes run) and `rgb_10` for a CAD-60 set,
 `lspet_convnet` for LSPET; `--model` (repeatable) replaces them (`--model rgbd_10` gives the
@@ -51,7 +54,7 @@ import cv2
 from pose4d_ros.cli._args import factor_list
 from pose4d_ros.core.convnet import PHOTO_SCALES, ConvNet, valid_scales
 from pose4d_ros.core.dpm.infer import SearchConfig
-from pose4d_ros.core.dpm.model import PartModel
+from pose4d_ros.core.dpm.model import PartModel, colour_channel
 from pose4d_ros.core.dpm.scale import ScaleConfig
 from pose4d_ros.core.files import write_atomic, write_json
 from pose4d_ros.core.people import TrackingConfig
@@ -137,8 +140,8 @@ def run(args: argparse.Namespace) -> int:
     if (args.peer_depth or args.fit_peer_depth) and not args.peer:
         raise ValueError('--peer-depth and --fit-peer-depth need --peer')
     offsets = read_offsets(args.peer_depth) if args.peer_depth else None
-    models = ([] if args.fit_peer_depth else
-              [load_any(m) for m in (args.model or default_models(kind))])
+    models = ({} if args.fit_peer_depth else
+              {m: load_any(m) for m in (args.model or default_models(kind))})
     if not valid_scales(args.photo_scales):
         raise ValueError(f'--photo-scales {args.photo_scales}: must include 1 and lie within '
                          f'0.25..4')
@@ -166,7 +169,7 @@ def run(args: argparse.Namespace) -> int:
     return 0
 
 
-def table_rows(args: argparse.Namespace, kind: str, models: list[PartModel | ConvNet],
+def table_rows(args: argparse.Namespace, kind: str, models: dict[str, PartModel | ConvNet],
                peer: MediaPipePeer | None, offsets: dict[str, float] | None = None
                ) -> tuple[dict[str, dict], int, dict[str, dict]]:
     """Every model's rows and the peer's ({row name: table}), the number of frames, and the
@@ -182,10 +185,14 @@ def table_rows(args: argparse.Namespace, kind: str, models: list[PartModel | Con
     people = None if max_people is None else TrackingConfig(max_people=max_people,
                                                             birth_score=args.birth_score)
     rows: dict[str, Row] = {}
-    for m in models:
-        if m.channels == 'rgbd' and any(f.depth_m is None for f in frames):
-            raise ValueError(f'{args.source}: no depth images for the rgbd model')
+    for given, m in models.items():
         name = m.channels
+        if m.channels == 'rgbd' and all(f.depth_m is None for f in frames):
+            # photographs: the model's colour channel alone, its row named after the model
+            m, name = colour_channel(m), Path(given).stem
+        elif m.channels == 'rgbd' and any(f.depth_m is None for f in frames):
+            raise ValueError(f'{args.source}: some frames have no depth image for the rgbd '
+                             'model')
         while name in rows:
             name += "'"
         if isinstance(m, ConvNet):

@@ -26,7 +26,7 @@ from __future__ import annotations
 
 import json
 from collections.abc import Mapping
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
@@ -188,6 +188,22 @@ class PartModel:
         one-GEMM response of a level."""
         p, k = self.n_parts, self.n_types
         return np.ascontiguousarray(self.filters.reshape(p * k, -1), dtype=np.float32)
+
+
+def colour_channel(model: PartModel) -> PartModel:
+    """An rgbd model's colour channel alone, for frames without depth (photographs): each
+    filter's colour half w_colour (the depth half w_depth would only score the constant
+    features of a missing depth image, so it is dropped), the same tree, springs and type
+    biases, searched without depth over the scales of its training people
+    (`PartModel.search_range_px`). What depth gave is gone: the depth-predicted scale, the 3-D
+    look-up and offsets, the part refiner (it probes depth); a model trained on masked frames
+    still sees a whole photograph, clutter included."""
+    if model.channels != 'rgbd':
+        return model
+    return replace(model, channels='rgb', filters=np.ascontiguousarray(
+        model.filters[..., :N_FEATURES]), depth_encoding='', depth_offset_m=None,
+        depth_lookup=None, refiner=None,
+        metadata={**model.metadata, 'channels_used': 'colour alone (of an rgbd model)'})
 
 
 _ARRAYS = ('filters', 'springs', 'anchors', 'bias')
