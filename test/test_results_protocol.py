@@ -3,6 +3,8 @@ validation sets only, reported tables from test sets only (nothing is run here).
 
 from __future__ import annotations
 
+import re
+
 import pytest
 
 from pose4d_ros.cli.main import main as pose4d_main
@@ -13,13 +15,38 @@ def option(ds: r.DataSet, name: str) -> str:
     return ds.options[ds.options.index(name) + 1]
 
 
+def subjects(takes: str) -> set[int]:
+    """The subjects a --takes value (sNN-sMM, sNN, sNN_eMM, aAA_sSS_eEE items) names."""
+    out: set[int] = set()
+    for item in takes.split(','):
+        if m := re.fullmatch(r's(\d\d)-s(\d\d)', item):
+            out |= set(range(int(m.group(1)), int(m.group(2)) + 1))
+        else:
+            m = re.search(r'(?:^|_)s(\d\d)(?:_e\d\d)?$', item)
+            assert m, item
+            out.add(int(m.group(1)))
+    return out
+
+
 def test_sets_are_disjoint_by_subject_and_seed() -> None:
     # a set of the same videos with one person alone (--alone) shares its seed on purpose
     seeds = [option(ds, '--seed') for ds in r.SETS.values() if '--alone' not in ds.options]
     assert len(seeds) == len(set(seeds))
     for ds in r.SETS.values():
-        takes = option(ds, '--takes')
-        assert takes == ('s07-s08' if ds.role == 'test' else 's01-s06'), ds.name
+        held_out = subjects(option(ds, '--takes')) <= {7, 8}
+        training = subjects(option(ds, '--takes')) <= set(range(1, 7))
+        assert held_out if ds.role == 'test' else training, ds.name
+    assert subjects('s07_e01,a05_s08_e02') == {7, 8} and subjects('s01-s06') == set(range(1, 7))
+
+
+def test_msr_sets_are_posed_by_msr_motion() -> None:
+    for name in ('test30_msr', 'valid30_msr'):
+        cmd = r.SETS[name].command('U', 'M')
+        assert cmd[2:4] == ['--msraction3d', 'M'] and '--utkinect' not in cmd
+    assert r.SETS['test30'].command('U', 'M')[2:4] == ['--utkinect', 'U']
+    job = next(j for j in r.JOBS if j.name == 'test30_msr')
+    assert 'no MSR Action3D motion' in r._missing(job, r.Context('U', 'L', peer=True,
+                                                                 msraction3d='/nonexistent'))
 
 
 def test_choices_on_validation_reports_on_test() -> None:

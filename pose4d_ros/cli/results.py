@@ -1,6 +1,7 @@
 """`pose4d results`: every set, table and figure the READMEs report, from one command.
 
-    pose4d results [--only JOB[,JOB...]] [--utkinect DIR] [--lspet DIR] [--no-peer]
+    pose4d results [--only JOB[,JOB...]] [--utkinect DIR] [--msraction3d DIR] [--lspet DIR]
+                   [--no-peer]
 
 Makes the protocol's sets (`pose4d synth`, into data/synth/, reusing a set made by the same
 command), runs `pose4d eval` and `pose4d bench` for every table (with `--peer mediapipe` when
@@ -8,8 +9,8 @@ command), runs `pose4d eval` and `pose4d bench` for every table (with `--peer me
 offsets are skipped and said so), and writes docs/results/*.json, docs/results/index.json (the
 commands, the machine, the commit, what was skipped), the generated docs/RESULTS.md and the
 README's summary (`evaluation.results`, `evaluation.results_doc`). Run from the repository
-root. Jobs, in order: peer_depth, validation, test, test30, test30_arms, sample,
-test30_people2, lspet, bench, bench_graph.
+root. Jobs, in order: peer_depth, validation, test, test30, test30_arms, test30_msr, sample,
+test30_people2, people, lspet, bench, bench_graph.
 """
 
 from __future__ import annotations
@@ -28,6 +29,8 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
                    help=f'run only these jobs ({", ".join(results.JOB_NAMES)})')
     p.add_argument('--utkinect', default='../shared/data/utkinect',
                    help='UTKinect motion, for the rendered sets')
+    p.add_argument('--msraction3d', default=results.MSRACTION3D,
+                   help='MSR Action3D motion, for the rendered sets posed by it')
     p.add_argument('--lspet', default='../shared/data/lspet', help='LSPET root')
     p.add_argument('--no-peer', action='store_true', help='do not run MediaPipe')
     p.set_defaults(func=run)
@@ -39,7 +42,7 @@ def run(args: argparse.Namespace) -> int:
         raise ValueError(f'--only {",".join(unknown)}: no such job (jobs: '
                          f'{", ".join(results.JOB_NAMES)})')
     index = results.run(args.only, utkinect=args.utkinect, lspet=args.lspet,
-                        peer=False if args.no_peer else None)
+                        peer=False if args.no_peer else None, msraction3d=args.msraction3d)
     skipped = index['last_run']['skipped']
     print(f"ran {len(index['last_run']['jobs']) - len(skipped)} job(s), skipped "
           f"{len(skipped)}" + ''.join(f"\n  {s['job']}: {s['why']}" for s in skipped))
