@@ -81,7 +81,8 @@ $(VENV)/.stamp-pkg: $(VENV)/.stamp-msgs $(VENV)/.stamp-tf2 $(PKG_SOURCES) tools/
 lint: setup
 	$(BIN)/ruff check .
 
-test: setup
+# train-env too: the photograph network's PyTorch twin is checked against core.convnet
+test: setup train-env
 	$(BIN)/ruff check .
 	$(BIN)/pytest
 

@@ -48,7 +48,7 @@ from pathlib import Path
 
 import numpy as np
 
-from pose4d_ros.cli._args import factor_list
+from pose4d_ros.cli._args import factor_list, load_list
 from pose4d_ros.core.dpm.infer import SearchConfig
 from pose4d_ros.core.dpm.model import load_model
 from pose4d_ros.core.dpm.scale import ScaleConfig
@@ -92,6 +92,9 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument('--rate', type=float, default=1.0, help='replay rate of --graph')
     p.add_argument('--best-effort', action='store_true',
                    help='--graph: replay the camera topics best effort, as camera drivers do')
+    p.add_argument('--load', type=load_list, default=(), metavar='busy,query',
+                   help='--graph: beside the graph, a process keeping a core busy and/or the ros2 '
+                   'command line querying the nodes (pose4d_ros.graph.load)')
     p.add_argument('--out', type=Path, default=Path('out/bench'),
                    help='where --graph writes its recordings and node logs')
     p.set_defaults(func=run)
@@ -185,7 +188,7 @@ def graph_bench(bag_path: Path, args: argparse.Namespace) -> dict:
     out = {}
     for name, single in (('nodes', False), ('pipeline', True)):
         r = run_graph(bag_path, args.out, rate=args.rate, model=args.model or 'rgbd_14',
-                      pipeline=single, best_effort=args.best_effort)
+                      pipeline=single, best_effort=args.best_effort, load=args.load)
         lat = r.latency_ms()
         t_out = np.sort(np.fromiter(r.left.values(), float))
         out_rate = (len(t_out) - 1) / (t_out[-1] - t_out[0]) if len(t_out) > 1 else None

@@ -18,6 +18,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 
+from pose4d_ros.cli._args import load_list
 from pose4d_ros.core.dpm.model import load_model
 from pose4d_ros.core.files import write_atomic, write_json
 from pose4d_ros.core.joints import JointSet
@@ -42,6 +43,9 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument('--model', default='rgbd_14', help='detector model (shipped name or .npz)')
     p.add_argument('--timeout', type=float, default=60.0,
                    help='seconds to wait for the graph to connect and to drain')
+    p.add_argument('--load', type=load_list, default=(), metavar='busy,query',
+                   help='beside the graph while the bag plays: a process keeping a core busy, '
+                   'and/or the ros2 command line querying the nodes (pose4d_ros.graph.load)')
     p.set_defaults(func=run)
 
 
@@ -52,7 +56,7 @@ def run(args: argparse.Namespace) -> int:
     print(f'pose4d demo: replaying {bag_path} at {args.rate}x through '
           f'{" -> ".join(STAGES)} (one process each)')
     result = run_graph(bag_path, args.out, rate=args.rate, model=args.model,
-                       timeout=args.timeout)
+                       timeout=args.timeout, load=args.load)
     return report(bag_path, result, args)
 
 
@@ -67,7 +71,8 @@ def report(bag_path: Path, result: GraphRun, args: argparse.Namespace) -> int:
     tables = score_rows({'graph': graph, **offline}, frames)
     n_in, latency = result.frames, result.latency_ms()
     results = {
-        'bag': str(bag_path), 'rate': args.rate, 'input_rate_hz': result.input_rate_hz(),
+        'bag': str(bag_path), 'rate': args.rate, 'load': list(args.load),
+        'input_rate_hz': result.input_rate_hz(),
         'frames_in': n_in, 'skeletons_out': len(skeletons),
         'frames_lost': n_in - len(skeletons),
         'latency_ms': ({'p50': float(np.percentile(latency, 50)),

@@ -12,6 +12,7 @@ import signal
 import subprocess
 import sys
 import time
+from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -68,6 +69,19 @@ class Graph:
         log = self.logs[exe].open('w')
         self.procs[exe] = subprocess.Popen(cmd, stdout=log, stderr=subprocess.STDOUT,
                                            env=dict(os.environ))
+
+    def start_load(self, kind: str, nodes: list[str]) -> None:
+        """A `graph.load` process beside the graph (named `load_<kind>` here and in the logs)."""
+        from pose4d_ros.graph.load import LOADS
+
+        if kind not in LOADS:
+            raise ValueError(f'load {kind!r}: expected one of {LOADS}')
+        name = f'load_{kind}'
+        self.logs[name] = self.out / 'logs' / f'{name}.log'
+        self.logs[name].parent.mkdir(parents=True, exist_ok=True)
+        self.procs[name] = subprocess.Popen(
+            [sys.executable, '-m', 'pose4d_ros.graph.load', kind, *nodes],
+            stdout=self.logs[name].open('w'), stderr=subprocess.STDOUT, env=dict(os.environ))
 
     def check_alive(self) -> None:
         for exe, proc in self.procs.items():
@@ -149,11 +163,12 @@ class GraphRun:
 
 
 def run_graph(bag_path: Path, out: Path, *, rate: float = 1.0, model: str = 'rgbd_14',
-              timeout: float = 60.0, pipeline: bool = False, best_effort: bool = False
-              ) -> GraphRun:
+              timeout: float = 60.0, pipeline: bool = False, best_effort: bool = False,
+              load: Sequence[str] = ()) -> GraphRun:
     """Replay `bag_path` through the graph, each node its own process as `ros2 run` starts
     it (or the single `pipeline` process), with a recorder; stop everything cleanly.
-    `best_effort`: the replay publishes best effort, as camera drivers do."""
+    `best_effort`: the replay publishes best effort, as camera drivers do. `load`: processes
+    run beside the graph while the bag plays (`graph.load`: 'busy', 'query')."""
     import rclpy
     from pose4d_msgs.msg import JointArray
     from rclpy.qos import QoSProfile, ReliabilityPolicy
@@ -204,6 +219,8 @@ def run_graph(bag_path: Path, out: Path, *, rate: float = 1.0, model: str = 'rgb
                 raise OSError(f'the graph did not connect within {timeout} s: too few '
                               f'subscribers on {", ".join(lacking)}')
             ex.spin_once(timeout_sec=0.1)
+        for kind in load:  # started once the graph is up, as a user's commands would be
+            graph.start_load(kind, list(stages))
         cpu_before = graph.cpu_seconds()
         t_play = time.monotonic()
         # the replay plays once it has matched every subscriber seen here (this one too)
