@@ -70,3 +70,23 @@ def test_choices_on_validation_reports_on_test() -> None:
 def test_an_unknown_job_is_refused_in_one_line(capsys: pytest.CaptureFixture) -> None:
     assert pose4d_main(['results', '--only', 'nosuch']) == 2
     assert 'no such job' in capsys.readouterr().err
+
+
+def test_config_overrides_are_typed_and_checked() -> None:
+    from pose4d_ros.core.slqe import SlqeConfig
+    from pose4d_ros.evaluation import overrides
+
+    s = overrides.parse(['foreground.person_min_cut_height_m=0.5', 'scale.factors=1,1.15',
+                         'slqe.limb_parts=left_wrist,right_knee', 'slqe.stop_hypothesis=false',
+                         'scale.warm_up_frames=2'])
+    assert s == {'foreground': {'person_min_cut_height_m': 0.5},
+                 'scale': {'factors': (1.0, 1.15), 'warm_up_frames': 2},
+                 'slqe': {'limb_parts': ('left_wrist', 'right_knee'), 'stop_hypothesis': False}}
+    cfg = overrides.apply(SlqeConfig(), s, 'slqe')
+    assert cfg.limb_parts == ('left_wrist', 'right_knee') and cfg.limb_tolerance == 0.35
+    assert overrides.apply(SlqeConfig(), s, 'search') == SlqeConfig()
+    for bad in ('slqe.nosuch=1', 'nosuch.x=1', 'slqe.limb_tolerance', 'scale.warm_up_frames=x'):
+        with pytest.raises(ValueError, match='--config'):
+            overrides.parse([bad])
+    with pytest.raises(ValueError, match='limb_rejected_frames'):
+        overrides.apply(SlqeConfig(), overrides.parse(['slqe.limb_rejected_frames=-1']), 'slqe')

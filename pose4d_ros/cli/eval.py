@@ -57,10 +57,12 @@ from pose4d_ros.core.dpm.infer import SearchConfig
 from pose4d_ros.core.dpm.model import PartModel, colour_channel
 from pose4d_ros.core.dpm.scale import ScaleConfig
 from pose4d_ros.core.files import write_atomic, write_json
+from pose4d_ros.core.foreground import ForegroundConfig
 from pose4d_ros.core.people import TrackingConfig
+from pose4d_ros.core.slqe import SlqeConfig
 from pose4d_ros.core.threads import set_blas_threads
 from pose4d_ros.datasets.sources import load_frames, source_kind
-from pose4d_ros.evaluation import draw, plot
+from pose4d_ros.evaluation import draw, overrides, plot
 from pose4d_ros.evaluation.peer_depth import (
     fit_depth_offsets,
     offset_row,
@@ -111,6 +113,11 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument('--birth-score', type=float, default=TrackingConfig.birth_score,
                    help="several-person pipeline: a tentative track's least part model score "
                         'while another track is confirmed (core.people.TrackingConfig)')
+    p.add_argument('--config', action='append', default=[], metavar='SECTION.KEY=VALUE',
+                   help='set a field of the core configuration of a stage, repeatable: '
+                        'foreground.person_min_cut_height_m=0.5, slqe.limb_parts=left_wrist,'
+                        'right_wrist, scale.warm_up_frames=2 (sections: foreground, search, '
+                        'scale, slqe; evaluation.overrides)')
     p.add_argument('--no-single-frame', action='store_true',
                    help='skip the single-frame `rgbd` pass (the temporal rows only)')
     p.add_argument('--blas-threads', type=int, default=1)
@@ -184,6 +191,7 @@ def table_rows(args: argparse.Namespace, kind: str, models: dict[str, PartModel 
         max_people = TrackingConfig.max_people
     people = None if max_people is None else TrackingConfig(max_people=max_people,
                                                             birth_score=args.birth_score)
+    settings = overrides.parse(args.config)
     rows: dict[str, Row] = {}
     for given, m in models.items():
         name = m.channels
@@ -201,8 +209,14 @@ def table_rows(args: argparse.Namespace, kind: str, models: dict[str, PartModel 
             continue
         rows.update(pipeline_rows(frames, m, name=name, sequence=sequence, show=progress,
                                   single_frame=not args.no_single_frame,
-                                  search=SearchConfig(n_levels=args.levels, margin=args.margin),
-                                  scale=ScaleConfig(factors=args.person_scales),
+                                  search=overrides.apply(SearchConfig(
+                                      n_levels=args.levels, margin=args.margin), settings,
+                                      'search'),
+                                  scale=overrides.apply(ScaleConfig(factors=args.person_scales),
+                                                        settings, 'scale'),
+                                  foreground=overrides.apply(ForegroundConfig(), settings,
+                                                             'foreground'),
+                                  slqe=overrides.apply(SlqeConfig(), settings, 'slqe'),
                                   people=people))
     if peer is not None:
         rows.update(peer_rows(progress(frames, peer.name), peer, sequence=sequence))

@@ -33,13 +33,14 @@ from pose4d_ros.core.convnet import PHOTO_SCALES, ConvNet
 from pose4d_ros.core.dpm.infer import SearchConfig
 from pose4d_ros.core.dpm.model import PartModel
 from pose4d_ros.core.dpm.scale import ScaleConfig
+from pose4d_ros.core.foreground import ForegroundConfig
 from pose4d_ros.core.joints import MISSING, JointSet
 from pose4d_ros.core.metrics import curves, joint_arrays, score_groups
 from pose4d_ros.core.people import TrackingConfig
 from pose4d_ros.core.pipeline import STAGES, FramePipeline
 from pose4d_ros.core.skeleton import SKELETON_14
 from pose4d_ros.core.slqe import SlqeConfig
-from pose4d_ros.core.stages import DetectorStage
+from pose4d_ros.core.stages import DetectorStage, ForegroundStage, TrackerStage
 from pose4d_ros.datasets.frame import Frame
 from pose4d_ros.evaluation.tracking_metrics import score_people
 from pose4d_ros.peer import MediaPipePeer
@@ -85,7 +86,8 @@ def pipeline_rows(frames: Iterable[Frame], model: PartModel, *, name: str | None
                   search: SearchConfig | None = None, scale: ScaleConfig | None = None,
                   sequence: bool = True, people: TrackingConfig | None = None,
                   single_frame: bool = True,
-                  show: Callable[[Sequence[Frame], str], Iterable[Frame]] | None = None
+                  show: Callable[[Sequence[Frame], str], Iterable[Frame]] | None = None,
+                  foreground: ForegroundConfig | None = None, slqe: SlqeConfig | None = None
                   ) -> dict[str, Row]:
     """The rows of a part model over the frames ({`name` (default: its channels) + suffix:
     row}); `sequence` False puts each frame on its own (the detector's row alone). In a
@@ -94,29 +96,35 @@ def pipeline_rows(frames: Iterable[Frame], model: PartModel, *, name: str | None
     a second pass that resets the pipeline before every frame. `people`: the several-person
     pipeline (`FramePipeline(people=...)`, as the nodes run it), whose `_kf_ik` row also holds
     every person's skeleton (`Row.people`); `show(frames, label)` wraps each pass's frames
-    (a progress bar)."""
+    (a progress bar); `foreground`, `slqe`: those stages' configurations (default: the
+    core's)."""
+    stages = {'foreground': foreground, 'slqe': slqe}
     frames = list(frames)
     name = name or model.channels
     show = show or (lambda fs, _label: fs)
     depth = model.channels == 'rgbd'
     if not (depth and sequence):
         return {name: _pass(show(frames, name), model, ('',), search, scale, people,
-                            reset=True)['']}
+                            reset=True, **stages)['']}
     rows = {}
     if single_frame:
         rows.update(_pass(show(frames, f'{name} (single frame)'), model, ('',), search, scale,
-                          people, reset=True))
+                          people, reset=True, **stages))
     rows.update(_pass(show(frames, name), model, ('_t', '_kf', '_kf_ik'), search, scale,
-                      people, reset=False))
+                      people, reset=False, **stages))
     return {name + s: row for s, row in rows.items()}
 
 
 def _pass(frames: Iterable[Frame], model: PartModel, suffixes: tuple[str, ...],
           search: SearchConfig | None, scale: ScaleConfig | None,
-          people: TrackingConfig | None, *, reset: bool) -> dict[str, Row]:
+          people: TrackingConfig | None, *, reset: bool,
+          foreground: ForegroundConfig | None = None, slqe: SlqeConfig | None = None
+          ) -> dict[str, Row]:
     """One pass of the pipeline over the frames, the rows `suffixes` (the detector's, the
     filter's, the skeleton's, in that order); `reset`: before every frame."""
-    pipeline = FramePipeline(DetectorStage(model, search=search, scale=scale), people=people)
+    pipeline = FramePipeline(DetectorStage(model, search=search, scale=scale), people=people,
+                             foreground=ForegroundStage(foreground),
+                             tracker=TrackerStage(slqe=slqe))
     depth = model.channels == 'rgbd'
     rows = {s: Row() for s in suffixes}
     for f in frames:

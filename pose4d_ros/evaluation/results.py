@@ -103,6 +103,33 @@ MARGINS = (0.3, 0.4, 0.5, 0.6)
 BIRTH_SCORES = (2.5, 5.0, 7.5)
 DEFAULT_MARGIN, DEFAULT_BIRTH_SCORE = 0.4, 5.0
 TIE = 0.1
+_ARMS = 'left_elbow,left_wrist,right_elbow,right_wrist'
+_LIMBS = _ARMS + ',left_knee,left_ankle,right_knee,right_ankle'
+# settings once chosen on test sets, swept on valid30 by `pose4d eval --config` (each value's
+# settings; the first is the shipped one, whose run is the margin sweep's DEFAULT_MARGIN run)
+SWEEPS: dict[str, dict[str, tuple[str, ...]]] = {
+    # ForegroundConfig.person_min_cut_height_m
+    'cut_height': {'0.4': (), **{str(h): (f'foreground.person_min_cut_height_m={h}',)
+                                 for h in (0.3, 0.5, 0.6)}},
+    # the limb rule's form (SlqeConfig.limb_parts, limb_rejected_frames; 'off': no limb rule)
+    'limb_rule': {'arms_second': (), 'arms_first': ('slqe.limb_rejected_frames=0',),
+                  'limbs_second': (f'slqe.limb_parts={_LIMBS}',),
+                  'limbs_first': (f'slqe.limb_parts={_LIMBS}', 'slqe.limb_rejected_frames=0'),
+                  'off': ('slqe.limb_tolerance=0',)},
+    # the person scale's factors and warm-up (ScaleConfig; 'none': the depth's scale alone)
+    'person_scale': {'4_frames': (), '2_frames': ('scale.warm_up_frames=2',),
+                     '8_frames': ('scale.warm_up_frames=8',),
+                     'narrow': ('scale.factors=0.87,1,1.15',),
+                     'wide': ('scale.factors=0.76,0.87,1,1.15,1.32,1.52',),
+                     'none': ('scale.factors=1',)},
+}
+
+
+def sweep_file(sweep: str, label: str) -> Path:
+    """The table of one value of a validation sweep (the shipped value's: the margin run)."""
+    if label == next(iter(SWEEPS[sweep])):
+        return WORK / f'margin_{DEFAULT_MARGIN}.json'
+    return WORK / f'{sweep}_{label}.json'
 
 
 @dataclass
@@ -143,6 +170,13 @@ class Job:
 def _validation(ctx: Context) -> list[list[str]]:
     cmds = [_eval(ctx, str(DATA / 'valid30'), WORK / f'margin_{m}.json', '--model', 'rgbd_14',
                   '--margin', str(m), '--no-single-frame', peer=False) for m in MARGINS]
+    cmds += [_eval(ctx, str(DATA / 'valid30'), sweep_file(sweep, label), '--model', 'rgbd_14',
+                   *(a for item in items for a in ('--config', item)), '--no-single-frame',
+                   peer=False)
+             for sweep, values in SWEEPS.items() for label, items in list(values.items())[1:]]
+    # MSR Action3D motion of the training subjects, the shipped settings (for future choices)
+    cmds.append(_eval(ctx, str(DATA / 'valid30_msr'), WORK / 'valid30_msr.json', '--model',
+                      'rgbd_14', '--no-single-frame', peer=False))
     cmds += [_eval(ctx, str(DATA / 'valid30_people2'), WORK / f'birth_{b}.json', '--model',
                    'rgbd_14', '--birth-score', str(b), '--no-single-frame', peer=False)
              for b in BIRTH_SCORES]
@@ -160,8 +194,9 @@ JOBS: tuple[Job, ...] = (
             'pose4d', 'eval', str(DATA / 'train'), '--json', str(WORK / 'peer_depth_train.json'),
             '--peer', 'mediapipe', '--fit-peer-depth', str(RESULTS / 'peer_depth.json')]],
         needs_peer=True),
-    Job('validation', 'the search margin and the birth score, swept on validation renders',
-        ('valid30', 'valid30_people2', 'valid60_people2'), _validation),
+    Job('validation', 'the search margin, the cut height, the limb rule, the person scale and '
+        'the birth score, swept on validation renders; the MSR Action3D validation set',
+        ('valid30', 'valid30_people2', 'valid60_people2', 'valid30_msr'), _validation),
     Job('test', 'held-out test (s07-s08, 400 frames 0.1 s apart): rgbd_14 and rgb_10',
         ('test',), lambda c: [_eval(c, str(DATA / 'test'), RESULTS / 'test.json')]),
     Job('test30', 'held-out test30 (720 frames at 30 fps), with the PCK curves',
@@ -340,8 +375,39 @@ def summarize_validation() -> dict:
     out['birth_score'] = birth
     out['birth_score_chosen'] = choose({k: 100 * (v['mota'] or 0) for k, v in birth.items()},
                                        DEFAULT_BIRTH_SCORE)
+    out['sweeps'] = {}
+    for sweep, values in SWEEPS.items():
+        table = {}
+        for label, items in values.items():
+            if not sweep_file(sweep, label).exists():
+                continue
+            r = json.loads(sweep_file(sweep, label).read_text())['rows']['rgbd_kf_ik']
+            table[label] = {'config': list(items), 'average7': r['pck']['average7'],
+                            'within_10cm': r.get('within_10cm', {}).get('average'),
+                            'groups': {g: r['pck'].get(g) for g in GROUPS7}}
+        shipped = next(iter(values))
+        out['sweeps'][sweep] = {'set': 'valid30', 'shipped': shipped, 'values': table,
+                                'chosen': choose_label({k: v['average7'] for k, v in
+                                                        table.items()}, shipped)}
+    if (WORK / 'valid30_msr.json').exists():
+        rows = json.loads((WORK / 'valid30_msr.json').read_text())
+        r = rows['rows']['rgbd_kf_ik']
+        out['valid30_msr'] = {'frames': rows['frames'], 'average7': r['pck']['average7'],
+                              'within_10cm': r.get('within_10cm', {}).get('average'),
+                              'groups': {g: r['pck'].get(g) for g in GROUPS7}}
     out['tie'] = TIE
     return out
+
+
+GROUPS7 = ('head', 'shoulder', 'elbow', 'wrist', 'hip', 'knee', 'ankle')
+
+
+def choose_label(scores: dict[str, float], shipped: str) -> str:
+    """The best-scoring value's label, unless the shipped one is within `TIE` of it."""
+    if shipped not in scores:
+        return shipped
+    best = max(scores, key=scores.get)
+    return shipped if scores[shipped] >= scores[best] - TIE else best
 
 
 def choose(scores: dict[str, float], default: float) -> float:

@@ -75,6 +75,8 @@ class SlqeConfig:
         the prediction lost); 0 disables.
     limb_parts : the parts `limb_tolerance` applies to: the arms, whose hands make the fastest
         turns (on the legs too, it cost the held-out renders' knees).
+    limb_rejected_frames : detections of the part rejected just before, at least, for the limb
+        rule to apply: 1 = at the second rejected frame (as shipped), 0 = at the first.
     shadow_frames : after a part is restarted on a detection (drift, stop or limb hypothesis), its
         previous track is kept, predicted, for this many frames: a later detection beyond the
         gate but within that track's brings the track back (the restart followed a wrong
@@ -100,6 +102,7 @@ class SlqeConfig:
     shadow_frames: int = 5
     limb_tolerance: float = 0.35
     limb_parts: tuple[str, ...] = ('left_elbow', 'left_wrist', 'right_elbow', 'right_wrist')
+    limb_rejected_frames: int = 1
 
     def __post_init__(self) -> None:
         if self.order not in (2, 3):
@@ -114,10 +117,12 @@ class SlqeConfig:
                 raise ValueError(f'{name} must be positive, got {value}')
         if self.output not in ('filtered', 'detection'):
             raise ValueError(f"output must be 'filtered' or 'detection', got {self.output!r}")
-        if min(self.drift_frames, self.max_missed_frames, self.shadow_frames) < 0:
+        if min(self.drift_frames, self.max_missed_frames, self.shadow_frames,
+               self.limb_rejected_frames) < 0:
             raise ValueError(f'drift_frames ({self.drift_frames}), max_missed_frames '
-                             f'({self.max_missed_frames}) and shadow_frames '
-                             f'({self.shadow_frames}) must be >= 0')
+                             f'({self.max_missed_frames}), shadow_frames '
+                             f'({self.shadow_frames}) and limb_rejected_frames '
+                             f'({self.limb_rejected_frames}) must be >= 0')
         if not 0.0 <= self.limb_tolerance < 1.0:
             raise ValueError(f'limb_tolerance must be in [0, 1), got {self.limb_tolerance}')
         if not 0.0 <= self.min_confidence <= 1.0:

@@ -215,7 +215,8 @@ def _restarts(i: int, z: NDArray[np.float64], r: float, state: TrackState,
         s0 = before.cov[np.ix_(p0, p0)] + r * np.eye(2)
         if _mahalanobis2((z[i] - before.x[p0])[None], s0[None])[0] <= config.gate_chi2:
             return True
-    return limb and state.rejected[i] > 0 and tree.parents[i] in accepted and \
+    return limb and state.rejected[i] >= config.limb_rejected_frames and \
+        tree.parents[i] in accepted and \
         _keeps_length(z, before, i, tree.parents[i], b, config.limb_tolerance)
 
 
