@@ -138,16 +138,22 @@ $(TRAIN_VENV)/.stamp: requirements/base.txt requirements/convnet.txt setup.py se
 	$(TRAIN_VENV)/bin/pose4d train-convnet --help >/dev/null
 	touch $@
 
-# The bundled sample bag: 45 frames (1.5 s at 30 fps) of a synthetic RGB-D person (no occluder) posed by held-out
-# UTKinect motion (subject 8, waving), made by the project's own tools from ../shared/data.
+# The bundled sample bags, made by the project's own tools from ../shared/data: bags/sample, 45
+# frames (1.5 s at 30 fps) of a synthetic RGB-D person (no occluder) posed by held-out UTKinect
+# motion (subject 8, waving); bags/sample_people2, 50 frames of two people (subjects 8 and 7, one
+# waving) side by side, every person's ground truth on /cad60/skeletons.
 UTKINECT ?= ../shared/data/utkinect
 sample-bag: setup
-	rm -rf build/sample_cad60 build/sample_bag
+	rm -rf build/sample_cad60 build/sample_people2_cad60 build/sample_bag
 	$(BIN)/pose4d synth --utkinect $(UTKINECT) --out build/sample_cad60 --seed 7 \
 		--takes s08_e01 --start 86 --frames 45 --occluders 0 --quiet
+	$(BIN)/pose4d synth --utkinect $(UTKINECT) --out build/sample_people2_cad60 --seed 7 \
+		--takes s08_e01,s07_e01 --start 86 --frames 50 --occluders 0 --people 2 --crossing 0 --quiet
 	mkdir -p build/sample_bag
 	$(BIN)/pose4d cad60-to-bag build/sample_cad60 build/sample_bag/sample
+	$(BIN)/pose4d cad60-to-bag build/sample_people2_cad60 build/sample_bag/sample_people2 --videos 0801000007
 	rm -rf bags/sample && mv build/sample_bag/sample bags/sample
+	rm -rf bags/sample_people2 && mv build/sample_bag/sample_people2 bags/sample_people2
 
 clean:
 	rm -rf build out .pytest_cache .ruff_cache *.egg-info
