@@ -75,6 +75,9 @@ SETS: dict[str, DataSet] = {s.name: s for s in (
     DataSet('valid30', 'validation', _synth(97, 's01-s06', 1, 45, 1)),
     DataSet('valid30_people2', 'validation', _synth(98, 's01-s06', 1, 45, 1, '--people', '2')),
     DataSet('valid60_people2', 'validation', _synth(201, 's01-s06', 1, 60, 1, '--people', '2')),
+    # people near the camera (1.2-2 m), cut by the image's bottom edge: the cut height's set
+    DataSet('valid30_near', 'validation',
+            _synth(403, 's01-s06', 2, 30, 1, '--distance', '1.2', '2.0')),
     # MSR Action3D motion of the training subjects (take 1 of each action)
     DataSet('valid30_msr', 'validation',
             _synth(402, ','.join(f's0{k}_e01' for k in range(1, 7)), 1, 30, 1, *MSR_ACTIONS),
@@ -105,8 +108,10 @@ DEFAULT_MARGIN, DEFAULT_BIRTH_SCORE = 0.4, 5.0
 TIE = 0.1
 _ARMS = 'left_elbow,left_wrist,right_elbow,right_wrist'
 _LIMBS = _ARMS + ',left_knee,left_ankle,right_knee,right_ankle'
-# settings once chosen on test sets, swept on valid30 by `pose4d eval --config` (each value's
-# settings; the first is the shipped one, whose run is the margin sweep's DEFAULT_MARGIN run)
+# settings once chosen on test sets, swept on validation by `pose4d eval --config` (each
+# value's settings; the first is the shipped one, whose run on valid30 is the margin sweep's
+# DEFAULT_MARGIN run); on valid30 but where SWEEP_SETS says (valid30 has nobody cut by the
+# image's edge, so every cut height gives the same frames there)
 SWEEPS: dict[str, dict[str, tuple[str, ...]]] = {
     # ForegroundConfig.person_min_cut_height_m
     'cut_height': {'0.4': (), **{str(h): (f'foreground.person_min_cut_height_m={h}',)
@@ -125,9 +130,17 @@ SWEEPS: dict[str, dict[str, tuple[str, ...]]] = {
 }
 
 
+SWEEP_SETS = {'cut_height': 'valid30_near'}
+
+
+def sweep_set(sweep: str) -> str:
+    return SWEEP_SETS.get(sweep, 'valid30')
+
+
 def sweep_file(sweep: str, label: str) -> Path:
-    """The table of one value of a validation sweep (the shipped value's: the margin run)."""
-    if label == next(iter(SWEEPS[sweep])):
+    """The table of one value of a validation sweep (the shipped value's on valid30: the
+    margin run)."""
+    if label == next(iter(SWEEPS[sweep])) and sweep_set(sweep) == 'valid30':
         return WORK / f'margin_{DEFAULT_MARGIN}.json'
     return WORK / f'{sweep}_{label}.json'
 
@@ -170,10 +183,11 @@ class Job:
 def _validation(ctx: Context) -> list[list[str]]:
     cmds = [_eval(ctx, str(DATA / 'valid30'), WORK / f'margin_{m}.json', '--model', 'rgbd_14',
                   '--margin', str(m), '--no-single-frame', peer=False) for m in MARGINS]
-    cmds += [_eval(ctx, str(DATA / 'valid30'), sweep_file(sweep, label), '--model', 'rgbd_14',
-                   *(a for item in items for a in ('--config', item)), '--no-single-frame',
-                   peer=False)
-             for sweep, values in SWEEPS.items() for label, items in list(values.items())[1:]]
+    cmds += [_eval(ctx, str(DATA / sweep_set(sweep)), sweep_file(sweep, label), '--model',
+                   'rgbd_14', *(a for item in items for a in ('--config', item)),
+                   '--no-single-frame', peer=False)
+             for sweep, values in SWEEPS.items() for label, items in values.items()
+             if sweep_file(sweep, label).name != f'margin_{DEFAULT_MARGIN}.json']
     # MSR Action3D motion of the training subjects, the shipped settings (for future choices)
     cmds.append(_eval(ctx, str(DATA / 'valid30_msr'), WORK / 'valid30_msr.json', '--model',
                       'rgbd_14', '--no-single-frame', peer=False))
@@ -196,7 +210,8 @@ JOBS: tuple[Job, ...] = (
         needs_peer=True),
     Job('validation', 'the search margin, the cut height, the limb rule, the person scale and '
         'the birth score, swept on validation renders; the MSR Action3D validation set',
-        ('valid30', 'valid30_people2', 'valid60_people2', 'valid30_msr'), _validation),
+        ('valid30', 'valid30_near', 'valid30_people2', 'valid60_people2', 'valid30_msr'),
+        _validation),
     Job('test', 'held-out test (s07-s08, 400 frames 0.1 s apart): rgbd_14 and rgb_10',
         ('test',), lambda c: [_eval(c, str(DATA / 'test'), RESULTS / 'test.json')]),
     Job('test30', 'held-out test30 (720 frames at 30 fps), with the PCK curves',
@@ -386,7 +401,7 @@ def summarize_validation() -> dict:
                             'within_10cm': r.get('within_10cm', {}).get('average'),
                             'groups': {g: r['pck'].get(g) for g in GROUPS7}}
         shipped = next(iter(values))
-        out['sweeps'][sweep] = {'set': 'valid30', 'shipped': shipped, 'values': table,
+        out['sweeps'][sweep] = {'set': sweep_set(sweep), 'shipped': shipped, 'values': table,
                                 'chosen': choose_label({k: v['average7'] for k, v in
                                                         table.items()}, shipped)}
     if (WORK / 'valid30_msr.json').exists():

@@ -199,6 +199,44 @@ def validation_section(results: Path, jobs: dict) -> list[str]:
             f"{fmt(r['idf1'] and 100 * r['idf1'])} | {fmt(r['id_switches_per_1000'])} | "
             f"{fmt(r['false_per_1000'])} |" for k, r in v['birth_score'].items()]
     out += ['', f"Chosen on validation: {v['birth_score_chosen']} (another value only when it "
-            f"beats the shipped one by more than {tie} points of MOTA).", '',
-            *commands(jobs.get('validation'))]
+            f"beats the shipped one by more than {tie} points of MOTA).", '']
+    out += sweeps_section(v)
+    msr = v.get('valid30_msr')
+    if msr:
+        out += ['MSR Action3D motion of the training subjects (`valid30_msr`, '
+                f"{msr['frames']} frames, `rgbd_kf_ik`, shipped settings; for future "
+                'choices):', '',
+                '| ' + ' | '.join(msr['groups']) + ' | average7 | within 10 cm |',
+                '|' + '---|' * (len(msr['groups']) + 2),
+                '| ' + ' | '.join(fmt(x) for x in msr['groups'].values())
+                + f" | {fmt(msr['average7'])} | {fmt(msr['within_10cm'])} |", '']
+    out += commands(jobs.get('validation'))
+    return out
+
+
+SWEEP_TITLES = {
+    'cut_height': 'Cut height (`ForegroundConfig.person_min_cut_height_m`, m)',
+    'limb_rule': "The limb rule's form (`SlqeConfig.limb_parts`, `limb_rejected_frames`; "
+                 'arms or arms and legs, at the second or the first rejected frame)',
+    'person_scale': "The person scale (`ScaleConfig.factors`, `warm_up_frames`)"}
+
+
+def sweeps_section(v: dict) -> list[str]:
+    """The validation sweeps of settings once chosen on test sets (`results.SWEEPS`)."""
+    out = []
+    tie = v.get('tie', 0.1)
+    for name, sweep in v.get('sweeps', {}).items():
+        values = sweep['values']
+        if not values:
+            continue
+        groups = list(next(iter(values.values()))['groups'])
+        out += [f"{SWEEP_TITLES.get(name, name)} on `{sweep['set']}` (`rgbd_kf_ik`, PCK@0.1):",
+                '', '| value | ' + ' | '.join(groups) + ' | average7 | within 10 cm |',
+                '|---|' + '---|' * (len(groups) + 2)]
+        out += [f"| {k}{' (shipped)' if k == sweep['shipped'] else ''} | "
+                + ' | '.join(fmt(x) for x in r['groups'].values())
+                + f" | {fmt(r['average7'])} | {fmt(r['within_10cm'])} |"
+                for k, r in values.items()]
+        out += ['', f"Chosen on validation: {sweep['chosen']} (another value only when it beats "
+                f"the shipped one by more than {tie} points of average7).", '']
     return out
