@@ -20,7 +20,7 @@ import cv2
 import numpy as np
 from numpy.typing import NDArray
 
-from pose4d_ros.core.draw import draw_skeleton, legend
+from pose4d_ros.core.draw import draw_people, draw_skeleton, legend
 from pose4d_ros.core.files import write_atomic
 from pose4d_ros.core.joints import JointSet
 from pose4d_ros.core.metrics import correct
@@ -115,15 +115,27 @@ def draw_rows(rows: dict[str, Row], frames: Sequence[Frame], out_dir: Path, *,
     return written
 
 
-def overlay_frame(frame: Frame, skeleton: JointSet, latency_ms: float | None) -> np.ndarray:
+def overlay_frame(frame: Frame, skeleton: JointSet, latency_ms: float | None,
+                  people: tuple[JointSet, ...] | None = None) -> np.ndarray:
     """One video frame (RGB): the skeleton by joint source on the frame, the ground truth
-    crossed, the frame's latency from camera to /pose4d/skeleton, and the legend."""
-    img = draw_skeleton(frame.color, skeleton, limb_bones(), truth_uv=frame.truth.uv)
+    crossed, the frame's latency from camera to /pose4d/skeleton, and the legend. `people`
+    (every person's skeleton of a several-person run): each drawn with its bones in its track
+    id's colour (`core.draw.draw_people`), every ground-truth person crossed."""
+    img = _overlay(frame, skeleton, people)
     text = f'latency {latency_ms:.0f} ms' if latency_ms is not None else 'latency unknown'
     for colour, width in (((0, 0, 0), 3), ((255, 255, 255), 1)):
         cv2.putText(img, text, (8, 22), cv2.FONT_HERSHEY_SIMPLEX, 0.6, colour, width,
                     cv2.LINE_AA)
-    return np.vstack([img, legend(img.shape[1])])
+    ids = tuple(sorted({int(p.track_id) for p in people or ()}))
+    return np.vstack([img, legend(img.shape[1], track_ids=ids)])
+
+
+def _overlay(frame: Frame, skeleton: JointSet, people: tuple[JointSet, ...] | None
+             ) -> np.ndarray:
+    if people is None:
+        return draw_skeleton(frame.color, skeleton, limb_bones(), truth_uv=frame.truth.uv)
+    truths = [t.uv for t in frame.people] or [frame.truth.uv]
+    return draw_people(frame.color, list(people), limb_bones(), truths_uv=truths)
 
 
 def write_video(path: Path, frames: Iterable[np.ndarray], *, fps: float) -> int:
@@ -154,10 +166,12 @@ def write_video(path: Path, frames: Iterable[np.ndarray], *, fps: float) -> int:
     return n
 
 
-def overlay_picture(frames: list[Frame], skeletons: list[JointSet], n: int = 4) -> np.ndarray:
-    """n frames spread over the bag, skeletons drawn by joint source, ground truth crossed."""
-    bones = limb_bones()
-    tiles = [draw_skeleton(frames[i].color, skeletons[i], bones, truth_uv=frames[i].truth.uv)
-             for i in np.linspace(0, len(frames) - 1, n).astype(int)]
-    row = np.hstack(tiles)
-    return np.vstack([row, legend(row.shape[1])])
+def overlay_picture(frames: list[Frame], skeletons: list[JointSet], n: int = 4,
+                    people: list[tuple[JointSet, ...]] | None = None) -> np.ndarray:
+    """n frames spread over the bag, skeletons drawn by joint source, ground truth crossed
+    (`people`: every person's skeletons of each frame, bones in their ids' colours)."""
+    shown = np.linspace(0, len(frames) - 1, n).astype(int)
+    row = np.hstack([_overlay(frames[i], skeletons[i], None if people is None else people[i])
+                     for i in shown])
+    ids = tuple(sorted({int(p.track_id) for i in shown for p in (people[i] if people else ())}))
+    return np.vstack([row, legend(row.shape[1], track_ids=ids)])

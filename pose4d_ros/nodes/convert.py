@@ -28,6 +28,7 @@ from tf2_msgs.msg import TFMessage
 from visualization_msgs.msg import Marker, MarkerArray
 
 from pose4d_ros.core.camera import Intrinsics
+from pose4d_ros.core.draw import person_rgb
 from pose4d_ros.core.joints import DETECTED, INFERRED, MISSING, TRACKED, JointSet
 from pose4d_ros.datasets.messages import (
     ENCODINGS,
@@ -229,21 +230,16 @@ def skeleton_markers(joints: JointSet, bones: list[tuple[int, int]], header: Hea
     return MarkerArray(markers=[spheres, lines])
 
 
-# One colour per track id (cycled): the bones of each person in RViz
-PERSON_RGB = ((0.95, 0.6, 0.1), (0.2, 0.8, 0.9), (0.9, 0.3, 0.8), (0.95, 0.95, 0.2),
-              (0.5, 0.35, 0.95), (0.3, 0.95, 0.5))
-
-
 def people_markers(people: list[JointSet], bones: list[tuple[int, int]], header: Header, *,
                    lifetime_s: float = 0.5) -> MarkerArray:
     """`skeleton_markers` of every person, each in its namespace `pose4d/<track_id>` with its
-    bones in its id's colour (`PERSON_RGB`)."""
+    bones in its id's colour (`core.draw.person_rgb`, as in the demo's overlays)."""
     out = MarkerArray()
     for joints in people:
         tid = int(joints.track_id)
         out.markers.extend(skeleton_markers(
             joints, bones, header, namespace=f'pose4d/{tid}', lifetime_s=lifetime_s,
-            tint=PERSON_RGB[tid % len(PERSON_RGB)]).markers)
+            tint=person_rgb(tid)).markers)
     return out
 
 
