@@ -1,4 +1,5 @@
-"""`pose4d demo` end to end: the sample bag through the node graph, scored (slow)."""
+"""`pose4d demo` end to end: the sample bags (one person, then two) through the node graph,
+scored (slow)."""
 
 from __future__ import annotations
 
@@ -18,7 +19,7 @@ def test_demo_runs_the_graph_and_scores_it(tmp_path):
     if 'rgbd_14' not in shipped_models():
         pytest.fail('the default model rgbd_14 is not shipped in pose4d_ros/models')
     run = subprocess.run([str(executable('pose4d')), 'demo', '--out', str(tmp_path)],
-                         capture_output=True, text=True, timeout=600)
+                         capture_output=True, text=True, timeout=900)
     assert run.returncode == 0, run.stdout[-3000:] + run.stderr[-3000:]
     results = json.loads((tmp_path / 'results.json').read_text())
     assert results['frames_in'] == 45
@@ -54,3 +55,53 @@ def test_demo_runs_the_graph_and_scores_it(tmp_path):
     for exe in ('replay', 'recorder', 'foreground', 'detector', 'tracker', 'ik'):
         assert (tmp_path / 'logs' / f'{exe}.log').is_file()
     assert 'frames in 45' in run.stdout
+    check_two_people(results['sample_people2'], tmp_path, run.stdout)
+
+
+def video_frames(path):
+    video = cv2.VideoCapture(str(path))
+    n = 0
+    while video.read()[0]:
+        n += 1
+    return n
+
+
+def check_two_people(results, out, stdout):
+    """The two-person bag's run: every frame out, scored per person and tracked."""
+    assert results['frames_in'] == 50
+    assert results['skeletons_out'] == 50 and results['frames_lost'] == 0
+    assert results['people_arrays_out'] == 50  # /pose4d/skeletons, one SkeletonArray a frame
+    assert results['latency_ms']['n'] == 50
+    assert results['tf']['matching'] == 50
+    offline = results['offline']['rgbd_kf_ik']
+    assert set(results['offline']) == {'rgbd', 'rgbd_t', 'rgbd_kf', 'rgbd_kf_ik'}
+    for table in (results['graph'], offline):
+        t = table['tracking']
+        # side by side, never hidden: no id switch, no skeleton without a person, each person
+        # tracked (a track is born after 2 frames)
+        assert t['id_switches'] == 0 and t['false_positives'] == 0, t
+        assert t['gt_objects'] == 100 and t['idf1'] > 0.9, t
+    for row in ('graph', 'offline'):
+        people = results['people'][row]
+        assert set(people) == {'1', '2'}, people
+        tracks = []
+        for person in people.values():
+            assert person['frames'] == 50
+            # one track each, the whole way (missed only before its track is born)
+            assert len(person['tracks']) == 1 and person['missed'] <= 5, person
+            assert 75 <= person['average7'] <= 100, person
+            tracks += list(person['tracks'])
+        assert len(set(tracks)) == 2  # two people, two ids
+    # live = offline, the several-person pipeline the nodes run: pooled over 100 person-frames,
+    # 1 point of average7 is one person-frame wholly different (say a track born a frame later
+    # live) and the id switches equal
+    live, off = results['graph']['pck']['average7'], offline['pck']['average7']
+    assert abs(live - off) <= 1.0, (live, off)
+    assert results['graph']['tracking']['id_switches'] == offline['tracking']['id_switches']
+    overlay = cv2.imread(str(out / 'overlay_people2.png'))
+    assert overlay is not None and overlay.shape[1] == 4 * 640
+    assert video_frames(out / 'overlay_people2.mp4') == results['skeletons_out']
+    for exe in ('replay', 'recorder', 'foreground', 'detector', 'tracker', 'ik'):
+        assert (out / 'sample_people2' / 'logs' / f'{exe}.log').is_file()
+    assert 'frames in 50' in stdout and 'id switches: live 0' in stdout
+    assert 'person 1 (50 frames)' in stdout and 'person 2 (50 frames)' in stdout

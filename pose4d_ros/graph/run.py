@@ -46,9 +46,13 @@ def share_path(relative: str) -> Path:
     return Path(__file__).resolve().parents[2] / relative
 
 
-def default_bag() -> Path:
-    """The bundled sample bag."""
-    return share_path('bags/sample')
+# The bundled sample bags (`make sample-bag`): one person, then two (ground truth of each)
+SAMPLE_BAGS = ('sample', 'sample_people2')
+
+
+def default_bag(name: str = SAMPLE_BAGS[0]) -> Path:
+    """A bundled sample bag (default: the one-person one)."""
+    return share_path(f'bags/{name}')
 
 
 class Graph:
