@@ -11,7 +11,7 @@ import scipy.io
 from numpy.testing import assert_allclose, assert_array_equal
 
 from pose4d_ros.datasets import lspet
-from pose4d_ros.datasets.sources import open_source, parse_range, source_kind
+from pose4d_ros.datasets.sources import open_source, parse_range, parse_ranges, source_kind
 
 LSPET = Path(__file__).resolve().parents[2] / 'shared' / 'data' / 'lspet'
 
@@ -75,6 +75,12 @@ def test_bad_files_and_ranges(tmp_path: Path) -> None:
     with pytest.raises(ValueError, match='A-B'):
         parse_range('12')
     assert parse_range('2501-3000') == (2501, 3000)
+    assert parse_ranges('1-2500,3001-8500') == [(1, 2500), (3001, 8500)]
+    assert parse_ranges('5-9') == [(5, 9)]
+    with pytest.raises(ValueError, match='without overlap'):
+        parse_ranges('1-2500,2500-3000')
+    with pytest.raises(ValueError, match='A-B'):
+        parse_ranges('1-2500,')
 
 
 @pytest.mark.shared_data

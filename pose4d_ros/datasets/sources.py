@@ -31,6 +31,16 @@ def parse_range(text: str | None) -> tuple[int, int] | None:
     return a, b
 
 
+def parse_ranges(text: str) -> list[tuple[int, int]]:
+    """'A-B,C-D,...' -> [(A, B), (C, D), ...] inclusive (each as `parse_range`), in order and
+    not overlapping."""
+    ranges = [parse_range(part.strip()) for part in text.split(',')]
+    for (_, b), (c, _) in zip(ranges[:-1], ranges[1:], strict=True):
+        if c <= b:
+            raise ValueError(f'ranges must be in increasing order without overlap, got {text!r}')
+    return ranges  # type: ignore[return-value]
+
+
 def source_kind(path: str | Path) -> str:
     """'lspet' for an LSPET root (joints.mat + images/), 'cad60' for a CAD-60 root (dataN/
     directories, or one dataN directory), 'bag' for a rosbag2 (e.g. made by
