@@ -194,3 +194,61 @@ def test_more_scales_keep_the_maps_distributions() -> None:
     assert np.abs(logp - one).max() > 1e-3  # the other scales count
     with pytest.raises(ValueError, match=r'include 1.*got \(1.2,\)'):
         net.detect(photo, (1.2,))
+
+
+def test_a_cpu_budget_counts_this_process_s_cpu_time_not_the_wall_clock() -> None:
+    import time
+
+    from pose4d_ros.training.convnet_torch import Budget
+
+    cpu = Budget(cpu_minutes=0.01, cpu_since=time.process_time())
+    wall = Budget(minutes=10.0)
+    time.sleep(0.2)  # no CPU spent: the CPU budget does not move
+    assert cpu.done() < 0.05 and 0 < wall.done() < 0.01
+    end = time.process_time() + 0.3
+    while time.process_time() < end:
+        pass
+    assert cpu.done() >= 0.45 and cpu.text == '0.01 CPU min' and wall.text == '10.0 min'
+    # counted from the process's start by default: this one is already spent
+    assert Budget(cpu_minutes=time.process_time() / 120.0).done() == 1.0
+    with pytest.raises(ValueError, match='either'):
+        Budget(minutes=1.0, cpu_minutes=1.0)
+    with pytest.raises(ValueError, match='> 0'):
+        Budget(cpu_minutes=0.0)
+
+
+def test_train_convnet_trains_on_several_ranges_within_a_cpu_budget(tmp_path: Path) -> None:
+    pytest.importorskip('torch', reason='PyTorch trains the network only (make train-env); '
+                        'the suite runs without it')
+    import time
+
+    import cv2
+    import scipy.io
+
+    from pose4d_ros.cli.main import main
+
+    root = tmp_path / 'lspet'
+    (root / 'images').mkdir(parents=True)
+    rng = np.random.default_rng(0)
+    n = 72
+    joints = np.ones((14, 3, n))
+    joints[:, 0] = rng.uniform(10, 50, (14, n))
+    joints[:, 1] = rng.uniform(10, 70, (14, n))
+    scipy.io.savemat(root / 'joints.mat', {'joints': joints})
+    for i in range(1, n + 1):
+        cv2.imwrite(str(root / 'images' / f'im{i:05d}.jpg'),
+                    rng.integers(0, 256, (80, 60, 3), dtype=np.uint8))
+    out = tmp_path / 'net.npz'
+    # the process's CPU time counts from its start: what pytest spent so far plus 2 s
+    budget = f'{(time.process_time() + 2.0) / 60.0:.5f}'
+    started = time.process_time()
+    assert main(['train-convnet', str(root), '--range', '1-32,41-72', '--input-px', '64',
+                 '--width', '4', '--threads', '1', '--cpu-minutes', budget,
+                 '--out', str(out)]) == 0
+    assert time.process_time() - started < 2.0 + 1.0
+    meta = cn.load_convnet(out).metadata
+    assert meta['data'] == 'LSPET 1-32,41-72' and meta['photographs'] == 64
+    assert meta['steps'] >= 2 and meta['epochs'] >= 1
+    assert meta['budget'] == f'{float(budget)} CPU min'
+    assert meta['cpu_minutes'] >= float(budget) - 0.06 and meta['train_minutes'] >= 0
+    assert meta['threads'] == 1
