@@ -111,7 +111,8 @@ _LIMBS = _ARMS + ',left_knee,left_ankle,right_knee,right_ankle'
 # settings once chosen on test sets, swept on validation by `pose4d eval --config` (each
 # value's settings; the first is the shipped one, whose run on valid30 is the margin sweep's
 # DEFAULT_MARGIN run); on valid30 but where SWEEP_SETS says (valid30 has nobody cut by the
-# image's edge, so every cut height gives the same frames there)
+# image's edge, so every cut height gives the same frames there); with several sets, the choice
+# is on their frames pooled (each set's average7 weighted by its frames)
 SWEEPS: dict[str, dict[str, tuple[str, ...]]] = {
     # ForegroundConfig.person_min_cut_height_m
     'cut_height': {'0.4': (), **{str(h): (f'foreground.person_min_cut_height_m={h}',)
@@ -130,19 +131,21 @@ SWEEPS: dict[str, dict[str, tuple[str, ...]]] = {
 }
 
 
-SWEEP_SETS = {'cut_height': 'valid30_near'}
+SWEEP_SETS = {'cut_height': ('valid30_near',), 'person_scale': ('valid30', 'valid30_msr')}
+# the shipped settings' run on a set, made anyway (the margin sweep's, valid30_msr's own)
+SHIPPED_RUNS = {'valid30': f'margin_{DEFAULT_MARGIN}.json', 'valid30_msr': 'valid30_msr.json'}
 
 
-def sweep_set(sweep: str) -> str:
-    return SWEEP_SETS.get(sweep, 'valid30')
+def sweep_sets(sweep: str) -> tuple[str, ...]:
+    return SWEEP_SETS.get(sweep, ('valid30',))
 
 
-def sweep_file(sweep: str, label: str) -> Path:
-    """The table of one value of a validation sweep (the shipped value's on valid30: the
-    margin run)."""
-    if label == next(iter(SWEEPS[sweep])) and sweep_set(sweep) == 'valid30':
-        return WORK / f'margin_{DEFAULT_MARGIN}.json'
-    return WORK / f'{sweep}_{label}.json'
+def sweep_file(sweep: str, label: str, data: str) -> Path:
+    """The table of one value of a validation sweep on set `data` (the shipped value's: the
+    run of the shipped settings on that set, when there is one)."""
+    if label == next(iter(SWEEPS[sweep])) and data in SHIPPED_RUNS:
+        return WORK / SHIPPED_RUNS[data]
+    return WORK / f'{sweep}_{label}_{data}.json'
 
 
 @dataclass
@@ -183,14 +186,15 @@ class Job:
 def _validation(ctx: Context) -> list[list[str]]:
     cmds = [_eval(ctx, str(DATA / 'valid30'), WORK / f'margin_{m}.json', '--model', 'rgbd_14',
                   '--margin', str(m), '--no-single-frame', peer=False) for m in MARGINS]
-    cmds += [_eval(ctx, str(DATA / sweep_set(sweep)), sweep_file(sweep, label), '--model',
-                   'rgbd_14', *(a for item in items for a in ('--config', item)),
-                   '--no-single-frame', peer=False)
-             for sweep, values in SWEEPS.items() for label, items in values.items()
-             if sweep_file(sweep, label).name != f'margin_{DEFAULT_MARGIN}.json']
     # MSR Action3D motion of the training subjects, the shipped settings (for future choices)
     cmds.append(_eval(ctx, str(DATA / 'valid30_msr'), WORK / 'valid30_msr.json', '--model',
                       'rgbd_14', '--no-single-frame', peer=False))
+    cmds += [_eval(ctx, str(DATA / data), sweep_file(sweep, label, data), '--model',
+                   'rgbd_14', *(a for item in items for a in ('--config', item)),
+                   '--no-single-frame', peer=False)
+             for sweep, values in SWEEPS.items() for label, items in values.items()
+             for data in sweep_sets(sweep)
+             if sweep_file(sweep, label, data).name not in SHIPPED_RUNS.values()]
     cmds += [_eval(ctx, str(DATA / 'valid30_people2'), WORK / f'birth_{b}.json', '--model',
                    'rgbd_14', '--birth-score', str(b), '--no-single-frame', peer=False)
              for b in BIRTH_SCORES]
@@ -394,14 +398,25 @@ def summarize_validation() -> dict:
     for sweep, values in SWEEPS.items():
         table = {}
         for label, items in values.items():
-            if not sweep_file(sweep, label).exists():
+            files = [sweep_file(sweep, label, d) for d in sweep_sets(sweep)]
+            if not all(f.exists() for f in files):
                 continue
-            r = json.loads(sweep_file(sweep, label).read_text())['rows']['rgbd_kf_ik']
-            table[label] = {'config': list(items), 'average7': r['pck']['average7'],
-                            'within_10cm': r.get('within_10cm', {}).get('average'),
-                            'groups': {g: r['pck'].get(g) for g in GROUPS7}}
+            runs = [json.loads(f.read_text()) for f in files]
+            rows = [run['rows']['rgbd_kf_ik'] for run in runs]
+            frames = [run['frames'] for run in runs]
+            table[label] = {
+                'config': list(items), 'average7': _pooled(
+                    [r['pck']['average7'] for r in rows], frames),
+                'within_10cm': _pooled([r.get('within_10cm', {}).get('average')
+                                        for r in rows], frames),
+                'groups': {g: _pooled([r['pck'].get(g) for r in rows], frames)
+                           for g in GROUPS7},
+                'sets': {d: {'average7': r['pck']['average7'],
+                             'within_10cm': r.get('within_10cm', {}).get('average')}
+                         for d, r in zip(sweep_sets(sweep), rows, strict=True)}}
         shipped = next(iter(values))
-        out['sweeps'][sweep] = {'set': sweep_set(sweep), 'shipped': shipped, 'values': table,
+        out['sweeps'][sweep] = {'set': ' + '.join(sweep_sets(sweep)), 'shipped': shipped,
+                                'values': table,
                                 'chosen': choose_label({k: v['average7'] for k, v in
                                                         table.items()}, shipped)}
     if (WORK / 'valid30_msr.json').exists():
@@ -415,6 +430,13 @@ def summarize_validation() -> dict:
 
 
 GROUPS7 = ('head', 'shoulder', 'elbow', 'wrist', 'hip', 'knee', 'ankle')
+
+
+def _pooled(values: list[float | None], frames: list[int]) -> float | None:
+    """The sets' figures weighted by their frames (None if any is missing)."""
+    if any(v is None for v in values):
+        return None
+    return sum(v * n for v, n in zip(values, frames, strict=True)) / sum(frames)
 
 
 def choose_label(scores: dict[str, float], shipped: str) -> str:

@@ -230,12 +230,17 @@ def sweeps_section(v: dict) -> list[str]:
         if not values:
             continue
         groups = list(next(iter(values.values()))['groups'])
-        out += [f"{SWEEP_TITLES.get(name, name)} on `{sweep['set']}` (`rgbd_kf_ik`, PCK@0.1):",
-                '', '| value | ' + ' | '.join(groups) + ' | average7 | within 10 cm |',
-                '|---|' + '---|' * (len(groups) + 2)]
+        sets = list(next(iter(values.values())).get('sets', {}))
+        pooled = ' (frames pooled)' if len(sets) > 1 else ''
+        out += [f"{SWEEP_TITLES.get(name, name)} on `{sweep['set']}` (`rgbd_kf_ik`, PCK@0.1"
+                f'{pooled}):', '', '| value | ' + ' | '.join(groups)
+                + ' | average7 | within 10 cm |'
+                + ''.join(f' `{d}` average7 |' for d in sets if pooled),
+                '|---|' + '---|' * (len(groups) + 2 + (len(sets) if pooled else 0))]
         out += [f"| {k}{' (shipped)' if k == sweep['shipped'] else ''} | "
                 + ' | '.join(fmt(x) for x in r['groups'].values())
                 + f" | {fmt(r['average7'])} | {fmt(r['within_10cm'])} |"
+                + ''.join(f" {fmt(r['sets'][d]['average7'])} |" for d in sets if pooled)
                 for k, r in values.items()]
         out += ['', f"Chosen on validation: {sweep['chosen']} (another value only when it beats "
                 f"the shipped one by more than {tie} points of average7).", '']
