@@ -12,6 +12,7 @@ from numpy.testing import assert_allclose
 from pose4d_ros.core import joints as cj
 from pose4d_ros.core.camera import backproject, cad60_intrinsics, project
 from pose4d_ros.core.dpm import load_model
+from pose4d_ros.core.dpm.scale import ScaleConfig
 from pose4d_ros.core.joints import JointSet
 from pose4d_ros.core.lifting import medoid_parts, person_scale_px
 from pose4d_ros.core.skeleton import (
@@ -308,7 +309,7 @@ def test_medoid_parts_takes_each_part_where_the_poses_agree() -> None:
     assert_allclose(medoid_parts([b, c]), b)  # two poses: the first on a tie
 
 
-@pytest.mark.parametrize('odd', [0, 1, 2, 3])
+@pytest.mark.parametrize('odd', range(len(ScaleConfig.factors)))
 def test_while_the_scale_is_undecided_a_part_one_factor_puts_elsewhere_is_not_taken(odd) -> None:
     """In a track's first frames every person-scale factor is searched; one factor's pose
     putting a part far from where the others agree does not decide that part."""
