@@ -122,12 +122,13 @@ SWEEPS: dict[str, dict[str, tuple[str, ...]]] = {
                   'limbs_second': (f'slqe.limb_parts={_LIMBS}',),
                   'limbs_first': (f'slqe.limb_parts={_LIMBS}', 'slqe.limb_rejected_frames=0'),
                   'off': ('slqe.limb_tolerance=0',)},
-    # the person scale's factors and warm-up (ScaleConfig; 'none': the depth's scale alone)
-    'person_scale': {'4_frames': (), '2_frames': ('scale.warm_up_frames=2',),
+    # the person scale's factors and warm-up (ScaleConfig: 0.87-1.15 with a 4-frame warm-up
+    # shipped, chosen on validation over 0.87-1.32, first shipped; '1': the depth's scale alone)
+    'person_scale': {'0.87-1.15': (), '2_frames': ('scale.warm_up_frames=2',),
                      '8_frames': ('scale.warm_up_frames=8',),
-                     'narrow': ('scale.factors=0.87,1,1.15',),
-                     'wide': ('scale.factors=0.76,0.87,1,1.15,1.32,1.52',),
-                     'none': ('scale.factors=1',)},
+                     '0.87-1.32': ('scale.factors=0.87,1,1.15,1.32',),
+                     '0.76-1.52': ('scale.factors=0.76,0.87,1,1.15,1.32,1.52',),
+                     '1': ('scale.factors=1',)},
 }
 
 
