@@ -101,10 +101,12 @@ def person_sized(regions: StableRegions, intrinsics: Intrinsics, config: Foregro
 
 def depth_parts(g: NDArray[np.uint8], regions: StableRegions, order: NDArray[np.int64],
                 above: NDArray[np.float32] | None, intrinsics: Intrinsics,
-                config: ForegroundConfig) -> list[Part]:
+                config: ForegroundConfig, *, occluded: bool = False) -> list[Part]:
     """Stage 2, on the full-resolution pixels of the regions `order` picked: each split at
     empty depth gaps (an occluder in front, furniture behind), and a part deeper than
-    `person_max_extent_m` at Otsu's threshold too; every part is a candidate."""
+    `person_max_extent_m` at Otsu's threshold too; every part is a candidate. `occluded`: the
+    parts may be people partly hidden by a nearer one (`occluded_rules`), whose top and bottom
+    heights are measured from the smaller sizes of a cut person on."""
     h, w = g.shape
     parts = []
     gap_levels = config.occluder_gap_m / config.metres_per_level
@@ -129,7 +131,7 @@ def depth_parts(g: NDArray[np.uint8], regions: StableRegions, order: NDArray[np.
                 whole = a <= present[0] and b >= present[-1]
                 part = crop if whole else crop & (gl >= a) & (gl <= b)
                 pt = _describe(part, hist[a:b + 1], a, b, bx, float(regions.variation[i]), hl,
-                               intrinsics, (w, h), config)
+                               intrinsics, (w, h), config, occluded)
                 if pt is not None:
                     parts.append(pt)
     return parts
@@ -175,9 +177,10 @@ def _distinct_kernel(order: NDArray[np.int64], x0: NDArray, y0: NDArray, x1: NDA
 
 def _describe(part: NDArray[np.bool_], hist: NDArray[np.int64], lo: int, hi: int,
               origin: tuple[int, int, int, int], var: float, above: NDArray[np.float32] | None,
-              intrinsics: Intrinsics, size: tuple[int, int], config: ForegroundConfig
-              ) -> Part | None:
-    """Measure one depth part; None when it is too small to be anything."""
+              intrinsics: Intrinsics, size: tuple[int, int], config: ForegroundConfig,
+              occluded: bool = False) -> Part | None:
+    """Measure one depth part; None when it is too small to be anything (`occluded`: its
+    tops and bottoms measured from a cut person's sizes on)."""
     cum = hist.cumsum()
     n = int(cum[-1])
     if n < config.mser_min_area_px:
@@ -196,7 +199,8 @@ def _describe(part: NDArray[np.bool_], hist: NDArray[np.int64], lo: int, hi: int
     extent = _extent_levels(hist, cum) * config.metres_per_level
     top = bottom = math.nan
     # the heights above the floor decide only among parts of a person's size
-    if above is not None and size_rules(height_m, width_m, area, fill, extent, cut, config):
+    if above is not None and size_rules(height_m, width_m, area, fill, extent, cut or occluded,
+                                        config):
         k = config.edge_rows
         t = above[r0:r0 + k][part[r0:r0 + k]]
         b = above[max(r1 - k, 0):r1][part[max(r1 - k, 0):r1]]
@@ -235,6 +239,19 @@ def person_rules(part: Part, config: PersonConfig, near: bool = False) -> bool:
     if not near and math.isfinite(part.bottom_m) and part.bottom_m > c.person_max_bottom_m:
         return False
     return True
+
+
+def occluded_rules(part: Part, config: PersonConfig) -> bool:
+    """Whether a part may be a person partly hidden by a nearer one: the smaller height and
+    surface of a person cut by the image's bottom edge (`person_min_cut_height_m`), the other
+    sizes and, with a floor, the height of its top rows (the head or the shoulders are seen)
+    as a whole person's; no rule on its bottom rows (the legs may be the hidden part)."""
+    c = config
+    if not size_rules(part.height_m, part.width_m, part.area_m2, part.fill, part.extent_m,
+                      True, c):
+        return False
+    return not (math.isfinite(part.top_m)
+                and not c.person_min_top_m <= part.top_m <= c.person_max_top_m)
 
 
 def part_score(part: Part, config: PersonConfig,

@@ -3,8 +3,10 @@ at the working resolution."""
 
 from __future__ import annotations
 
+import math
 from dataclasses import replace
 
+import cv2
 import numpy as np
 from numpy.typing import NDArray
 
@@ -24,6 +26,7 @@ from pose4d_ros.core.foreground.mask import complete, upsample_mask
 from pose4d_ros.core.foreground.person import (
     Part,
     depth_parts,
+    occluded_rules,
     part_score,
     person_rules,
     person_sized,
@@ -32,8 +35,13 @@ from pose4d_ros.core.foreground.regions import depth_to_levels, stable_regions
 from pose4d_ros.core.stats import median
 
 DEFAULT = ForegroundConfig()  # the defaults, one instance (frozen)
+# `ndarray.any` without its Python wrapper
+_any = np.logical_or.reduce
 # Largest share of a part's pixels that another, better person may hold (`segment_people`)
 OVERLAP = 0.2
+# Pixels around the people found that a second look for people hidden behind them leaves out
+# (the ragged band of mixed depths along a person's outline, `segment_people`)
+BEHIND_MARGIN_PX = 2
 
 
 def segment(depth_m: NDArray[np.floating], intrinsics: Intrinsics, *,
@@ -149,20 +157,16 @@ def segment_people(depth_m: NDArray[np.floating], intrinsics: Intrinsics, *,
     valid = np.isfinite(depth)
     if not valid.any():
         return [], 0
-    floor, parts, _ = _examine(depth, intrinsics, config,
-                               previous[0] if len(previous) else None)
+    floor, above, drop = _floor(depth, intrinsics, config,
+                                previous[0] if len(previous) else None)
+    parts, _ = _parts(depth, intrinsics, config, above, drop)
     ok = [pt for pt in parts if person_rules(pt, config)]
     if not ok:
         ok = [pt for pt in parts if person_rules(pt, config, near=True)]
     boxes = [p.box for p in previous if p.found and p.box is not None]
-    ok.sort(key=lambda pt: -max([part_score(pt, config, b) for b in boxes]
-                                or [part_score(pt, config)]))
-    picked: list[tuple[Part, NDArray[np.bool_]]] = []
-    for pt in ok:
-        mask = _part_mask(pt, depth.shape)
-        if any((mask & m).sum() > OVERLAP * min(pt.n, q.n) for q, m in picked):
-            continue
-        picked.append((pt, mask))
+    picked = _distinct_people(ok, depth.shape, config, boxes, [])
+    if picked and len(picked) < max_people:
+        picked += _behind(depth, intrinsics, config, above, drop, boxes, picked)
     people = [_result(pt, depth, valid, floor, config) for pt, _ in picked[:max_people]]
     # completion may add a pixel to two people: it stays with the better one
     taken = np.zeros(depth.shape, bool)
@@ -170,6 +174,63 @@ def segment_people(depth_m: NDArray[np.floating], intrinsics: Intrinsics, *,
         people[k] = replace(person, mask=person.mask & ~taken)
         taken |= person.mask
     return people, len(picked)
+
+
+def _distinct_people(parts: list[Part], shape: tuple[int, ...], config: ForegroundConfig,
+                     boxes: list[tuple[int, int, int, int]],
+                     picked: list[tuple[Part, NDArray[np.bool_]]]
+                     ) -> list[tuple[Part, NDArray[np.bool_]]]:
+    """The parts (best first by `part_score`, a part overlapping a previous box in `boxes`
+    with its bonus) that share at most `OVERLAP` of their pixels with a better one, or with
+    one of `picked`; each with its mask."""
+    parts = sorted(parts, key=lambda pt: -max([part_score(pt, config, b) for b in boxes]
+                                              or [part_score(pt, config)]))
+    out: list[tuple[Part, NDArray[np.bool_]]] = []
+    for pt in parts:
+        mask = _part_mask(pt, shape)
+        if any((mask & m).sum() > OVERLAP * min(pt.n, q.n) for q, m in picked + out):
+            continue
+        out.append((pt, mask))
+    return out
+
+
+def _behind(depth: NDArray[np.float32], intrinsics: Intrinsics, config: ForegroundConfig,
+            above: NDArray[np.float32] | None, drop: NDArray[np.bool_] | None,
+            boxes: list[tuple[int, int, int, int]],
+            picked: list[tuple[Part, NDArray[np.bool_]]]
+            ) -> list[tuple[Part, NDArray[np.bool_]]]:
+    """People partly hidden by the people found (`picked`): found again with those people's
+    pixels (and `BEHIND_MARGIN_PX` around them) left out.
+
+    A person whose outline touches a nearer person's in the image is no stable region of
+    their own: at the depths just beyond theirs their region joins the nearer person's,
+    whose pixels are all nearer, and grows at once (MSER's variation is large). Without the
+    nearer person, the one behind is a region of its own, as when alone. Only a part that
+    reaches a person found in the image and lies behind them (farther by over
+    `occluder_gap_m`) is taken, and it needs only `occluded_rules` (its head or shoulders at a
+    person's height above the floor, a cut person's size; without a floor nothing is taken:
+    a piece of the wall framed by the people found would pass): anything else was judged by
+    the first look.
+    """
+    k = 2 * BEHIND_MARGIN_PX + 1
+    grown = [cv2.dilate(m.view(np.uint8), np.ones((k, k), np.uint8)).view(bool)
+             for _, m in picked]
+    taken = np.logical_or.reduce(grown)
+    parts, _ = _parts(depth, intrinsics, config, above, taken if drop is None else drop | taken,
+                      occluded=True)
+    # the pixels just outside each person found: a part behind them reaches them there
+    rings = [cv2.dilate(m.view(np.uint8), np.ones((3, 3), np.uint8)).view(bool) & ~taken
+             for m in grown]
+    ok = []
+    for pt in parts:
+        # without a floor, a piece of the wall framed by people would pass for one's top
+        if not (math.isfinite(pt.top_m) and occluded_rules(pt, config)):
+            continue
+        mask = _part_mask(pt, depth.shape)
+        if any(pt.z > q.z + config.occluder_gap_m and _any(mask & ring, axis=None)
+               for (q, _), ring in zip(picked, rings, strict=True)):
+            ok.append(pt)
+    return _distinct_people(ok, depth.shape, config, boxes, picked)
 
 
 def _subsampled_segment(depth: NDArray, intrinsics: Intrinsics, f: int,
@@ -238,11 +299,20 @@ def _examine(depth: NDArray[np.float32], intrinsics: Intrinsics, config: Foregro
     Returns the floor plane (or None), the parts, and the reason when there are none.
     """
     floor, above, drop = _floor(depth, intrinsics, config, previous)
+    return (floor, *_parts(depth, intrinsics, config, above, drop))
+
+
+def _parts(depth: NDArray[np.float32], intrinsics: Intrinsics, config: ForegroundConfig,
+           above: NDArray[np.float32] | None, drop: NDArray[np.bool_] | None, *,
+           occluded: bool = False) -> tuple[list[Part], str]:
+    """The stable regions of `depth` without the pixels `drop` and their depth parts
+    (`depth_parts`, `occluded` passed on), and the reason when there are none."""
     g = depth_to_levels(depth, config=config, drop=drop)
     regions = stable_regions(g, config)
     if regions.stable.size == 0:
-        return floor, [], REASON_NO_REGION
+        return [], REASON_NO_REGION
     order = person_sized(regions, intrinsics, config)
     if order.size == 0:
-        return floor, [], REASON_NO_PERSON
-    return floor, depth_parts(g, regions, order, above, intrinsics, config), REASON_NO_PERSON
+        return [], REASON_NO_PERSON
+    return depth_parts(g, regions, order, above, intrinsics, config,
+                       occluded=occluded), REASON_NO_PERSON
