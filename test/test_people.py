@@ -210,3 +210,45 @@ def test_without_camera_info_people_are_told_apart_in_the_image():
     for k in range(30):
         out = tr.step([person(-0.6 + 0.005 * k), person(0.6)], k * DT, None)
     assert sorted(t.track_id for t in out) == [1, 2] and len(tr.tracks) == 2
+
+
+def _scored(joints: JointSet, score: float) -> JointSet:
+    return JointSet(joints.names, joints.uv, joints.xyz, source=joints.source,
+                    confidence=joints.confidence, score=score)
+
+
+def test_a_person_hidden_behind_a_nearer_one_keeps_their_last_pose():
+    """The far person walks behind the near one and is not detected for 15 frames: their
+    track keeps their last pose (TRACKED), where a constant-velocity prediction would drift
+    on, and takes their detection again with their id."""
+    tr = tracker()
+    for k in range(10):
+        out = tr.step([person(0.0, z=2.2), person(-0.2 + 0.03 * k, z=3.4)], k * DT, INTR)
+    far = max(out, key=lambda t: torso(t)[0][2])
+    last = torso(far)[0]
+    for k in range(10, 25):
+        out = tr.step([person(0.0, z=2.2)], k * DT, INTR)
+        held = next(t for t in out if t.track_id == far.track_id)
+        assert np.allclose(torso(held)[0], last, atol=1e-9)
+        assert set(held.source[held.source != cj.MISSING].tolist()) == {cj.TRACKED}
+    out = tr.step([person(0.0, z=2.2), person(0.1, z=3.4)], 25 * DT, INTR)
+    back = next(t for t in out if t.track_id == far.track_id)
+    assert torso(back)[0][0] == pytest.approx(0.1, abs=0.03)
+
+
+def test_an_unseen_track_beside_another_is_taken_back_only_by_a_persons_detection():
+    """Two people; the right one unseen for 5 frames (not behind anyone). A detection there
+    scoring under `birth_score` (a part of the room) is not theirs; one scoring above is."""
+    tr = tracker()
+    for k in range(6):
+        out = tr.step([_scored(person(-0.6), 8.0), _scored(person(0.8), 8.0)], k * DT, INTR)
+    right = next(i for i, x in ids_by_x(out).items() if x > 0)
+    for k in range(6, 11):
+        tr.step([_scored(person(-0.6), 8.0)], k * DT, INTR)
+    out = tr.step([_scored(person(-0.6), 8.0), _scored(person(0.85), 0.2)], 11 * DT, INTR)
+    track = next(t for t in out if t.track_id == right)
+    assert not (track.source == cj.DETECTED).any()
+    out = tr.step([_scored(person(-0.6), 8.0), _scored(person(0.85), 6.0)], 12 * DT, INTR)
+    track = next(t for t in out if t.track_id == right)
+    assert (track.source == cj.DETECTED).any()
+    assert torso(track)[0][0] == pytest.approx(0.85, abs=0.03)

@@ -237,6 +237,7 @@ class _Track:
     velocity: NDArray[np.float64] = field(default_factory=lambda: np.zeros(3))
     names: tuple[str, ...] = ()
     last: JointSet | None = None
+    held: bool = False  # hidden behind another person: `last` is their last pose, kept
 
 
 class PeopleTracker:
@@ -259,6 +260,7 @@ class PeopleTracker:
         self.config = config or TrackingConfig()
         self.tracks: list[_Track] = []
         self.last_s: float | None = None
+        self._previous_s: float | None = None
         self._spare: object | None = None
         self.next_id = 1
         self.born: list[int] = []
@@ -303,7 +305,7 @@ class PeopleTracker:
         # ends every track, as the SLQE restarts after one; a track unseen longer than
         # `max_unseen_s` while frames came has ended and is matched no more
         gap = self.last_s is not None and not 0.0 <= stamp_s - self.last_s <= cfg.max_gap_s
-        self.last_s = stamp_s
+        self._previous_s, self.last_s = self.last_s, stamp_s
         ended = [t for t in self.tracks if gap or stamp_s - t.seen_s > cfg.max_unseen_s]
         self.ended = [t.id for t in ended if t.id]
         self.tracks = [t for t in self.tracks if t not in ended]
@@ -316,15 +318,28 @@ class PeopleTracker:
         trusted = -1 if any(t.id for t in self.tracks) else min(
             (j for j in range(len(detections)) if j not in matched), default=-1)
         for j, det in enumerate(detections):
-            if j in matched and not self.tracks[matched[j]].id and not self._born(det):
-                del matched[j]  # a tentative track's detection must be a person's
+            if j in matched and not self._born(det) and not self._continues(
+                    self.tracks[matched[j]]):
+                # a tentative track's detection must be a person's, and so must that of a
+                # track unseen beside another person (`_continues`)
+                del matched[j]
             if j not in matched and (_finite(points[j][0]) or _finite(torso_px(det)[0])) \
                     and (j == trusted or self._born(det)):
                 stage = self.make()
                 self.tracks.append(_Track(stage, names=stage.check(det, intrinsics).names))
                 matched[j] = len(self.tracks) - 1
         seen = {i: j for j, i in matched.items()}
-        for i, track in enumerate(self.tracks):
+        # the tracks seen first: a track unseen behind one of them is held (`_behind`)
+        for i in sorted(range(len(self.tracks)), key=lambda i: i not in seen):
+            track = self.tracks[i]
+            if i not in seen and track.id and (track.held or self._behind(track, stamp_s)):
+                # its last pose kept until seen again (its SLQE then restarts) or ended
+                track.held = True
+                track.last = _held(track.last)
+                continue
+            if i in seen and track.held:
+                track.stage.reset()
+                track.held = False
             det = detections[seen[i]] if i in seen else JointSet.missing(track.names)
             out = track.stage.step(det, stamp_s, intrinsics)
             track.names = out.names
@@ -347,6 +362,39 @@ class PeopleTracker:
 
     def _born(self, det: JointSet) -> bool:
         return not det.score < self.config.birth_score  # NaN: no score to judge by
+
+    def _continues(self, track: _Track) -> bool:
+        """Whether a confirmed track takes any detection: no other confirmed track exists (one
+        person is tracked as the single-person tracker tracks them), or it was seen at the
+        last frame. Otherwise only a detection that could start a track (`birth_score`) is
+        its: what the gate of a track unseen beside another person reaches is often a part of
+        the room."""
+        if not track.id:
+            return False
+        if not any(t.id for t in self.tracks if t is not track):
+            return True
+        return track.seen_s == self._previous_s
+
+    def _behind(self, track: _Track, stamp_s: float) -> bool:
+        """Whether an unseen track's person is hidden behind a person seen this frame: their
+        last torso pixel within that person's box (its located joints, grown by a tenth of
+        its height) and their torso farther by over `torso_std_m` (both in 3-D)."""
+        if not (_finite(track.pixel) and _finite(track.point)):
+            return False
+        for other in self.tracks:
+            if other is track or not other.id or other.seen_s != stamp_s or other.last is None \
+                    or not _finite(other.point) \
+                    or not track.point[2] > other.point[2] + self.config.torso_std_m:
+                continue
+            uv = other.last.uv[(other.last.source != cj.MISSING)
+                               & np.isfinite(other.last.uv).all(axis=1)]
+            if len(uv) < 2:
+                continue
+            lo, hi = uv.min(axis=0), uv.max(axis=0)
+            grow = 0.1 * (hi[1] - lo[1])
+            if np.all(track.pixel >= lo - grow) and np.all(track.pixel <= hi + grow):
+                return True
+        return False
 
     def _cost(self, detections: Sequence[JointSet], points: list[tuple[NDArray, NDArray]],
               stamp_s: float) -> NDArray[np.float64]:
@@ -407,6 +455,15 @@ class PeopleTracker:
 def _finite(v: NDArray[np.float64]) -> bool:
     """Every value finite (`np.isfinite(v).all()` without its Python wrapper)."""
     return bool(np.logical_and.reduce(np.isfinite(v), axis=None))
+
+
+def _held(joints: JointSet | None) -> JointSet | None:
+    """A track's last pose kept while its person is hidden: every located joint TRACKED."""
+    if joints is None:
+        return None
+    source = np.where(joints.source == cj.MISSING, cj.MISSING, cj.TRACKED).astype(np.uint8)
+    return JointSet.of_arrays(joints.names, joints.uv, joints.xyz, joints.confidence, source,
+                              joints.covariance, score=joints.score, track_id=joints.track_id)
 
 
 def _with_track_id(joints: JointSet, track_id: int) -> JointSet:
