@@ -165,7 +165,7 @@ def segment_people(depth_m: NDArray[np.floating], intrinsics: Intrinsics, *,
         ok = [pt for pt in parts if person_rules(pt, config, near=True)]
     boxes = [p.box for p in previous if p.found and p.box is not None]
     picked = _distinct_people(ok, depth.shape, config, boxes, [])
-    if picked and len(picked) < max_people:
+    if config.second_look and picked and len(picked) < max_people:
         picked += _behind(depth, intrinsics, config, above, drop, boxes, picked)
     people = [_result(pt, depth, valid, floor, config) for pt, _ in picked[:max_people]]
     # completion may add a pixel to two people: it stays with the better one
