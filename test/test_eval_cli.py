@@ -82,6 +82,13 @@ def test_eval_writes_the_table_json(tiny_set: Path, tmp_path: Path, capsys) -> N
         assert row['pck@0.2']['average'] >= row['pck']['average']
     text = capsys.readouterr().out
     assert 'PCK@0.1' in text and 'rgbd' in text and 'APK' in text
+    # two models of one kind, without the single-frame pass: each keeps its own rows
+    other = tmp_path / 'rgbd_b.npz'
+    save_model(random_model(PARTS_10, 'rgbd', 2), other)
+    assert pose4d_main(['eval', str(tiny_set), '--json', str(out), '--model', str(rgbd),
+                        '--model', str(other), '--no-single-frame']) == 0
+    assert list(json.loads(out.read_text())['rows']) == [
+        'rgbd_t', 'rgbd_kf', 'rgbd_kf_ik', "rgbd'_t", "rgbd'_kf", "rgbd'_kf_ik"]
 
 
 def test_train_then_eval_and_bench(tiny_set: Path, tmp_path: Path, capsys) -> None:

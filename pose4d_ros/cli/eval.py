@@ -193,6 +193,7 @@ def table_rows(args: argparse.Namespace, kind: str, models: dict[str, PartModel 
                                                             birth_score=args.birth_score)
     settings = overrides.parse(args.config)
     rows: dict[str, Row] = {}
+    used: set[str] = set()
     for given, m in models.items():
         name = m.channels
         if m.channels == 'rgbd' and all(f.depth_m is None for f in frames):
@@ -201,8 +202,9 @@ def table_rows(args: argparse.Namespace, kind: str, models: dict[str, PartModel 
         elif m.channels == 'rgbd' and any(f.depth_m is None for f in frames):
             raise ValueError(f'{args.source}: some frames have no depth image for the rgbd '
                              'model')
-        while name in rows:
+        while name in used:  # a second model of the same channels: rgbd', rgbd'_kf, ...
             name += "'"
+        used.add(name)
         if isinstance(m, ConvNet):
             rows.update(convnet_rows(progress(frames, name), m, name=name,
                                      scales=args.photo_scales))
