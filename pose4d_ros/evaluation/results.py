@@ -243,9 +243,11 @@ JOBS: tuple[Job, ...] = (
                          '--max-people', '4', peer=False)
                    for s in ('test60_people2', 'test60_people2_alone1', 'test60_people2_alone2',
                              'test60_people3')]),
-    Job('lspet', 'LSPET photographs 2501-3000: the photograph network and the part model', (),
+    Job('lspet', 'LSPET photographs 2501-3000: the photograph network, the photograph part '
+        "model, and the nodes' rgbd_14 by its colour channel alone", (),
         lambda c: [_eval(c, c.lspet, RESULTS / 'lspet.json', '--range', '2501-3000',
-                         '--model', 'lspet_convnet', '--model', 'lspet_rgb_14')],
+                         '--model', 'lspet_convnet', '--model', 'lspet_rgb_14',
+                         '--model', 'rgbd_14')],
         needs='lspet'),
     Job('bench', 'CPU per stage on the demo bag, and MediaPipe in the same run', (),
         lambda c: [['pose4d', 'bench', 'bags/sample', '--json', str(RESULTS / 'bench.json'),
