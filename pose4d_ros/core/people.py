@@ -69,12 +69,13 @@ class TrackingConfig:
         rules but is no person (a door jamb at the image's edge) scores low, and does not
         become a second person.
 
-    `confirm_frames` and `birth_score` were chosen on validation renders of two people
-    (training subjects s01-s06, `valid60_people2` of `make results`, 720 frames) by
-    `tools/people_sweep.py` (`docs/results/people_sweep_valid60_people2.json`): 2 frames and
-    1.0 gave IDF1 0.954, MOTA 0.924, no false skeleton (2.0: 0.954, 0.919; 0: 140 false
-    skeletons per 1000 frames; 4 and more, or 3-5 frames: more people missed at a track's
-    start); on renders of one person no setting made a second track.
+    `confirm_frames` and `birth_score` were chosen on validation renders (training subjects
+    s01-s06, seed 201: `valid60_people2`, two people, 720 frames, and its twins with each person
+    alone) by `tools/people_sweep.py`, for the shipped `rgbd_14`, by the mean MOTA of the three
+    sets: birth score 5 with 2 frames 0.943 (two people: IDF1 0.945, MOTA 0.914, no false
+    skeleton; alone: 0.915 and 1.000); 3 with 3 frames 0.942; 1 with 2 frames (the choice for
+    the model before, whose scores ran lower) 0.823, with 100-246 false skeletons per 1000
+    frames; 6 and more miss more people at a track's start.
     """
 
     max_people: int = 4
@@ -83,7 +84,7 @@ class TrackingConfig:
     torso_std_m: float = 0.15
     max_speed_mps: float = 1.5
     gate_chi2: float = 16.0
-    birth_score: float = 1.0
+    birth_score: float = 5.0
     max_gap_s: float = 0.5
 
     def __post_init__(self) -> None:

@@ -75,6 +75,9 @@ SETS: dict[str, DataSet] = {s.name: s for s in (
     DataSet('valid30', 'validation', _synth(97, 's01-s06', 1, 45, 1)),
     DataSet('valid30_people2', 'validation', _synth(98, 's01-s06', 1, 45, 1, '--people', '2')),
     DataSet('valid60_people2', 'validation', _synth(201, 's01-s06', 1, 60, 1, '--people', '2')),
+    *(DataSet(f'valid60_people2_alone{k}', 'validation',
+              _synth(201, 's01-s06', 1, 60, 1, '--people', '2', '--alone', str(k)))
+      for k in (1, 2)),
     # people near the camera (1.2-2 m), cut by the image's bottom edge: the cut height's set
     DataSet('valid30_near', 'validation',
             _synth(403, 's01-s06', 2, 30, 1, '--distance', '1.2', '2.0')),
@@ -199,11 +202,12 @@ def _validation(ctx: Context) -> list[list[str]]:
     cmds += [_eval(ctx, str(DATA / 'valid30_people2'), WORK / f'birth_{b}.json', '--model',
                    'rgbd_14', '--birth-score', str(b), '--no-single-frame', peer=False)
              for b in BIRTH_SCORES]
-    # the several-person tracker's birth score and confirmation (TrackingConfig), the detections
-    # computed once (tools/people_sweep.py)
-    cmds.append([sys.executable, 'tools/people_sweep.py', str(DATA / 'valid60_people2'),
-                 '--birth-score', '0,1,2,3,4,5', '--confirm-frames', '2,3,5', '--json',
-                 str(RESULTS / 'people_sweep_valid60_people2.json')])
+    # the several-person tracker's birth score and confirmation (TrackingConfig), on two people
+    # and on each of them alone, the detections computed once (tools/people_sweep.py)
+    cmds += [[sys.executable, 'tools/people_sweep.py', str(DATA / s), '--birth-score',
+              '1,2,3,4,5,6,8', '--confirm-frames', '2,3', '--json',
+              str(RESULTS / f'people_sweep_{s}.json')]
+             for s in ('valid60_people2', 'valid60_people2_alone1', 'valid60_people2_alone2')]
     return cmds
 
 
@@ -215,7 +219,8 @@ JOBS: tuple[Job, ...] = (
         needs_peer=True),
     Job('validation', 'the search margin, the cut height, the limb rule, the person scale and '
         'the birth score, swept on validation renders; the MSR Action3D validation set',
-        ('valid30', 'valid30_near', 'valid30_people2', 'valid60_people2', 'valid30_msr'),
+        ('valid30', 'valid30_near', 'valid30_people2', 'valid60_people2', 'valid60_people2_alone1',
+         'valid60_people2_alone2', 'valid30_msr'),
         _validation),
     Job('test', 'held-out test (s07-s08, 400 frames 0.1 s apart): rgbd_14 and rgb_10',
         ('test',), lambda c: [_eval(c, str(DATA / 'test'), RESULTS / 'test.json')]),
