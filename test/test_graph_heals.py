@@ -124,10 +124,13 @@ def test_each_stage_killed_and_restarted_mid_replay(ros, tmp_path):
             resumed = next(t for t, m in skeletons[n_dead:] if t >= first)
             report[exe] = {'answers_after_up_s': first - up, 'skeleton_after_s': resumed - first}
             assert first - up <= 3.0 and resumed - first <= 1.0, (exe, report[exe])
-            if exe == 'tracker':  # a new track on the detections it gets
+            if exe == 'tracker':  # a new track on the detections it gets (not one kept from
+                # before: that would be all TRACKED); published at its first or second frame
+                # (confirm_frames), so a joint the second detection missed may be TRACKED
                 tracked = joints_from_msg(arrivals[topic][n_out][1])
-                assert (tracked.source != cj.MISSING).sum() >= 8
-                assert set(tracked.source[tracked.source != cj.MISSING]) == {cj.DETECTED}
+                assert (tracked.source == cj.DETECTED).sum() >= 8, tracked.source
+                assert (tracked.source == cj.TRACKED).sum() <= 2, tracked.source
+                assert not (tracked.source == cj.INFERRED).any(), tracked.source
         n = len(skeletons)
         ros.spin_until(lambda: len(skeletons) >= n + 10, 10.0, 'skeletons at the end')
         nodes['replay'].stop()
