@@ -21,6 +21,7 @@ the same answers on the same frames.
 from __future__ import annotations
 
 import functools
+import itertools
 import math
 from collections.abc import Mapping
 from dataclasses import replace
@@ -98,6 +99,13 @@ def _reordering(given: tuple[str, ...], names: tuple[str, ...]
     return rows, found
 
 
+def _read_only(a: NDArray) -> NDArray:
+    """A read-only view of `a`, as an array made on a message's buffer is."""
+    view = a.view()
+    view.flags.writeable = False
+    return view
+
+
 class ForegroundStage:
     """The person's mask from the depth image, applied to colour and depth.
 
@@ -136,11 +144,17 @@ class ForegroundStage:
         camera's size and at twice it (the working-resolution path of larger images), then
         forget it, so the kernels are compiled."""
         for k in (intrinsics, intrinsics.scaled(2 * intrinsics.width, 2 * intrinsics.height)):
-            color, depth, _ = warm_up_frame(k)
+            color, depth, mask = warm_up_frame(k)
             for _ in range(2):
                 self.step(color, depth, k)
                 self.step_people(color, depth, k, 4)
             self.reset()
+        # the blanking kernel for the arrays a node gets: views of a message's buffer are
+        # read-only (a new numba signature each, else compiled at the first camera frame)
+        for c, d in itertools.product((color, _read_only(color)),
+                                      (depth, _read_only(depth), (depth * 1000).astype(np.uint16),
+                                       _read_only((depth * 1000).astype(np.uint16)))):
+            apply_mask(c, d, mask)
 
     def step(self, color: NDArray[np.uint8], depth_m: NDArray[np.floating],
              intrinsics: Intrinsics
