@@ -5,7 +5,8 @@ The sample bag loops at 1x through replay -> foreground -> detector -> tracker -
 recorder on /pose4d/skeleton. In turn each stage (and the replay) is killed, left dead for a
 second, and started again. Checked:
 - while it is dead, nothing downstream publishes (no skeleton from stale state);
-- skeletons come again within 1 s of the restarted stage's first output, and that output
+- skeletons come again within 1 s of the restarted stage's first output (1.5 s after the
+  replay's: the bag starts again, every stage anew), and that output
   within 3 s of the stage being up (its start-up line in its log; the rest is Fast DDS finding
   a participant that took a dead one's ports, 0.7-1.5 s with config/fastdds.xml); a restarted
   tracker starts a new track on the detections it gets;
@@ -123,7 +124,10 @@ def test_each_stage_killed_and_restarted_mid_replay(ros, tmp_path):
                            f'skeletons after {exe} came back')
             resumed = next(t for t, m in skeletons[n_dead:] if t >= first)
             report[exe] = {'answers_after_up_s': first - up, 'skeleton_after_s': resumed - first}
-            assert first - up <= 3.0 and resumed - first <= 1.0, (exe, report[exe])
+            # a restarted replay starts the bag again: its stamps jump back, so every stage
+            # starts anew (a new track is confirmed over 2 frames): 1.5 s for it
+            assert first - up <= 3.0 and resumed - first <= (1.5 if exe == 'replay' else 1.0), \
+                (exe, report[exe])
             if exe == 'tracker':  # a new track on the detections it gets (not one kept from
                 # before: that would be all TRACKED); published at its first or second frame
                 # (confirm_frames), so a joint the second detection missed may be TRACKED
