@@ -25,7 +25,7 @@ from pathlib import Path
 import numpy as np
 from numpy.typing import NDArray
 
-from pose4d_ros.datasets.utkinect import UTKINECT_JOINTS, Take
+from pose4d_ros.datasets.utkinect import UTKINECT_JOINTS, Take, read_rows
 from pose4d_ros.datasets.utkinect import resample as _resample
 
 FPS = 15.0  # the recording's frame rate
@@ -104,19 +104,7 @@ def read_sequence(path: str | Path) -> Sequence:
     """
     path = Path(path)
     name = parse_name(path)[0]
-    rows: list[list[float]] = []
-    with path.open() as f:
-        for lineno, line in enumerate(f, start=1):
-            fields = line.split()
-            if not fields:
-                continue
-            if len(fields) != 4:
-                raise ValueError(f'{path}:{lineno}: expected 4 fields (x y z confidence), '
-                                 f'got {len(fields)}')
-            try:
-                rows.append([float(x) for x in fields])
-            except ValueError as exc:
-                raise ValueError(f'{path}:{lineno}: non-numeric field ({exc})') from None
+    rows = read_rows(path, 4, 'x y z confidence')
     if len(rows) % 20:
         raise ValueError(f'{path}: {len(rows)} joint lines, not a multiple of 20 (20 a frame)')
     data = np.asarray(rows, dtype=np.float64).reshape(-1, 20, 4)[:, TO_UTKINECT]

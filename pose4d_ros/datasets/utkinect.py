@@ -57,6 +57,26 @@ class Take:
         return int(match.group(1))
 
 
+def read_rows(path: Path, n_fields: int, names: str = '') -> list[list[float]]:
+    """The numbers of a text file of whitespace-separated lines, `n_fields` a line (blank lines
+    skipped); `ValueError` naming the file and line for a line of another length (`names`, if
+    given, says what the fields are) or a field that is not a number."""
+    rows: list[list[float]] = []
+    with path.open() as f:
+        for lineno, line in enumerate(f, start=1):
+            fields = line.split()
+            if not fields:
+                continue
+            if len(fields) != n_fields:
+                raise ValueError(f'{path}:{lineno}: expected {n_fields} fields'
+                                 f'{f" ({names})" if names else ""}, got {len(fields)}')
+            try:
+                rows.append([float(x) for x in fields])
+            except ValueError as exc:
+                raise ValueError(f'{path}:{lineno}: non-numeric field ({exc})') from None
+    return rows
+
+
 def read_take(path: str | Path) -> Take:
     """Read one `joints_sNN_eMM.txt` file, dropping repeated frame numbers (first one kept).
 
@@ -67,18 +87,7 @@ def read_take(path: str | Path) -> Take:
     match = _NAME.search(path.name)
     if not match:
         raise ValueError(f'{path}: not a UTKinect skeleton file name (joints_sNN_eMM.txt)')
-    rows: list[list[float]] = []
-    with path.open() as f:
-        for lineno, line in enumerate(f, start=1):
-            fields = line.split()
-            if not fields:
-                continue
-            if len(fields) != 61:
-                raise ValueError(f'{path}:{lineno}: expected 61 fields, got {len(fields)}')
-            try:
-                rows.append([float(x) for x in fields])
-            except ValueError as exc:
-                raise ValueError(f'{path}:{lineno}: non-numeric field ({exc})') from None
+    rows = read_rows(path, 61)
     if not rows:
         raise ValueError(f'{path}: no frames')
     data = np.asarray(rows)
