@@ -66,13 +66,15 @@ class Graph:
     def start(self, exe: str, params: dict[str, Any]) -> None:
         from pose4d_ros.nodes.params import override_args
 
-        cmd = [str(Path(sys.prefix) / 'lib' / 'pose4d_ros' / exe), '--ros-args',
-               *override_args(params)]
-        self.logs[exe] = self.out / 'logs' / f'{exe}.log'
-        self.logs[exe].parent.mkdir(parents=True, exist_ok=True)
-        log = self.logs[exe].open('w')
-        self.procs[exe] = subprocess.Popen(cmd, stdout=log, stderr=subprocess.STDOUT,
-                                           env=dict(os.environ))
+        self._spawn(exe, [str(Path(sys.prefix) / 'lib' / 'pose4d_ros' / exe), '--ros-args',
+                          *override_args(params)])
+
+    def _spawn(self, name: str, cmd: list[str]) -> None:
+        """Start `cmd` as process `name`, its output in `<out>/logs/<name>.log`."""
+        self.logs[name] = self.out / 'logs' / f'{name}.log'
+        self.logs[name].parent.mkdir(parents=True, exist_ok=True)
+        self.procs[name] = subprocess.Popen(cmd, stdout=self.logs[name].open('w'),
+                                            stderr=subprocess.STDOUT, env=dict(os.environ))
 
     def start_load(self, kind: str, nodes: list[str]) -> None:
         """A `graph.load` process beside the graph (named `load_<kind>` here and in the logs)."""
@@ -80,12 +82,7 @@ class Graph:
 
         if kind not in LOADS:
             raise ValueError(f'load {kind!r}: expected one of {LOADS}')
-        name = f'load_{kind}'
-        self.logs[name] = self.out / 'logs' / f'{name}.log'
-        self.logs[name].parent.mkdir(parents=True, exist_ok=True)
-        self.procs[name] = subprocess.Popen(
-            [sys.executable, '-m', 'pose4d_ros.graph.load', kind, *nodes],
-            stdout=self.logs[name].open('w'), stderr=subprocess.STDOUT, env=dict(os.environ))
+        self._spawn(f'load_{kind}', [sys.executable, '-m', 'pose4d_ros.graph.load', kind, *nodes])
 
     def check_alive(self) -> None:
         for exe, proc in self.procs.items():
