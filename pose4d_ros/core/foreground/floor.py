@@ -10,12 +10,17 @@ import functools
 import math
 
 import numpy as np
+from numpy.linalg import _umath_linalg
 from numpy.typing import NDArray
 
 from pose4d_ros.core.camera import Intrinsics
 from pose4d_ros.core.foreground.config import FloorConfig
 
 DEFAULT = FloorConfig()  # the defaults, one instance (frozen)
+# reductions without their Python wrappers (the per-frame path)
+_sum, _any, _all = np.add.reduce, np.logical_or.reduce, np.logical_and.reduce
+# np.linalg.eigh's LAPACK call (lower triangle), without its wrapper's checks and casts
+_eigh_lo = _umath_linalg.eigh_lo
 
 
 _RAYS: dict[Intrinsics, tuple[NDArray[np.float32], NDArray[np.float32]]] = {}
@@ -67,58 +72,65 @@ def fit_floor(depth_m: NDArray[np.floating], intrinsics: Intrinsics, *,
     sub = depth_m[r0::step, ::step]
     rx, ry = _rays(intrinsics)
     ok = np.isfinite(sub)
-    if np.count_nonzero(ok) < max(config.floor_min_inliers, 3):
+    # numpy's Python-level wrappers (np.stack, np.einsum, np.where, np.linalg.eigh, ...) are
+    # written out here as the operations they call: the same arithmetic in the same order,
+    # a fraction of the interpreter's work per frame
+    rr, cc = ok.nonzero()
+    n_pts = len(rr)
+    if n_pts < config.floor_min_inliers or n_pts < 3:
         return None
     z = sub[ok].astype(np.float64)
-    rr, cc = np.nonzero(ok)
-    x = rx[0, cc * step] * z
-    y = ry[r0 + rr * step, 0] * z
-    pts = np.stack([x, y, z], axis=1)
-    n_pts = len(pts)
+    pts = np.empty((n_pts, 3))
+    pts[:, 0] = rx[0, cc * step] * z
+    pts[:, 1] = ry[r0 + rr * step, 0] * z
+    pts[:, 2] = z
     # Kinect v1 depth error grows with z^2 (disparity quantisation)
     tol = config.floor_inlier_m * np.maximum(z, 1.0) ** 2
 
     idx = _ransac_draws(config.seed, n_pts, config.floor_iterations)
     p0, p1, p2 = pts[idx[:, 0]], pts[idx[:, 1]], pts[idx[:, 2]]
     normal = _cross(p1 - p0, p2 - p0)
-    norm = np.sqrt(np.add.reduce(normal * normal, axis=1))  # np.linalg.norm's, unwrapped
+    norm = np.sqrt(_sum(normal * normal, axis=1))
     good = norm > 1e-9
     normal = normal[good] / norm[good, None]
     p0 = p0[good]
-    normal *= np.where(normal[:, 1] > 0, -1.0, 1.0)[:, None]  # point up (optical -y)
-    d = -np.einsum('ij,ij->i', normal, p0)
+    normal[normal[:, 1] > 0] *= -1.0  # point up (optical -y)
+    d = -_sum(normal * p0, axis=1)
     if previous is not None:
         prev = np.asarray(previous, dtype=np.float64).reshape(4)
-        if np.all(np.isfinite(prev)):
-            normal = np.vstack([normal, prev[:3]])
-            d = np.append(d, prev[3])
-    cos_tilt = math.cos(math.radians(config.floor_max_tilt_deg))
+        if _all(np.isfinite(prev)):
+            normal = np.concatenate((normal, prev[None, :3]))
+            d = np.concatenate((d, prev[3:]))
+    cos_tilt = math.cos(config.floor_max_tilt_deg * (math.pi / 180.0))  # math.radians's
     plausible = ((-normal[:, 1] >= cos_tilt) & (d >= config.floor_min_height_m)
                  & (d <= config.floor_max_height_m))
-    if not plausible.any():
+    if not _any(plausible):
         return None
     normal, d = normal[plausible], d[plausible]
     dist = np.abs(pts @ normal.T + d[None, :])
-    counts = np.add.reduce(dist < tol[:, None], axis=0, dtype=np.intp)  # count_nonzero's
-    best = int(np.argmax(counts))
+    counts = _sum(dist < tol[:, None], axis=0, dtype=np.intp)  # count_nonzero's
+    best = int(counts.argmax())
     if counts[best] < config.floor_min_inliers:
         return None
-    plane = np.array([*normal[best], d[best]])
+    plane = np.empty(4)
+    plane[:3], plane[3] = normal[best], d[best]
     for _ in range(2):  # least-squares refinement on the inliers
         inl = np.abs(pts @ plane[:3] + plane[3]) < tol
-        if np.add.reduce(inl, dtype=np.intp) < 3:
+        if _sum(inl, dtype=np.intp) < 3:
             break
         # weighted total least squares, weights 1 / sigma^2 with sigma ~ z^2
         q = pts[inl]
         wt = 1.0 / np.maximum(q[:, 2], 1.0) ** 4
-        c = (wt @ q) / wt.sum()
+        c = (wt @ q) / _sum(wt)
         qc = q - c
-        # the normal: the weighted scatter's eigenvector of the smallest eigenvalue
-        _, vecs = np.linalg.eigh((qc * wt[:, None]).T @ qc)
+        # the normal: the weighted scatter's eigenvector of the smallest eigenvalue (the
+        # LAPACK routine np.linalg.eigh calls, without its checks: NaN if it fails)
+        _, vecs = _eigh_lo((qc * wt[:, None]).T @ qc, signature='d->dd')
         n = vecs[:, 0] * (-1.0 if vecs[1, 0] > 0 else 1.0)
-        if -n[1] < cos_tilt:
+        if not -n[1] >= cos_tilt:  # NaN too
             break
-        plane = np.array([*n, -float(n @ c)])
+        plane = np.empty(4)
+        plane[:3], plane[3] = n, -float(n @ c)
     return plane
 
 

@@ -15,11 +15,7 @@ from numpy.typing import NDArray
 
 from pose4d_ros.core.camera import Intrinsics
 from pose4d_ros.core.foreground.config import ForegroundConfig, PersonConfig
-from pose4d_ros.core.foreground.regions import StableRegions, trace_region
-from pose4d_ros.core.stats import median
-
-# `ndarray.any` without its Python wrapper (the per-frame path)
-_any = np.logical_or.reduce
+from pose4d_ros.core.foreground.regions import StableRegions
 
 
 @dataclass(frozen=True)
@@ -53,7 +49,6 @@ class Part:
     top_m: float
     bottom_m: float
     extent_m: float
-
 
 def person_sized(regions: StableRegions, intrinsics: Intrinsics, config: ForegroundConfig
                  ) -> NDArray[np.int64]:
@@ -98,7 +93,6 @@ def person_sized(regions: StableRegions, intrinsics: Intrinsics, config: Foregro
                                      r.y1, r.size, config.max_candidates)
                            for near in (False, True)])
 
-
 def depth_parts(g: NDArray[np.uint8], regions: StableRegions, order: NDArray[np.int64],
                 above: NDArray[np.float32] | None, intrinsics: Intrinsics,
                 config: ForegroundConfig, *, occluded: bool = False) -> list[Part]:
@@ -106,43 +100,37 @@ def depth_parts(g: NDArray[np.uint8], regions: StableRegions, order: NDArray[np.
     empty depth gaps (an occluder in front, furniture behind), and a part deeper than
     `person_max_extent_m` at Otsu's threshold too; every part is a candidate. `occluded`: the
     parts may be people partly hidden by a nearer one (`occluded_rules`), whose top and bottom
-    heights are measured from the smaller sizes of a cut person on."""
+    heights are measured from the smaller sizes of a cut person on.
+
+    Each region is traced and its parts measured by one kernel call (`_region_parts`): per
+    region, a handful of Python-level calls instead of some seventy small numpy ones."""
     h, w = g.shape
     parts = []
     gap_levels = config.occluder_gap_m / config.metres_per_level
     extent_levels = config.person_max_extent_m / config.metres_per_level
     st, ws = regions.step, regions.shape[1]
+    mpl = config.metres_per_level
+    heights = _NO_HEIGHTS if above is None else above
     for i in order.tolist():
         sy, sx = divmod(int(regions.seed[i]), ws)
-        crop, bx = trace_region(g, int(regions.level[i]), (sy * st, sx * st),
-                                config.connectivity)
-        gl = g[bx[1]:bx[3], bx[0]:bx[2]]
-        hl = None if above is None else above[bx[1]:bx[3], bx[0]:bx[2]]
-        hist = np.bincount(gl[crop], minlength=256)
-        present = hist.nonzero()[0]
-        for lo, hi in _depth_parts(hist, gap_levels):
-            ranges = [(lo, hi)]
-            if _extent_levels(hist[lo:hi + 1]) > extent_levels:
-                # too deep for one person, but no empty gap: an occluder whose top surface
-                # recedes towards the person (a table); split at Otsu's threshold
-                cut = lo + _otsu(hist[lo:hi + 1])
-                ranges += [(lo, cut), (cut + 1, hi)]
-            for a, b in ranges:
-                whole = a <= present[0] and b >= present[-1]
-                part = crop if whole else crop & (gl >= a) & (gl <= b)
-                pt = _describe(part, hist[a:b + 1], a, b, bx, float(regions.variation[i]), hl,
-                               intrinsics, (w, h), config, occluded)
-                if pt is not None:
-                    parts.append(pt)
+        crop, bx, rows = _region_parts(g, heights, above is not None, int(regions.level[i]),
+                                       sy * st, sx * st, config.connectivity == 8, gap_levels,
+                                       extent_levels, config.edge_rows)
+        box = tuple(bx.tolist())
+        for a, b, n, med, r0, r1, c0, c1, extent, top, bottom, whole in rows.tolist():
+            pt = _describe(crop, g, box, int(a), int(b), int(n), int(med),
+                           (int(r0), int(r1), int(c0), int(c1)), extent, top, bottom,
+                           bool(whole), float(regions.variation[i]), intrinsics, (w, h),
+                           config, mpl, occluded)
+            if pt is not None:
+                parts.append(pt)
     return parts
-
 
 def _distinct(order: NDArray[np.int64], x0: NDArray, y0: NDArray, x1: NDArray, y1: NDArray,
               size: NDArray, n: int) -> NDArray[np.int64]:
     """The first `n` regions of `order` (best first) that are not nested copies of one picked
     before: the regions of one chain are often the same pixels at several levels."""
     return _distinct_kernel(order.astype(np.int64), x0, y0, x1, y1, size, n)
-
 
 @njit(cache=True)
 def _distinct_kernel(order: NDArray[np.int64], x0: NDArray, y0: NDArray, x1: NDArray,
@@ -174,42 +162,37 @@ def _distinct_kernel(order: NDArray[np.int64], x0: NDArray, y0: NDArray, x1: NDA
             break
     return picked[:k]
 
-
-def _describe(part: NDArray[np.bool_], hist: NDArray[np.int64], lo: int, hi: int,
-              origin: tuple[int, int, int, int], var: float, above: NDArray[np.float32] | None,
+def _describe(crop: NDArray[np.bool_], g: NDArray[np.uint8], origin: tuple[int, ...],
+              lo: int, hi: int, n: int, med: int, extent_box: tuple[int, int, int, int],
+              extent_levels: float, top: float, bottom: float, whole: bool, var: float,
               intrinsics: Intrinsics, size: tuple[int, int], config: ForegroundConfig,
-              occluded: bool = False) -> Part | None:
-    """Measure one depth part; None when it is too small to be anything (`occluded`: its
-    tops and bottoms measured from a cut person's sizes on)."""
-    cum = hist.cumsum()
-    n = int(cum[-1])
+              metres_per_level: float, occluded: bool = False) -> Part | None:
+    """One depth part as `_region_parts` measured it (levels `lo`-`hi` of the region `crop`
+    over box `origin`; `n` pixels, median level `med`, rows `r0:r1` and columns `c0:c1` of
+    the crop, depth extent in levels, heights of its top and bottom rows); None when it is
+    too small to be anything (`occluded`: its tops and bottoms judged by a cut person's
+    sizes; `metres_per_level` is the config's, computed once by the caller)."""
     if n < config.mser_min_area_px:
         return None
-    # median level -> depth; level l is at depth near + (255 - l) * metres_per_level
-    med = lo + int(cum.searchsorted((n + 1) // 2))
-    z = config.depth_near_m + (255.0 - med) * config.metres_per_level
-    rows = _any(part, axis=1).nonzero()[0]
-    cols = _any(part, axis=0).nonzero()[0]
-    r0, r1, c0, c1 = int(rows[0]), int(rows[-1]) + 1, int(cols[0]), int(cols[-1]) + 1
+    r0, r1, c0, c1 = extent_box
+    # level l is at depth near + (255 - l) * metres_per_level
+    z = config.depth_near_m + (255.0 - med) * metres_per_level
     bh, bw = r1 - r0, c1 - c0
     box = (origin[0] + c0, origin[1] + r0, origin[0] + c1, origin[1] + r1)
     cut = box[3] == size[1]
     height_m, width_m = bh * z / intrinsics.fy, bw * z / intrinsics.fx
     area, fill = n * z * z / (intrinsics.fx * intrinsics.fy), n / (bh * bw)
-    extent = _extent_levels(hist, cum) * config.metres_per_level
-    top = bottom = math.nan
+    extent = extent_levels * metres_per_level
     # the heights above the floor decide only among parts of a person's size
-    if above is not None and size_rules(height_m, width_m, area, fill, extent, cut or occluded,
-                                        config):
-        k = config.edge_rows
-        t = above[r0:r0 + k][part[r0:r0 + k]]
-        b = above[max(r1 - k, 0):r1][part[max(r1 - k, 0):r1]]
-        top, bottom = median(t[np.isfinite(t)]), median(b[np.isfinite(b)])
-    return Part(crop=part, origin=(origin[0], origin[1]), box=box, lo=lo, hi=hi, n=n, z=z,
+    if not size_rules(height_m, width_m, area, fill, extent, cut or occluded, config):
+        top = bottom = math.nan
+    if not whole:
+        gl = g[origin[1]:origin[3], origin[0]:origin[2]]
+        crop = crop & (gl >= lo) & (gl <= hi)
+    return Part(crop=crop, origin=(origin[0], origin[1]), box=box, lo=lo, hi=hi, n=n, z=z,
                 height_m=height_m, width_m=width_m, area_m2=area, fill=fill, variation=var,
                 side=box[0] == 0 or box[2] == size[0], cut=cut, top_m=top, bottom_m=bottom,
                 extent_m=extent)
-
 
 def size_rules(height_m: float, width_m: float, area_m2: float, fill: float, extent_m: float,
                cut: bool, config: PersonConfig) -> bool:
@@ -222,7 +205,6 @@ def size_rules(height_m: float, width_m: float, area_m2: float, fill: float, ext
             and c.person_min_width_m <= width_m <= c.person_max_width_m
             and min_area <= area_m2 <= c.person_max_area_m2
             and fill <= c.person_max_fill and extent_m <= c.person_max_extent_m)
-
 
 def person_rules(part: Part, config: PersonConfig, near: bool = False) -> bool:
     """Whether a part passes the person-size rules of `config` (tops and bottoms only when
@@ -240,7 +222,6 @@ def person_rules(part: Part, config: PersonConfig, near: bool = False) -> bool:
         return False
     return True
 
-
 def occluded_rules(part: Part, config: PersonConfig) -> bool:
     """Whether a part may be a person partly hidden by a nearer one: the smaller height and
     surface of a person cut by the image's bottom edge (`person_min_cut_height_m`), the other
@@ -252,7 +233,6 @@ def occluded_rules(part: Part, config: PersonConfig) -> bool:
         return False
     return not (math.isfinite(part.top_m)
                 and not c.person_min_top_m <= part.top_m <= c.person_max_top_m)
-
 
 def part_score(part: Part, config: PersonConfig,
                prev_box: tuple[int, int, int, int] | None = None) -> float:
@@ -270,47 +250,177 @@ def part_score(part: Part, config: PersonConfig,
         score += config.previous_bonus
     return score
 
+# `_region_parts` without a floor: its heights argument, never read
+_NO_HEIGHTS = np.zeros((1, 1), np.float32)
 
-def _extent_levels(hist: NDArray[np.int64], cum: NDArray[np.int64] | None = None) -> int:
-    """Levels between the 5th and 95th percentiles of a histogram (`cum` its cumulative sum,
-    if known)."""
-    cum = hist.cumsum() if cum is None else cum
-    n = cum[-1]
-    return int(cum.searchsorted(0.95 * n) - cum.searchsorted(0.05 * n))
+@njit(cache=True)
+def _region_parts(g: NDArray[np.uint8], above: NDArray[np.float32], has_above: bool,
+                  level: int, sy: int, sx: int, conn8: bool, gap_levels: float,
+                  extent_levels: float, edge_rows: int
+                  ) -> tuple[NDArray[np.bool_], NDArray[np.int64], NDArray[np.float64]]:
+    """One stable region traced and cut into depth parts, in one pass of compiled code.
 
+    The region is the connected component of ``{g >= level}`` (8- or 4-connected) holding
+    pixel (`sy`, `sx`); its histogram of levels is split where more than `gap_levels` levels
+    are empty, and a range whose 5th-95th percentile extent exceeds `extent_levels` is also
+    cut at Otsu's threshold (both halves kept besides the whole).
 
-def _otsu(hist: NDArray[np.int64]) -> int:
-    """Otsu's threshold of a histogram: the last bin of the lower class."""
-    p = hist.astype(np.float64)
-    k = np.arange(p.size)
-    w0 = np.cumsum(p)[:-1]
-    w1 = p.sum() - w0
-    m0 = np.cumsum(p * k)[:-1]
-    m1 = (p * k).sum() - m0
-    with np.errstate(invalid='ignore', divide='ignore'):
-        between = w0 * w1 * (m0 / w0 - m1 / w1) ** 2
-    return int(np.nanargmax(between)) if np.isfinite(between).any() else p.size // 2
+    Returns the region as a bool array over its box, the box (x0, y0, x1, y1; x1/y1
+    exclusive) and one row per part: first and last level, pixels, median level, the rows
+    r0:r1 and columns c0:c1 of the crop it spans, its depth extent in levels, the median
+    height above the floor of its top and bottom `edge_rows` rows (NaN without `has_above`
+    or without a finite height there) and whether it is the whole region (1.0) or not."""
+    h, w = g.shape
+    seen = np.zeros((h, w), np.uint8)
+    stack = np.empty(h * w, np.int64)
+    seen[sy, sx] = 1
+    stack[0] = sy * w + sx
+    top_ = 1
+    y0, y1, x0, x1 = sy, sy, sx, sx
+    while top_ > 0:
+        top_ -= 1
+        y, x = divmod(stack[top_], w)
+        y0, y1, x0, x1 = min(y0, y), max(y1, y), min(x0, x), max(x1, x)
+        for dy in range(-1, 2):
+            for dx in range(-1, 2):
+                if (dy == 0 and dx == 0) or (not conn8 and dy != 0 and dx != 0):
+                    continue
+                v, u = y + dy, x + dx
+                if 0 <= v < h and 0 <= u < w and seen[v, u] == 0 and g[v, u] >= level:
+                    seen[v, u] = 1
+                    stack[top_] = v * w + u
+                    top_ += 1
+    ch, cw = y1 - y0 + 1, x1 - x0 + 1
+    crop = np.empty((ch, cw), np.bool_)
+    hist = np.zeros(256, np.int64)
+    for y in range(ch):
+        for x in range(cw):
+            inside = seen[y0 + y, x0 + x] != 0
+            crop[y, x] = inside
+            if inside:
+                hist[g[y0 + y, x0 + x]] += 1
+    box = np.array([x0, y0, x1 + 1, y1 + 1], np.int64)
+    first, last = 0, 255
+    while hist[first] == 0:
+        first += 1
+    while hist[last] == 0:
+        last -= 1
+    # level ranges between gaps of more than gap_levels empty levels
+    ranges = []
+    lo = first
+    prev = first
+    for lv in range(first + 1, last + 1):
+        if hist[lv] == 0:
+            continue
+        if gap_levels > 0 and lv - prev > gap_levels:
+            ranges.append((lo, prev))
+            lo = lv
+        prev = lv
+    ranges.append((lo, last))
+    bounds = []
+    for lo, hi in ranges:
+        bounds.append((lo, hi))
+        if _extent_kernel(hist, lo, hi) > extent_levels:
+            cut = lo + _otsu_kernel(hist, lo, hi)
+            bounds.append((lo, cut))
+            bounds.append((cut + 1, hi))
+    # no slices or NaN fills here: each costs a Python-level call per kernel call
+    rows = np.empty((len(bounds), 12))
+    for k in range(len(bounds)):
+        a, b = bounds[k]
+        n = 0
+        for lv in range(a, b + 1):
+            n += hist[lv]
+        half = (n + 1) // 2
+        med, cum = a, hist[a]
+        while cum < half:
+            med += 1
+            cum += hist[med]
+        r0, r1, c0, c1 = ch, -1, cw, -1
+        for y in range(ch):
+            for x in range(cw):
+                if crop[y, x] and a <= g[y0 + y, x0 + x] <= b:
+                    r0, r1, c0, c1 = min(r0, y), max(r1, y), min(c0, x), max(c1, x)
+        values = (a, b, n, med, r0, r1 + 1, c0, c1 + 1, _extent_kernel(hist, a, b))
+        for j in range(9):
+            rows[k, j] = values[j]
+        rows[k, 9] = rows[k, 10] = np.nan
+        if has_above and n > 0:
+            for j, (ra, rb) in enumerate(((r0, min(r0 + edge_rows, r1 + 1)),
+                                          (max(r1 + 1 - edge_rows, 0), r1 + 1))):
+                vals = np.empty((rb - ra) * cw, np.float32)
+                m = 0
+                for y in range(ra, rb):
+                    for x in range(cw):
+                        if crop[y, x] and a <= g[y0 + y, x0 + x] <= b:
+                            v = above[y0 + y, x0 + x]
+                            if np.isfinite(v):
+                                vals[m] = v
+                                m += 1
+                rows[k, 9 + j] = _median_kernel(vals, m)
+        rows[k, 11] = 1.0 if a <= first and b >= last else 0.0
+    return crop, box, rows
 
+@njit(cache=True)
+def _extent_kernel(hist: NDArray[np.int64], lo: int, hi: int) -> int:
+    """Levels between the 5th and 95th percentiles of `hist[lo:hi + 1]` (the first level
+    whose cumulative count reaches each, as `searchsorted`)."""
+    n = 0
+    for lv in range(lo, hi + 1):
+        n += hist[lv]
+    a, b = 0.05 * n, 0.95 * n
+    ia = ib = -1
+    cum = 0
+    for lv in range(lo, hi + 1):
+        cum += hist[lv]
+        if ia < 0 and cum >= a:
+            ia = lv
+        if ib < 0 and cum >= b:
+            ib = lv
+    return ib - ia
 
-def _depth_parts(hist: NDArray[np.int64], gap_levels: float) -> list[tuple[int, int]]:
-    """Level ranges [lo, hi] of a region's histogram separated by more than `gap_levels`
-    empty levels (all of it when `gap_levels` is 0)."""
-    levels = hist.nonzero()[0]
-    if levels.size == 0:
-        return []
-    if gap_levels <= 0:
-        return [(int(levels[0]), int(levels[-1]))]
-    cuts = ((levels[1:] - levels[:-1]) > gap_levels).nonzero()[0].tolist()
-    lv = levels.tolist()
-    starts = [lv[0]] + [lv[i + 1] for i in cuts]
-    ends = [lv[i] for i in cuts] + [lv[-1]]
-    return list(zip(starts, ends, strict=True))
+@njit(cache=True)
+def _otsu_kernel(hist: NDArray[np.int64], lo: int, hi: int) -> int:
+    """Otsu's threshold of `hist[lo:hi + 1]`: the last bin of the lower class, counted from
+    `lo` (the middle bin when no split has both classes non-empty)."""
+    total = 0.0
+    moment = 0.0
+    for k in range(hi - lo + 1):
+        total += hist[lo + k]
+        moment += hist[lo + k] * k
+    w0 = m0 = 0.0
+    best, arg = -1.0, -1
+    for k in range(hi - lo):
+        w0 += hist[lo + k]
+        m0 += hist[lo + k] * k
+        w1 = total - w0
+        if w0 == 0 or w1 == 0:
+            continue
+        between = w0 * w1 * (m0 / w0 - (moment - m0) / w1) ** 2
+        if between > best:
+            best, arg = between, k
+    return arg if arg >= 0 else (hi - lo + 1) // 2
+
+@njit(cache=True)
+def _median_kernel(values: NDArray[np.float32], n: int) -> float:
+    """`stats.median` of the first `n` float32 `values` in compiled code (NaN when none)."""
+    if n == 0:
+        return np.nan
+    s = np.empty(n, np.float32)
+    for i in range(n):
+        s[i] = values[i]
+    s.sort()
+    k = n // 2
+    if n % 2:
+        return float(s[k])
+    return float(np.float32(s[k - 1] + s[k])) / 2.0
 
 
 def _overlap(a: tuple[int, int, int, int], b: tuple[int, int, int, int]) -> float:
-    """Intersection over union of two boxes."""
-    iw = min(a[2], b[2]) - max(a[0], b[0])
-    ih = min(a[3], b[3]) - max(a[1], b[1])
+    """Intersection over union of two boxes (`min`/`max` written out: a call each, per part
+    per frame)."""
+    iw = (a[2] if a[2] < b[2] else b[2]) - (a[0] if a[0] > b[0] else b[0])
+    ih = (a[3] if a[3] < b[3] else b[3]) - (a[1] if a[1] > b[1] else b[1])
     if iw <= 0 or ih <= 0:
         return 0.0
     inter = iw * ih

@@ -8,7 +8,6 @@ from __future__ import annotations
 import threading
 from dataclasses import dataclass
 
-import cv2
 import numpy as np
 from numba import njit
 from numpy.typing import NDArray
@@ -200,23 +199,6 @@ def variation(level: NDArray[np.int32], size: NDArray[np.int32], parent: NDArray
             a = parent[a]
         out[i] = (size[a] - size[i]) / size[i]
     return out
-
-
-def trace_region(g: NDArray[np.uint8], level: int, seed: tuple[int, int], connectivity: int
-            ) -> tuple[NDArray[np.bool_], tuple[int, int, int, int]]:
-    """The connected component of ``{g >= level}`` holding pixel `seed` (row, column).
-
-    Returns the component as a bool array over its bounding box, and the box (x0, y0, x1,
-    y1), x1/y1 exclusive.
-    """
-    h, w = g.shape
-    ff = np.zeros((h + 2, w + 2), np.uint8)
-    sy, sx = seed
-    flags = connectivity | cv2.FLOODFILL_FIXED_RANGE | cv2.FLOODFILL_MASK_ONLY | (1 << 8)
-    _, _, _, (rx, ry, rw, rh) = cv2.floodFill(g, ff, (sx, sy), 0,
-                                              loDiff=int(g[sy, sx]) - level, upDiff=255,
-                                              flags=flags)
-    return ff[ry + 1:ry + rh + 1, rx + 1:rx + rw + 1] > 0, (rx, ry, rx + rw, ry + rh)
 
 
 @dataclass(frozen=True)
