@@ -137,10 +137,13 @@ def backproject(uv: NDArray[np.floating], depth_m: NDArray[np.floating],
     z = np.asarray(depth_m, dtype=np.float64).reshape(-1)
     if len(z) != len(uv):
         raise ValueError(f'{len(uv)} pixels but {len(z)} depths')
-    z = np.where(z > 0, z, np.nan)
-    x = (uv[:, 0] - intrinsics.cx) * z / intrinsics.fx
-    y = (uv[:, 1] - intrinsics.cy) * z / intrinsics.fy
-    return np.stack([x, y, z], axis=1)
+    out = np.empty((len(z), 3))  # np.stack's result, without its Python wrapper
+    out[:, 2] = z
+    z = out[:, 2]
+    z[~(z > 0)] = np.nan  # np.where(z > 0, z, np.nan)'s, in place
+    out[:, 0] = (uv[:, 0] - intrinsics.cx) * z / intrinsics.fx
+    out[:, 1] = (uv[:, 1] - intrinsics.cy) * z / intrinsics.fy
+    return out
 
 
 def depth_to_metres(depth: NDArray) -> NDArray[np.float32]:

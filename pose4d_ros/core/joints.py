@@ -178,12 +178,12 @@ def check_joints(joints: JointSet, intrinsics: Intrinsics | None = None) -> None
     names = joints.names
     lo, hi, where = _pixel_bounds(intrinsics)
     uv, xyz, conf, cov = joints.uv, joints.xyz, joints.confidence, joints.covariance
-    with np.errstate(invalid='ignore'):
-        # every rule at once (ufuncs): the details below only for a set that breaks one
-        fine = (_all(np.isnan(uv) | ((uv >= lo) & (uv <= hi)), axis=None)
-                & _all(np.isnan(xyz) | (np.abs(xyz) <= MAX_DEPTH_M), axis=None)
-                & _all((conf >= 0) & (conf <= 1), axis=None)
-                & _all(np.abs(cov) <= MAX_DEPTH_M ** 2, axis=None))
+    # every rule at once (ufuncs; comparisons with NaN are quietly False, no np.errstate
+    # needed): the details below only for a set that breaks one
+    fine = (_all(np.isnan(uv) | ((uv >= lo) & (uv <= hi)), axis=None)
+            & _all(np.isnan(xyz) | (np.abs(xyz) <= MAX_DEPTH_M), axis=None)
+            & _all((conf >= 0) & (conf <= 1), axis=None)
+            & _all(np.abs(cov) <= MAX_DEPTH_M ** 2, axis=None))
     if fine and len(names) <= MAX_JOINTS and len(set(names)) == len(names) \
             and not np.isinf(joints.score):
         return

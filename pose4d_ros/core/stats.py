@@ -12,14 +12,17 @@ from numpy.typing import ArrayLike
 
 def median(values: ArrayLike) -> float:
     """The median of an array of finite numbers, exactly as `np.median` gives it (in the
-    array's float type); NaN when empty."""
+    array's float type); NaN when empty. The middle values are order statistics, the same
+    whichever selection finds them: a flat copy partitioned in place (`np.partition`'s work
+    without its wrappers)."""
     a = np.asarray(values)
-    a = (a if a.dtype.kind == 'f' else a.astype(np.float64)).ravel()
+    a = a.flatten() if a.dtype.kind == 'f' else a.astype(np.float64).reshape(-1)
     n = a.size
     if n == 0:
         return float('nan')
     k = n // 2
     if n % 2:
-        return float(np.partition(a, k)[k])
-    lo, hi = np.partition(a, (k - 1, k))[k - 1:k + 1]
-    return float((lo + hi) / 2.0)
+        a.partition(k)
+        return float(a[k])
+    a.partition((k - 1, k))
+    return float((a[k - 1] + a[k]) / 2.0)

@@ -3,6 +3,7 @@
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass
 from enum import IntEnum
 
@@ -130,7 +131,7 @@ class SlqeConfig:
         if not 0.0 < self.confidence_decay <= 1.0:
             raise ValueError(f'confidence_decay must be in (0, 1], got {self.confidence_decay}')
 
-    @property
+    @functools.cached_property  # a frozen dataclass's too: read each frame, computed once
     def block(self) -> int:
         """State size per part: 2 axes x `order` derivatives."""
         return 2 * self.order
@@ -170,7 +171,7 @@ class TrackState:
     stamp: float | None = None
     dt: float = NOMINAL_DT_S
 
-    @property
+    @functools.cached_property  # `evolve` copies it with the arrays, which keep their size
     def n_parts(self) -> int:
         return len(self.active)
 

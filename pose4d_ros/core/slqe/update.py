@@ -8,6 +8,7 @@ import math
 from types import SimpleNamespace
 
 import numpy as np
+from numpy.linalg import _umath_linalg
 from numpy.typing import NDArray
 
 from pose4d_ros.core.skeleton import PartTree
@@ -62,10 +63,12 @@ def _mahalanobis2(y: NDArray[np.float64], s: NDArray[np.float64]) -> NDArray[np.
     """y_n^T S_n^-1 y_n for innovations `y` (N, 2) and covariances `s` (N, 2, 2), in closed
     form; inf where S_n is not positive definite."""
     det = s[:, 0, 0] * s[:, 1, 1] - s[:, 0, 1] * s[:, 1, 0]
-    with np.errstate(divide='ignore', invalid='ignore'):
-        d2 = (s[:, 1, 1] * y[:, 0] ** 2 + s[:, 0, 0] * y[:, 1] ** 2
-              - (s[:, 0, 1] + s[:, 1, 0]) * y[:, 0] * y[:, 1]) / det
-    return np.where(det > 0, d2, math.inf)
+    d2 = np.empty(len(det))
+    d2.fill(math.inf)
+    # divided only where det > 0 (no warning to silence: np.errstate is three calls a frame)
+    np.divide(s[:, 1, 1] * y[:, 0] ** 2 + s[:, 0, 0] * y[:, 1] ** 2
+              - (s[:, 0, 1] + s[:, 1, 0]) * y[:, 0] * y[:, 1], det, out=d2, where=det > 0)
+    return d2
 
 
 def _keeps_length(z: NDArray[np.float64], before: TrackState, i: int, parent: int, b: int,
@@ -81,6 +84,8 @@ def _keeps_length(z: NDArray[np.float64], before: TrackState, i: int, parent: in
 # `ndarray.any` and `ndarray.all` without their Python wrappers (the per-frame path)
 _any = np.logical_or.reduce
 _all = np.logical_and.reduce
+# np.linalg.solve's LAPACK call (gesv) without its wrapper: NaN where it would raise
+_solve = _umath_linalg.solve
 # the sources as uint8 scalars (an enum member's look-up is a Python call)
 _TRACKED, _MISSING = np.uint8(Source.TRACKED), np.uint8(Source.MISSING)
 # the (x, y) offsets of a part's position in its state block, and the 2 x 2 identity
@@ -211,8 +216,8 @@ def _restarts(i: int, z: NDArray[np.float64], r: float, state: TrackState,
     limb between the two detections keeping its length)."""
     b = config.block
     if config.stop_hypothesis and before is not None and before.active[i]:
-        p0 = np.arange(i * b, i * b + 2)
-        s0 = before.cov[np.ix_(p0, p0)] + r * np.eye(2)
+        p0 = slice(i * b, i * b + 2)
+        s0 = before.cov[p0, p0] + r * _EYE2
         if _mahalanobis2((z[i] - before.x[p0])[None], s0[None])[0] <= config.gate_chi2:
             return True
     return limb and state.rejected[i] >= config.limb_rejected_frames and \
@@ -224,7 +229,7 @@ def _back_to_kept_track(w: SimpleNamespace, i: int, z: NDArray[np.float64], r: f
                         config: SlqeConfig) -> bool:
     """The last restart of part i followed a wrong detection when detection `z` is within the
     gate of the track kept from before it: back to that track (True)."""
-    s1 = w.shadow_cov[i, :2, :2] + r * np.eye(2)
+    s1 = w.shadow_cov[i, :2, :2] + r * _EYE2
     if _mahalanobis2((z - w.shadow_x[i, :2])[None], s1[None])[0] > config.gate_chi2:
         return False
     b = config.block
@@ -247,7 +252,9 @@ def _kalman_update(w: SimpleNamespace, z: NDArray[np.float64], r_var: NDArray[np
     r.flat[::len(idx) + 1] = r_diag
     ph = w.cov[:, idx]
     s = w.cov[idx[:, None], idx] + r
-    gain = np.linalg.solve(s, ph.T).T
+    gain = _solve(s, ph.T, signature='dd->d').T
+    if not _all(np.isfinite(gain), axis=None):  # what np.linalg.solve's checks would refuse
+        raise np.linalg.LinAlgError(f'singular innovation covariance S = {s.tolist()}')
     w.x = w.x + gain @ y
     # Joseph form (I - K H) P (I - K H)^T + K R K^T, with H picking the rows `idx`: the
     # same products restricted to the columns H touches (K H P = K P[idx])
