@@ -76,10 +76,13 @@ def reorder(joints: JointSet, names: tuple[str, ...]) -> JointSet:
         return joints
     n = len(names)
     rows, found = _reordering(joints.names, names)
-    uv = np.full((n, 2), np.nan)
-    xyz = np.full((n, 3), np.nan)
+    # np.full's arrays, without its Python wrapper (the per-frame path)
+    uv, xyz = np.empty((n, 2)), np.empty((n, 3))
+    uv.fill(np.nan)
+    xyz.fill(np.nan)
     conf = np.zeros(n, np.float32)
-    src = np.full(n, cj.MISSING, np.uint8)
+    src = np.zeros(n, np.uint8)
+    src.fill(cj.MISSING)
     cov = np.zeros((n, 3, 3))
     uv[rows], xyz[rows], conf[rows], src[rows], cov[rows] = (
         joints.uv[found], joints.xyz[found], joints.confidence[found], joints.source[found],
@@ -398,8 +401,10 @@ class TrackerStage:
         if new_track:
             self.depth[:] = np.nan
         detected = parts.source == cj.DETECTED
-        uv = np.where(detected[:, None], parts.uv, np.nan)
-        out = self.filter.step(uv, np.where(detected, parts.confidence, 0.0), stamp_s,
+        # np.where's arrays, without its Python wrapper (the per-frame path)
+        uv, conf = parts.uv.copy(), parts.confidence.copy()
+        uv[~detected], conf[~detected] = np.nan, 0.0
+        out = self.filter.step(uv, conf, stamp_s,
                                person_scale_px(parts.xyz[detected], intrinsics))
         if new_track and _any(self.filter.state.active):
             self.track_id += 1
@@ -412,7 +417,8 @@ class TrackerStage:
         # prediction may overshoot an edge the part moves towards); np.clip's values
         if intrinsics is not None:
             held = np.minimum(np.maximum(positions, 0.0), _image_max(intrinsics))
-            positions = np.where((source == cj.DETECTED)[:, None], held, positions)
+            accepted = source == cj.DETECTED
+            positions[accepted] = held[accepted]  # `output`'s own array
         # a part predicted off the image (coasting away) is lost: no stage takes such pixels
         lost = (source != cj.MISSING) & ~cj.near_image(positions, intrinsics)
         if _any(lost):
@@ -449,6 +455,8 @@ _MIDDLE_ROWS = tuple((limb, SKELETON_14.index(middle)) for limb, (_, middle, _) 
 # `ndarray.any` and `ndarray.all` without their Python wrappers (the per-frame path)
 _any = np.logical_or.reduce
 _all = np.logical_and.reduce
+_EYE3 = np.eye(3)
+_EYE3.setflags(write=False)
 
 
 @functools.lru_cache(maxsize=16)
@@ -564,7 +572,7 @@ class IkStage:
         """
         check_known(tracked, SKELETON_14, intrinsics)
         if depth_m is not None and intrinsics is not None:
-            intrinsics.check_size(np.shape(depth_m), 'depth image')
+            intrinsics.check_size(np.asarray(depth_m).shape, 'depth image')
         if tracked.track_id != self.track_id:  # a new person: learn their limbs anew
             self.learner = LimbLengths(self.defaults)
             self.track_id = tracked.track_id
@@ -572,10 +580,11 @@ class IkStage:
         valid = valid_xyz(out.xyz)
         uv, xyz = out.uv.copy(), out.xyz.copy()
         conf, src, cov = out.confidence.copy(), out.source.copy(), out.covariance.copy()
-        bad = (src != cj.MISSING) & ~valid & np.isfinite(xyz).any(axis=1)
+        bad = (src != cj.MISSING) & ~valid & _any(np.isfinite(xyz), axis=1)
         # a 3-D position behind the camera is never passed on as valid
         uv[bad], xyz[bad], conf[bad], src[bad], cov[bad] = np.nan, np.nan, 0.0, cj.MISSING, 0.0
-        points = np.where(valid[:, None], xyz, np.nan)
+        points = xyz.copy()
+        points[~valid] = np.nan
         if self.learn:
             self.learner.observe_skeleton(SKELETON_14, points)
         # elbows and knees measured by a 14-part detector are kept: only the others are solved
@@ -590,17 +599,17 @@ class IkStage:
         for k, name in enumerate(result.names):
             i = SKELETON_14.index(name)
             if result.flags[k] in (IkFlag.MISSING, IkFlag.BEHIND_CAMERA) or \
-                    not np.isfinite(result.positions[k]).all():
+                    not _all(np.isfinite(result.positions[k])):
                 uv[i], xyz[i], conf[i], src[i] = np.nan, np.nan, 0.0, cj.MISSING
                 continue
             xyz[i] = result.positions[k]
             uv[i] = result.pixels[k] if intrinsics is not None else np.nan
-            if intrinsics is not None and not np.isfinite(uv[i]).all():
+            if intrinsics is not None and not _all(np.isfinite(uv[i])):
                 uv[i] = project(xyz[i][None], intrinsics)[0]
             conf[i], src[i] = result.confidence[k], cj.INFERRED
             # kinematics' confidence is exp(-sigma / confidence_scale_m): invert it for sigma
             sigma = -self.config.confidence_scale_m * math.log(max(float(conf[i]), 1e-3))
-            cov[i] = np.eye(3) * sigma ** 2
+            cov[i] = _EYE3 * sigma ** 2
         live = conf[src != cj.MISSING]
         # np.mean's value (float32 sum over the count), without its Python wrapper
         score = float(np.add.reduce(live) / len(live)) if len(live) else math.nan
