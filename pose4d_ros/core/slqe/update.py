@@ -87,7 +87,8 @@ _all = np.logical_and.reduce
 # np.linalg.solve's LAPACK call (gesv) without its wrapper: NaN where it would raise
 _solve = _umath_linalg.solve
 # the sources as uint8 scalars (an enum member's look-up is a Python call)
-_TRACKED, _MISSING = np.uint8(Source.TRACKED), np.uint8(Source.MISSING)
+_DETECTED, _TRACKED, _MISSING = (np.uint8(Source.DETECTED), np.uint8(Source.TRACKED),
+                                 np.uint8(Source.MISSING))
 # the (x, y) offsets of a part's position in its state block, and the 2 x 2 identity
 _XY = np.arange(2)
 _EYE2 = np.eye(2)
@@ -147,7 +148,7 @@ def update_arrays(state: TrackState, uv: NDArray[np.floating],
     accepted, restart = _gate(w, nis, state, before, z, valid, r_var, config, tree, px_gain)
     if accepted:
         _kalman_update(w, z[accepted], r_var[accepted], accepted, config.block)
-        source[accepted] = Source.DETECTED
+        source[accepted] = _DETECTED
         w.missed[accepted] = 0
         w.confidence[accepted] = conf[accepted]
     new = (valid & ~state.active).nonzero()[0].tolist()
@@ -278,7 +279,7 @@ def _start_parts(w: SimpleNamespace, starts: list[int], restart: list[int], z: N
     for i in starts:
         _init_part(w.x, w.cov, i, z[i], tree.parents[i], w.active, config, r_var[i], px_gain)
         w.active[i] = True
-        source[i] = Source.DETECTED
+        source[i] = _DETECTED
         w.missed[i] = 0
         w.rejected[i] = 0
         w.last_rejected[i] = np.nan
@@ -288,7 +289,7 @@ def _start_parts(w: SimpleNamespace, starts: list[int], restart: list[int], z: N
 def _coast(w: SimpleNamespace, source: NDArray[np.uint8], config: SlqeConfig) -> None:
     """Parts only predicted this frame: one more frame missed, their confidence decayed; past
     `max_missed_frames` they are dropped (MISSING)."""
-    coasting = w.active & (source == Source.TRACKED)
+    coasting = w.active & (source == _TRACKED)
     w.missed[coasting] += 1
     w.confidence[coasting] *= config.confidence_decay
     lost = coasting & (w.missed > config.max_missed_frames)
@@ -298,7 +299,7 @@ def _coast(w: SimpleNamespace, source: NDArray[np.uint8], config: SlqeConfig) ->
         w.cov[drop, :] = 0.0
         w.cov[:, drop] = 0.0
         w.active[lost] = False
-        source[lost] = Source.MISSING
+        source[lost] = _MISSING
         w.missed[lost] = 0
         w.rejected[lost] = 0
         w.last_rejected[lost] = np.nan
@@ -322,12 +323,12 @@ def output(state: TrackState, info: UpdateInfo, uv: NDArray[np.floating],
     covs = state.cov[at[:, :, None], at[:, None, :]]
     if config.output == 'detection':
         z, conf = _check_measurement(uv, confidence, n_parts)
-        det = info.source == Source.DETECTED
+        det = info.source == _DETECTED
         pos[det] = z[det]
         safe = np.where(det, np.maximum(np.nan_to_num(conf, nan=1.0), 1e-6), 1.0)
         r_var = (px_gain * config.measurement_noise_px) ** 2 / safe
         covs[det] = r_var[det, None, None] * np.eye(2)
-    missing = info.source == Source.MISSING
+    missing = info.source == _MISSING
     pos[missing] = np.nan
     vel[missing] = np.nan
     covs[missing] = np.nan
