@@ -162,7 +162,9 @@ def test_the_shipped_model_finds_people_in_held_out_photographs(shared_data: Pat
 
     root = shared_data / 'lspet'
     net = cn.load_convnet(model_path('lspet_convnet'))
-    assert net.metadata['data'] == 'LSPET 1-2500' and net.metadata['train_minutes'] <= 30
+    # trained on LSPET 1-2500 and 3001-8500 within 110 CPU minutes (both cores)
+    assert net.metadata['data'] == 'LSPET 1-2500,3001-8500'
+    assert net.metadata['cpu_minutes'] <= 111
     frames = list(lspet.read_frames(root, 2501, 2540))
     truth = np.array([f.truth.uv for f in frames])
     visible = np.array([f.truth.confidence > 0 for f in frames])
@@ -201,10 +203,14 @@ def test_a_cpu_budget_counts_this_process_s_cpu_time_not_the_wall_clock() -> Non
 
     from pose4d_ros.training.convnet_torch import Budget
 
-    cpu = Budget(cpu_minutes=0.01, cpu_since=time.process_time())
+    c0 = time.process_time()
+    cpu = Budget(cpu_minutes=0.01, cpu_since=c0)
     wall = Budget(minutes=10.0)
-    time.sleep(0.2)  # no CPU spent: the CPU budget does not move
-    assert cpu.done() < 0.05 and 0 < wall.done() < 0.01
+    time.sleep(0.2)
+    # the CPU budget moves by this process's CPU time only (asleep: what other threads spent,
+    # e.g. BLAS threads of earlier tests spinning down), never by the 0.2 s of wall time
+    spent = time.process_time() - c0
+    assert cpu.done() == pytest.approx(spent / 0.6, abs=0.01) and 0 < wall.done() < 0.01
     end = time.process_time() + 0.3
     while time.process_time() < end:
         pass
