@@ -162,8 +162,10 @@ def apply_mask(color: NDArray[np.uint8], depth_m: NDArray[np.floating],
                          f'got dtype {depth.dtype}')
     if depth.shape != mask.shape:
         raise ValueError(f'depth shape {depth.shape} does not match the mask {mask.shape}')
-    color_masked = np.empty(color.shape, color.dtype)
+    # outside the mask zeros and NaN are written at memory speed, inside by one kernel pass
+    color_masked = np.zeros(color.shape, color.dtype)
     depth_masked = np.empty(mask.shape, np.float32)
+    depth_masked.fill(np.nan)
     h, w = mask.shape
     _blank_outside(color.reshape(h, w, -1), color_masked.reshape(h, w, -1), depth,
                    depth_masked, mask, 0.001 if depth.dtype == np.uint16 else 1.0, MAX_DEPTH_M)
@@ -174,20 +176,15 @@ def apply_mask(color: NDArray[np.uint8], depth_m: NDArray[np.floating],
 def _blank_outside(color: NDArray[np.uint8], out: NDArray[np.uint8], depth: NDArray,
                    out_depth: NDArray[np.float32], mask: NDArray[np.bool_], scale: float,
                    max_m: float) -> None:
-    """`apply_mask` in one pass over every pixel: `out` = `color` inside the mask, 0
-    outside; `out_depth` = the depth in metres (`depth` times `scale`) inside the mask where it
-    is a reading (`camera.depth_to_metres`'s rule), NaN elsewhere."""
+    """`apply_mask` inside the mask, in one pass: `out` = `color` inside the mask (it is 0
+    elsewhere already); `out_depth` = the depth in metres (`depth` times `scale`) inside the
+    mask where it is a reading (`camera.depth_to_metres`'s rule), NaN elsewhere already."""
     h, w, c = color.shape
     for r in range(h):
         for x in range(w):
-            z = np.float32(np.nan)
             if mask[r, x]:
                 for k in range(c):
                     out[r, x, k] = color[r, x, k]
-                v = np.float32(depth[r, x]) * np.float32(scale)  # as depth_to_metres
-                if v > 0 and v <= max_m:
-                    z = v
-            else:
-                for k in range(c):
-                    out[r, x, k] = 0
-            out_depth[r, x] = z
+                z = np.float32(depth[r, x]) * np.float32(scale)  # as depth_to_metres
+                if z > 0 and z <= max_m:
+                    out_depth[r, x] = z
