@@ -154,10 +154,15 @@ class ForegroundStage:
             self.reset()
         # the blanking kernel for the arrays a node gets: views of a message's buffer are
         # read-only (a new numba signature each, else compiled at the first camera frame)
+        millimetres = np.nan_to_num(depth * 1000).astype(np.uint16)
         for c, d in itertools.product((color, _read_only(color)),
-                                      (depth, _read_only(depth), (depth * 1000).astype(np.uint16),
-                                       _read_only((depth * 1000).astype(np.uint16)))):
+                                      (depth, _read_only(depth), millimetres,
+                                       _read_only(millimetres))):
             apply_mask(c, d, mask)
+        # and for the detector's crops of them (`dpm.infer`: views, not contiguous)
+        for c, d, m in itertools.product((color, _read_only(color)), (depth, _read_only(depth)),
+                                         (mask, _read_only(mask))):
+            apply_mask(c[:, 1:], d[:, 1:], m[:, 1:])
 
     def step(self, color: NDArray[np.uint8], depth_m: NDArray[np.floating],
              intrinsics: Intrinsics
