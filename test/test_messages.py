@@ -186,3 +186,40 @@ def test_joints_to_cdr_is_the_serialised_message(frame_id, n):
         assert_array_equal([a.u, a.v, a.position.x, a.position.y, a.position.z],
                            [b.u, b.v, b.position.x, b.position.y, b.position.z])
         assert_array_equal(a.position_covariance, b.position_covariance)
+
+
+@pytest.mark.parametrize('people', [0, 1, 3])
+def test_skeletons_to_cdr_is_the_serialised_message(people):
+    """Several people's bytes (names of several lengths, so every alignment is exercised)
+    decode to the SkeletonArray skeletons_to_msg builds, and have its length."""
+    from builtin_interfaces.msg import Time
+    from pose4d_msgs.msg import SkeletonArray
+    from rclpy.serialization import deserialize_message, serialize_message
+    from std_msgs.msg import Header
+
+    from pose4d_ros.core.joints import JointSet
+    from pose4d_ros.core.skeleton import SKELETON_14
+    from pose4d_ros.nodes.convert import skeletons_to_cdr, skeletons_to_msg
+
+    rng = np.random.default_rng(people)
+    sets = []
+    for k in range(people):
+        n = (14, 3, 1)[k]
+        sets.append(JointSet(SKELETON_14[k:k + n], rng.normal(size=(n, 2)) * 100,
+                             rng.normal(size=(n, 3)), confidence=rng.random(n).astype(np.float32),
+                             source=rng.integers(0, 4, n).astype(np.uint8),
+                             covariance=rng.normal(size=(n, 3, 3)), score=0.5, track_id=k + 1))
+    header = Header(frame_id='cam', stamp=Time(sec=12, nanosec=34))
+    data = skeletons_to_cdr(sets, header)
+    msg = skeletons_to_msg(sets, header)
+    # the same length (layout and alignment); the padding rclpy writes is not zeroed, so the
+    # bytes are compared by what they decode to
+    assert len(data) == len(serialize_message(msg))
+    back = deserialize_message(data, SkeletonArray)
+    assert back.header == header and len(back.skeletons) == people
+    for got, want in zip(back.skeletons, msg.skeletons, strict=True):
+        assert (got.header, got.track_id, got.score) == (want.header, want.track_id, want.score)
+        assert [(j.name, j.source, j.u, j.v, j.position, j.confidence,
+                 list(j.position_covariance)) for j in got.joints] == \
+            [(j.name, j.source, j.u, j.v, j.position, np.float32(j.confidence),
+              list(j.position_covariance)) for j in want.joints]

@@ -54,7 +54,7 @@ from pose4d_ros.nodes.convert import (
     depth_from_msg,
     image_to_array,
     joints_to_cdr,
-    skeletons_to_msg,
+    skeletons_to_cdr,
     stamp_to_ns,
 )
 from pose4d_ros.nodes.params import NodeParams, Param, ParameterError
@@ -202,7 +202,7 @@ class DetectorNode(Node):
         values['people_over_limit'] += max(len(people) - len(parts), 0)
         header = color_msg.header
         # everyone first: a tracker that hears both then leaves the single person out
-        self.pub_people.publish(skeletons_to_msg(parts, header))
+        self.pub_people.publish(skeletons_to_cdr(parts, header))
         self.pub.publish(joints_to_cdr(parts[0] if parts else
                                        JointSet.missing(self.template.names), header))
         self.monitor.frame(stamp, time.perf_counter() - t0)

@@ -58,7 +58,7 @@ from pose4d_ros.nodes.convert import (
     joints_to_tf,
     people_markers,
     skeleton_markers,
-    skeletons_to_msg,
+    skeletons_to_cdr,
     stamp_to_ns,
 )
 from pose4d_ros.nodes.params import NodeParams, Param
@@ -135,7 +135,7 @@ class SkeletonOutputs:
     def publish(self, people: list[JointSet], header: Header) -> None:
         """Every person's skeleton (the primary first); nobody: an empty SkeletonArray and an
         all-MISSING skeleton of track 0 on pose4d/skeleton."""
-        self.skeletons.publish(skeletons_to_msg(people, header))
+        self.skeletons.publish(skeletons_to_cdr(people, header))
         primary = people[0] if people else JointSet.missing(SKELETON_14)
         self.skeleton.publish(joints_to_cdr(primary, header))
         # markers and transforms are built only while someone listens: making and serialising

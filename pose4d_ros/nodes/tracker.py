@@ -38,7 +38,7 @@ from pose4d_ros.core.slqe import CvConfig, SlqeConfig
 from pose4d_ros.core.stages import TrackerStage
 from pose4d_ros.nodes import qos
 from pose4d_ros.nodes.common import LatestIntrinsics, PeopleInputs, StageMonitor, run
-from pose4d_ros.nodes.convert import joints_to_cdr, skeletons_to_msg, stamp_to_ns
+from pose4d_ros.nodes.convert import joints_to_cdr, skeletons_to_cdr, stamp_to_ns
 from pose4d_ros.nodes.params import NodeParams, Param
 
 _D = SlqeConfig()
@@ -149,7 +149,7 @@ class TrackerNode(Node):
         values['people'] = len(tracked)
         values['tracks_born'] += len(self.people.born)
         values['tracks_ended'] += len(self.people.ended)
-        self.pub_people.publish(skeletons_to_msg(tracked, header))
+        self.pub_people.publish(skeletons_to_cdr(tracked, header))
         primary = tracked[0] if tracked else JointSet.missing(
             detections[0].names if detections else self.template.tree.names)
         self.pub.publish(joints_to_cdr(primary, header))
