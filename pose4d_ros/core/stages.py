@@ -264,11 +264,16 @@ class DetectorStage:
 
     def warm_up(self, intrinsics: Intrinsics) -> None:
         """Run on a synthetic frame (`warm_up_frame`) twice, the second time guided by the
-        first (`SearchConfig.arm_prior`), so the kernels are compiled, then forget it."""
+        first (`SearchConfig.arm_prior`), so the kernels are compiled and loaded, then forget
+        it."""
         color, depth, mask = warm_up_frame(intrinsics)
-        for stamp_s in (0.0, 1.0 / 30.0):
-            self.step(color, depth, intrinsics, mask=mask, stamp_s=stamp_s)
-        self.reset()
+        # and on read-only views, as a node's frames are (arrays on a message's buffer): each
+        # kernel's signature for them loaded in this process now, not at the first frame
+        for c, d, m in ((color, depth, mask),
+                        (_read_only(color), _read_only(depth), _read_only(mask))):
+            for stamp_s in (0.0, 1.0 / 30.0):
+                self.step(c, d, intrinsics, mask=m, stamp_s=stamp_s)
+            self.reset()
 
     def step(self, color: NDArray[np.uint8], depth_m: NDArray[np.floating] | None,
              intrinsics: Intrinsics | None, *, mask: NDArray[np.bool_] | None = None,
