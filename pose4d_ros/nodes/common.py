@@ -265,6 +265,13 @@ def subscribe(node: Node, msg_type: type, topic: str, callback: Callable[[object
     return node.create_subscription(msg_type, topic, on_bytes, profile, raw=True)
 
 
+# Frames the detector (and the pipeline node, which runs it) may hold: a new track's first
+# frames search every person scale (`ScaleConfig.warm_up_frames`, 3x the work), a burst a
+# queue of one turned into lost frames under load (`make test`, `pose4d demo --load busy`);
+# two absorb it, and latency stays bounded (at most two frames waiting)
+DETECTOR_QUEUE = 2
+
+
 class FrameQueue:
     """Frames processed in a worker thread, in arrival order, at most `size` waiting (1: the
     newest).
@@ -335,14 +342,15 @@ class PairedInputs:
     ----------
     topics : (message type, topic, QoS profile) per stream.
     process : called with the tuple of messages of one stamp.
+    queue_size : complete sets that may wait (`FrameQueue`'s size).
     """
 
     def __init__(self, node: Node, topics: list[tuple[type, str, object]],
                  process: Callable[[tuple], None], monitor: StageMonitor, *,
-                 slop_ns: int = 0) -> None:
+                 slop_ns: int = 0, queue_size: int = 1) -> None:
         self._sync = StampSync(len(topics), slop_ns=slop_ns)
         self._monitor = monitor
-        self._queue = FrameQueue(node, process, monitor)
+        self._queue = FrameQueue(node, process, monitor, size=queue_size)
         for k, (kind, topic, profile) in enumerate(topics):
             if kind is not None:  # None: the caller pushes that stream (`push`)
                 subscribe(node, kind, topic, lambda m, k=k: self._on(k, m), profile, monitor)
