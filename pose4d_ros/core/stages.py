@@ -465,6 +465,7 @@ _MIDDLE_ROWS = tuple((limb, SKELETON_14.index(middle)) for limb, (_, middle, _) 
 # `ndarray.any` and `ndarray.all` without their Python wrappers (the per-frame path)
 _any = np.logical_or.reduce
 _all = np.logical_and.reduce
+# the 3 x 3 identity of the inferred joints' covariance (np.eye is a Python call a joint)
 _EYE3 = np.eye(3)
 _EYE3.setflags(write=False)
 

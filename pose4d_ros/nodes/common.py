@@ -238,7 +238,6 @@ class StageMonitor:
             header=Header(stamp=self._node.get_clock().now().to_msg()), status=[status]))
 
 
-
 def subscribe(node: Node, msg_type: type, topic: str, callback: Callable[[object], None],
               profile: object, monitor: StageMonitor) -> Subscription:
     """A subscription that counts the messages which do not deserialize as `msg_type`.

@@ -50,6 +50,7 @@ class Part:
     bottom_m: float
     extent_m: float
 
+
 def person_sized(regions: StableRegions, intrinsics: Intrinsics, config: ForegroundConfig
                  ) -> NDArray[np.int64]:
     """Stage 1 of the person rules, on the tree's statistics (box, mean depth): the stable
@@ -93,6 +94,7 @@ def person_sized(regions: StableRegions, intrinsics: Intrinsics, config: Foregro
                                      r.y1, r.size, config.max_candidates)
                            for near in (False, True)])
 
+
 def depth_parts(g: NDArray[np.uint8], regions: StableRegions, order: NDArray[np.int64],
                 above: NDArray[np.float32] | None, intrinsics: Intrinsics,
                 config: ForegroundConfig, *, occluded: bool = False) -> list[Part]:
@@ -106,10 +108,10 @@ def depth_parts(g: NDArray[np.uint8], regions: StableRegions, order: NDArray[np.
     region, a handful of Python-level calls instead of some seventy small numpy ones."""
     h, w = g.shape
     parts = []
-    gap_levels = config.occluder_gap_m / config.metres_per_level
-    extent_levels = config.person_max_extent_m / config.metres_per_level
-    st, ws = regions.step, regions.shape[1]
     mpl = config.metres_per_level
+    gap_levels = config.occluder_gap_m / mpl
+    extent_levels = config.person_max_extent_m / mpl
+    st, ws = regions.step, regions.shape[1]
     heights = _NO_HEIGHTS if above is None else above
     for i in order.tolist():
         sy, sx = divmod(int(regions.seed[i]), ws)
@@ -126,11 +128,13 @@ def depth_parts(g: NDArray[np.uint8], regions: StableRegions, order: NDArray[np.
                 parts.append(pt)
     return parts
 
+
 def _distinct(order: NDArray[np.int64], x0: NDArray, y0: NDArray, x1: NDArray, y1: NDArray,
               size: NDArray, n: int) -> NDArray[np.int64]:
     """The first `n` regions of `order` (best first) that are not nested copies of one picked
     before: the regions of one chain are often the same pixels at several levels."""
     return _distinct_kernel(order.astype(np.int64), x0, y0, x1, y1, size, n)
+
 
 @njit(cache=True)
 def _distinct_kernel(order: NDArray[np.int64], x0: NDArray, y0: NDArray, x1: NDArray,
@@ -161,6 +165,7 @@ def _distinct_kernel(order: NDArray[np.int64], x0: NDArray, y0: NDArray, x1: NDA
         if k == n:
             break
     return picked[:k]
+
 
 def _describe(crop: NDArray[np.bool_], g: NDArray[np.uint8], origin: tuple[int, ...],
               lo: int, hi: int, n: int, med: int, extent_box: tuple[int, int, int, int],
@@ -194,6 +199,7 @@ def _describe(crop: NDArray[np.bool_], g: NDArray[np.uint8], origin: tuple[int, 
                 side=box[0] == 0 or box[2] == size[0], cut=cut, top_m=top, bottom_m=bottom,
                 extent_m=extent)
 
+
 def size_rules(height_m: float, width_m: float, area_m2: float, fill: float, extent_m: float,
                cut: bool, config: PersonConfig) -> bool:
     """Whether a part has a person's height, width, surface, fill and depth extent (`cut`:
@@ -205,6 +211,7 @@ def size_rules(height_m: float, width_m: float, area_m2: float, fill: float, ext
             and c.person_min_width_m <= width_m <= c.person_max_width_m
             and min_area <= area_m2 <= c.person_max_area_m2
             and fill <= c.person_max_fill and extent_m <= c.person_max_extent_m)
+
 
 def person_rules(part: Part, config: PersonConfig, near: bool = False) -> bool:
     """Whether a part passes the person-size rules of `config` (tops and bottoms only when
@@ -222,6 +229,7 @@ def person_rules(part: Part, config: PersonConfig, near: bool = False) -> bool:
         return False
     return True
 
+
 def occluded_rules(part: Part, config: PersonConfig) -> bool:
     """Whether a part may be a person partly hidden by a nearer one: the smaller height and
     surface of a person cut by the image's bottom edge (`person_min_cut_height_m`), the other
@@ -233,6 +241,7 @@ def occluded_rules(part: Part, config: PersonConfig) -> bool:
         return False
     return not (math.isfinite(part.top_m)
                 and not c.person_min_top_m <= part.top_m <= c.person_max_top_m)
+
 
 def part_score(part: Part, config: PersonConfig,
                prev_box: tuple[int, int, int, int] | None = None) -> float:
@@ -250,8 +259,10 @@ def part_score(part: Part, config: PersonConfig,
         score += config.previous_bonus
     return score
 
+
 # `_region_parts` without a floor: its heights argument, never read
 _NO_HEIGHTS = np.zeros((1, 1), np.float32)
+
 
 @njit(cache=True)
 def _region_parts(g: NDArray[np.uint8], above: NDArray[np.float32], has_above: bool,
@@ -361,6 +372,7 @@ def _region_parts(g: NDArray[np.uint8], above: NDArray[np.float32], has_above: b
         rows[k, 11] = 1.0 if a <= first and b >= last else 0.0
     return crop, box, rows
 
+
 @njit(cache=True)
 def _extent_kernel(hist: NDArray[np.int64], lo: int, hi: int) -> int:
     """Levels between the 5th and 95th percentiles of `hist[lo:hi + 1]` (the first level
@@ -378,6 +390,7 @@ def _extent_kernel(hist: NDArray[np.int64], lo: int, hi: int) -> int:
         if ib < 0 and cum >= b:
             ib = lv
     return ib - ia
+
 
 @njit(cache=True)
 def _otsu_kernel(hist: NDArray[np.int64], lo: int, hi: int) -> int:
@@ -400,6 +413,7 @@ def _otsu_kernel(hist: NDArray[np.int64], lo: int, hi: int) -> int:
         if between > best:
             best, arg = between, k
     return arg if arg >= 0 else (hi - lo + 1) // 2
+
 
 @njit(cache=True)
 def _median_kernel(values: NDArray[np.float32], n: int) -> float:

@@ -327,7 +327,7 @@ def output(state: TrackState, info: UpdateInfo, uv: NDArray[np.floating],
         pos[det] = z[det]
         safe = np.where(det, np.maximum(np.nan_to_num(conf, nan=1.0), 1e-6), 1.0)
         r_var = (px_gain * config.measurement_noise_px) ** 2 / safe
-        covs[det] = r_var[det, None, None] * np.eye(2)
+        covs[det] = r_var[det, None, None] * _EYE2
     missing = info.source == _MISSING
     pos[missing] = np.nan
     vel[missing] = np.nan
