@@ -252,3 +252,62 @@ def test_an_unseen_track_beside_another_is_taken_back_only_by_a_persons_detectio
     track = next(t for t in out if t.track_id == right)
     assert (track.source == cj.DETECTED).any()
     assert torso(track)[0][0] == pytest.approx(0.85, abs=0.03)
+
+
+def test_with_nobody_tracked_every_sure_detection_is_confirmed_at_once():
+    """No track yet: detections scoring at least `trust_score` are confirmed at their first
+    frame, and a better region (first) scoring under it (a chair) is not; without a sure one,
+    the foreground's best region is trusted as the single-person tracker trusts it."""
+    tr = tracker(trust_score=7.0, birth_score=5.0, confirm_frames=2)
+    out = tr.step([_scored(person(-1.0), 4.5), _scored(person(0.0), 10.0),
+                   _scored(person(1.0), 8.0)], 0.0, INTR)
+    assert sorted(ids_by_x(out).values()) == [0.0, 1.0]
+    assert tr.tracks and all(t.id for t in tr.tracks)  # the chair started no track
+    alone = tracker(trust_score=7.0)
+    out = alone.step([_scored(person(-1.0), 4.5), _scored(person(0.0), 6.0)], 0.0, INTR)
+    assert list(ids_by_x(out).values()) == [-1.0]
+    # the default trusts the first region only (what the single-person tracker does)
+    out = tracker(trust_score=np.inf).step([_scored(person(-1.0), 4.5),
+                                            _scored(person(0.0), 10.0)], 0.0, INTR)
+    assert list(ids_by_x(out).values()) == [-1.0]
+
+
+def test_the_second_look_runs_where_someone_may_be_hidden(monkeypatch):
+    """`segment_people` looks again for people hidden behind those found (`_behind`) at a
+    stream's start, while that look finds someone, or when fewer people are found than in the
+    previous frame; not while the same people stand in the open. What it finds is marked
+    `behind` and comes after the people found in the open."""
+    from dataclasses import replace
+
+    from pose4d_ros.core.foreground import ForegroundConfig
+    from pose4d_ros.core.foreground import segmentation as seg
+
+    _, depth, _ = _two_people(offset=0.8)
+    depth_m = depth.astype(np.float32) / 1000
+    both, _ = segment_people(depth_m, INTR, config=ForegroundConfig(second_look=False))
+    far = max(both, key=lambda p: p.depth_m)
+    near = np.where(far.mask, np.nan, depth_m).astype(np.float32)  # the far one left out
+    config = ForegroundConfig(second_look=False)
+    part = max((pt for pt in seg._parts(depth_m, INTR, config, *seg._floor(
+        depth_m, INTR, config, None)[1:])[0] if seg.person_rules(pt, config)),
+        key=lambda pt: pt.z)
+    calls = []
+
+    def look(*args):  # the second look, as if it found the far person
+        calls.append(1)
+        return [(part, seg._part_mask(part, depth_m.shape))]
+
+    monkeypatch.setattr(seg, '_behind', look)
+    people, found = segment_people(near, INTR)
+    assert len(calls) == 1  # a stream's start
+    assert found == 2 and [p.behind for p in people] == [False, True]
+    assert people[1].box == far.box
+    segment_people(near, INTR, previous=people)
+    assert len(calls) == 2  # while it finds someone
+    alone = [replace(people[0])]
+    segment_people(near, INTR, previous=alone)
+    assert len(calls) == 2  # the same person in the open: no second look
+    segment_people(near, INTR, previous=alone + [replace(people[0], box=(0, 0, 9, 9))])
+    assert len(calls) == 3  # two people before, one now
+    segment_people(near, INTR, config=config)
+    assert len(calls) == 3  # off

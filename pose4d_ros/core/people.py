@@ -12,12 +12,13 @@ its velocity, its covariance the SLQE's covariance of the torso joints plus the 
 plus `TrackingConfig.torso_std_m` and a spread growing with the time the track went unseen
 (`max_speed_mps`). A pair beyond `gate_chi2` is never assigned. A detection left over starts a
 tentative track, confirmed (and given its id) after `confirm_frames` frames matched, or at
-once for the first person in view when no track is confirmed (the foreground's best region,
-trusted as the single-person tracker always trusted its one detection). A confirmed track
-survives `max_unseen_s` unseen (its parts predicted, TRACKED, as long as the SLQE keeps them)
-and is matched again when the person comes back, and every track ends at a gap in the stream
-(`max_gap_s`); ids count up from 1 in a run and are never reused. One track and one detection are
-always paired: the SLQE's own gate then judges each part, as it does for a single person.
+once while no track is confirmed: every detection the part model scores at least
+`trust_score`, or else the foreground's best region (trusted as the single-person tracker
+always trusted its one detection). A confirmed track survives `max_unseen_s` unseen (its
+parts predicted, TRACKED, as long as the SLQE keeps them) and is matched again when the
+person comes back, and every track ends at a gap in the stream (`max_gap_s`); ids count up
+from 1 in a run and are never reused. One track and one detection are always paired: the
+SLQE's own gate then judges each part, as it does for a single person.
 
 The primary person (the one `/pose4d/skeleton` carries): of the confirmed tracks seen this
 frame, the longest tracked (matched in most frames; the first confirmed on a tie); when none is
@@ -68,14 +69,22 @@ class TrackingConfig:
         is at least this; a confirmed track takes any. A region that passes the person-size
         rules but is no person (a door jamb at the image's edge) scores low, and does not
         become a second person.
+    trust_score : with no track confirmed, every detection scoring at least this is confirmed
+        at its first frame (two people in view at a stream's start are both published from
+        it); when none does, the foreground's best region is, as the single-person tracker
+        trusts its one detection. A chair nearer and larger than the person (the foreground's
+        best region) scores under it, the person over it (part model scores on validation:
+        people 7-9 at the 5th percentile, 12 at the median; other regions at most 6.1).
 
-    `confirm_frames` and `birth_score` were chosen on validation renders (training subjects
-    s01-s06, seed 201: `valid60_people2`, two people, 720 frames, and its twins with each person
-    alone) by `tools/people_sweep.py`, for the shipped `rgbd_14`, by the mean MOTA of the three
-    sets: birth score 5 with 2 frames 0.943 (two people: IDF1 0.945, MOTA 0.914, no false
-    skeleton; alone: 0.915 and 1.000); 3 with 3 frames 0.942; 1 with 2 frames (the choice for
-    the model before, whose scores ran lower) 0.823, with 100-246 false skeletons per 1000
-    frames; 6 and more miss more people at a track's start.
+    `confirm_frames`, `birth_score` and `trust_score`, and the foreground's second look, were
+    chosen on validation renders (training subjects s01-s06, seed 201: `valid60_people2`, two
+    people, 720 frames, and its twins with each person alone) by `tools/people_sweep.py`, for
+    the shipped `rgbd_14`, by the mean MOTA of the three sets: second look, birth score 5, 2
+    frames, trust score 7: 0.985 (two people: average7 86.6, IDF1 0.960, MOTA 0.953, 8 false
+    skeletons per 1000 frames; alone: MOTA 1.000 and 1.000); trust score 9: 0.984; birth
+    score 4 with 3 frames: 0.983; without the second look, the best 0.974; the settings before
+    (no second look, the best region trusted at once) 0.943, a chair trusted in one alone
+    video (83 false skeletons per 1000 frames).
     """
 
     max_people: int = 4
@@ -86,6 +95,7 @@ class TrackingConfig:
     gate_chi2: float = 16.0
     birth_score: float = 5.0
     max_gap_s: float = 0.5
+    trust_score: float = 7.0
 
     def __post_init__(self) -> None:
         if self.max_people < 1 or self.confirm_frames < 1:
@@ -313,11 +323,7 @@ class PeopleTracker:
         points = [torso(d) for d in detections]
         pairs = assign(self._cost(detections, points, stamp_s), cfg.gate_chi2)
         matched = {j: i for i, j in pairs}
-        # with nobody tracked, the first person in view (the foreground's best region) is
-        # trusted at once, as the single-person tracker trusts its one detection; the others
-        # are born as beside a tracked person
-        trusted = -1 if any(t.id for t in self.tracks) else min(
-            (j for j in range(len(detections)) if j not in matched), default=-1)
+        trusted = self._trusted(detections, matched)
         for j, det in enumerate(detections):
             if j in matched and not self._born(det) and not self._continues(
                     self.tracks[matched[j]]):
@@ -325,7 +331,7 @@ class PeopleTracker:
                 # track unseen beside another person (`_continues`)
                 del matched[j]
             if j not in matched and (_finite(points[j][0]) or _finite(torso_px(det)[0])) \
-                    and (j == trusted or self._born(det)):
+                    and (j in trusted or self._born(det)):
                 stage = self.make()
                 self.tracks.append(_Track(stage, names=stage.check(det, intrinsics).names))
                 matched[j] = len(self.tracks) - 1
@@ -346,7 +352,7 @@ class PeopleTracker:
             track.names = out.names
             if i in seen:
                 self._seen(track, out, stamp_s)
-                if not track.id and (track.hits >= cfg.confirm_frames or seen[i] == trusted):
+                if not track.id and (track.hits >= cfg.confirm_frames or seen[i] in trusted):
                     track.id, self.next_id = self.next_id, self.next_id + 1
                     self.born.append(track.id)
             track.last = _with_track_id(out, track.id)
@@ -354,6 +360,17 @@ class PeopleTracker:
         # once unseen over `max_unseen_s`)
         self.tracks = [t for t in self.tracks if t.id or t.seen_s == stamp_s]
         return [t.last for t in self._ordered(stamp_s)]
+
+    def _trusted(self, detections: Sequence[JointSet], matched: dict[int, int]) -> set[int]:
+        """The detections confirmed at their first frame: none while a track is confirmed;
+        with nobody tracked, every one scoring at least `trust_score`, or, when none does, the
+        first not matched (the foreground's best region), as the single-person tracker trusts
+        its one detection."""
+        if any(t.id for t in self.tracks):
+            return set()
+        free = [j for j in range(len(detections)) if j not in matched]
+        sure = {j for j in free if detections[j].score >= self.config.trust_score}
+        return sure or set(free[:1])
 
     def _checker(self) -> object:
         """A stage to check detections with while there is no track (made once)."""

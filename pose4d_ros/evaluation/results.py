@@ -202,10 +202,12 @@ def _validation(ctx: Context) -> list[list[str]]:
     cmds += [_eval(ctx, str(DATA / 'valid30_people2'), WORK / f'birth_{b}.json', '--model',
                    'rgbd_14', '--birth-score', str(b), '--no-single-frame', peer=False)
              for b in BIRTH_SCORES]
-    # the several-person tracker's birth score and confirmation (TrackingConfig), on two people
-    # and on each of them alone, the detections computed once (tools/people_sweep.py)
+    # the several-person tracker's birth score, confirmation and trust score (TrackingConfig)
+    # and the foreground's second look, on two people and on each of them alone, the
+    # detections computed once per foreground setting (tools/people_sweep.py)
     cmds += [[sys.executable, 'tools/people_sweep.py', str(DATA / s), '--birth-score',
-              '1,2,3,4,5,6,8', '--confirm-frames', '2,3', '--json',
+              '3,4,5,6', '--confirm-frames', '2,3', '--trust-score', '5,7,9,inf',
+              '--second-look', 'false,true', '--json',
               str(RESULTS / f'people_sweep_{s}.json')]
              for s in ('valid60_people2', 'valid60_people2_alone1', 'valid60_people2_alone2')]
     return cmds

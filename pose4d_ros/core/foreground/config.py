@@ -110,7 +110,7 @@ class PersonConfig:
     edge_rows: int = 3
     max_candidates: int = 6
     occluder_gap_m: float = 0.3
-    second_look: bool = False
+    second_look: bool = True
     stability_weight: float = 50.0
     previous_bonus: float = 0.5
 
@@ -267,10 +267,14 @@ class ForegroundConfig(MaskConfig, FloorConfig, PersonConfig, RegionConfig):
     occluder_gap_m : an empty depth gap wider than this inside the chosen region separates a
         nearer object (an occluder) from the person, metres; 0 disables the cut.
     second_look : `segment_people` looks again for people partly hidden by those found (their
-        pixels left out; `occluded_rules`). Off: on validation (valid60_people2 and its alone
-        twins) it found people walking behind others (two people: IDF1 0.948 -> 0.964, MOTA
-        0.912 -> 0.942) but took a door behind a lone person for one (alone: IDF1 0.984 ->
-        0.949, MOTA 0.968 -> 0.892, false skeletons 32 -> 108 per 1000 frames).
+        pixels left out; `occluded_rules`), where someone may be hidden: at a stream's start
+        (no previous people), when fewer people are found than in the previous frame, and
+        while it finds someone (`ForegroundResult.behind`); a lone person in the open costs
+        no second look. On, chosen on validation (`tools/people_sweep.py`, valid60_people2 and
+        its alone twins, with the tracker's `trust_score`): two people MOTA 0.910 -> 0.953,
+        average7 84.8 -> 86.6, false skeletons 0 -> 8 per 1000 frames; alone unchanged. (Off
+        before: looking on every frame, with a lone person's best region trusted at once, it
+        took a door behind a lone person for a second one.)
     close_px : size of the closing (ellipse, pixels) whose no-reading pixels join the mask;
         0 or 1 = none.
     fill_holes : fill holes of the mask that have no depth reading.
@@ -314,6 +318,7 @@ class ForegroundResult:
     floor : (4,) float64 plane (nx, ny, nz, d), optical frame, n unit and pointing up, so
         that ``n . p + d`` is the height of point p above the floor (metres); None if no floor
         was found.
+    behind : found by `segment_people`'s second look (partly hidden by a nearer person).
     """
 
     mask: NDArray[np.bool_]
@@ -324,6 +329,7 @@ class ForegroundResult:
     stability: float = math.nan
     level: int = -1
     floor: NDArray[np.float64] | None = field(default=None, repr=False)
+    behind: bool = False
 
     @property
     def area_px(self) -> int:
@@ -331,13 +337,7 @@ class ForegroundResult:
         return int(np.count_nonzero(self.mask))
 
 
-def _not_found(shape: tuple[int, ...], reason: str,
-               floor: NDArray[np.float64] | None = None) -> ForegroundResult:
-    return ForegroundResult(mask=np.zeros(shape, dtype=bool), found=False, reason=reason,
-                            floor=floor)
-
-
 def not_found(shape: tuple[int, ...], reason: str,
-               floor: NDArray[np.float64] | None = None) -> ForegroundResult:
+              floor: NDArray[np.float64] | None = None) -> ForegroundResult:
     return ForegroundResult(mask=np.zeros(shape, dtype=bool), found=False, reason=reason,
                             floor=floor)

@@ -165,9 +165,14 @@ def segment_people(depth_m: NDArray[np.floating], intrinsics: Intrinsics, *,
         ok = [pt for pt in parts if person_rules(pt, config, near=True)]
     boxes = [p.box for p in previous if p.found and p.box is not None]
     picked = _distinct_people(ok, depth.shape, config, boxes, [])
-    if config.second_look and picked and len(picked) < max_people:
+    first = len(picked)
+    if config.second_look and picked and first < max_people and (
+            not previous or first < len(previous) or any(p.behind for p in previous)):
+        # where someone may be hidden: at a stream's start, when fewer people are found than
+        # before (one went behind another) or while the second look finds someone
         picked += _behind(depth, intrinsics, config, above, drop, boxes, picked)
-    people = [_result(pt, depth, valid, floor, config) for pt, _ in picked[:max_people]]
+    people = [replace(_result(pt, depth, valid, floor, config), behind=k >= first)
+              for k, (pt, _) in enumerate(picked[:max_people])]
     # completion may add a pixel to two people: it stays with the better one
     taken = np.zeros(depth.shape, bool)
     for k, person in enumerate(people):
