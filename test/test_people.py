@@ -231,9 +231,9 @@ def test_a_person_hidden_behind_a_nearer_one_keeps_their_last_pose():
         held = next(t for t in out if t.track_id == far.track_id)
         assert np.allclose(torso(held)[0], last, atol=1e-9)
         assert set(held.source[held.source != cj.MISSING].tolist()) == {cj.TRACKED}
-    out = tr.step([person(0.0, z=2.2), person(0.1, z=3.4)], 25 * DT, INTR)
+    out = tr.step([person(0.0, z=2.2), person(0.8, z=3.4)], 25 * DT, INTR)  # out in the open
     back = next(t for t in out if t.track_id == far.track_id)
-    assert torso(back)[0][0] == pytest.approx(0.1, abs=0.03)
+    assert torso(back)[0][0] == pytest.approx(0.8, abs=0.03)
 
 
 def test_an_unseen_track_beside_another_is_taken_back_only_by_a_persons_detection():
@@ -311,3 +311,36 @@ def test_the_second_look_runs_where_someone_may_be_hidden(monkeypatch):
     assert len(calls) == 3  # two people before, one now
     segment_people(near, INTR, config=config)
     assert len(calls) == 3  # off
+
+
+def test_joints_on_a_nearer_persons_body_keep_their_last_estimate():
+    """A far person half behind a near one: the far person's detected joints that lie on the
+    near person's body (within `occluded_width_m` of one of their bones in the image) keep
+    the track's last estimate (TRACKED); the others follow the detection."""
+    from pose4d_ros.core.people import _near_segment
+    from pose4d_ros.core.skeleton import tree_for
+
+    tr = tracker()
+    near = _scored(person(0.0, z=2.2), 10.0)
+    for k in range(6):
+        out = tr.step([near, _scored(person(0.3, z=3.4), 10.0)], k * DT, INTR)
+    far_id = max(out, key=lambda t: torso(t)[0][2]).track_id
+    before = next(t for t in out if t.track_id == far_id)
+    moved = _scored(person(0.34, z=3.4), 10.0)
+    out = tr.step([near, moved], 6 * DT, INTR)
+    after = next(t for t in out if t.track_id == far_id)
+    r = TrackingConfig().occluded_width_m * INTR.fx / torso(near)[0][2]
+    hidden = np.zeros(10, bool)
+    for a, b in tree_for(near.names).edges():
+        hidden |= _near_segment(moved.uv, near.uv[a], near.uv[b], r)
+    assert 0 < hidden.sum() < 10, hidden
+    np.testing.assert_array_equal(after.uv[hidden], before.uv[hidden])
+    assert (after.source[hidden] == cj.TRACKED).all()
+    assert (after.source[~hidden] == cj.DETECTED).all()
+    assert (after.uv[~hidden, 0] > before.uv[~hidden, 0] + 1.0).all()  # followed the detection
+    # off: every joint follows the detection
+    off = tracker(hold_occluded=False)
+    for k in range(6):
+        off.step([near, _scored(person(0.3, z=3.4), 10.0)], k * DT, INTR)
+    out = off.step([near, moved], 6 * DT, INTR)
+    assert (max(out, key=lambda t: torso(t)[0][2]).source == cj.DETECTED).all()
