@@ -135,6 +135,21 @@ def test_floor_plane_is_recovered() -> None:
     assert_allclose(np.median(np.abs(height[on_floor])), 0.0, atol=0.01)
 
 
+def test_a_table_top_larger_than_the_floor_seen_is_not_the_floor() -> None:
+    """A wide low table near the camera fills more of the lower image than the floor does:
+    the plane with most points there is its top, but the floor shows below it (and the
+    table's front), and a floor has nothing below it."""
+    top = CAM_HEIGHT - 0.55  # a table top 0.55 m above the floor, left of the person
+    table = [(-2.2, 0.1, top, top + 0.04, 1.3, 2.7)]
+    depth, _, floor = render_boxes(box_person(x=0.45, z=3.2) + table)
+    assert fit_floor(depth, K, config=ForegroundConfig(floor_max_below=0.0))[3] < 0.6
+    plane = fit_floor(depth, K)
+    assert plane is not None
+    assert_allclose(plane[3], CAM_HEIGHT, atol=0.03)
+    found = segment(depth, K)
+    assert found.found and found.box[3] > 200  # the legs behind the table reach the floor
+
+
 def test_without_floor_removal_the_mask_leaks_into_the_floor() -> None:
     # the reason for the floor stage: the floor in front of the feet joins the person
     depth, masks, floor = render_boxes(box_person())

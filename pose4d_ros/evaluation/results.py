@@ -132,10 +132,14 @@ SWEEPS: dict[str, dict[str, tuple[str, ...]]] = {
                      '0.87-1.32': ('scale.factors=0.87,1,1.15,1.32',),
                      '0.76-1.52': ('scale.factors=0.76,0.87,1,1.15,1.32,1.52',),
                      '1': ('scale.factors=1',)},
+    # ForegroundConfig.floor_max_below (0: no rule, the floor before)
+    'floor_below': {'0.25': (), **{str(b): (f'foreground.floor_max_below={b}',)
+                                   for b in (0, 0.1, 0.5)}},
 }
 
 
-SWEEP_SETS = {'cut_height': ('valid30_near',), 'person_scale': ('valid30', 'valid30_msr')}
+SWEEP_SETS = {'cut_height': ('valid30_near',), 'person_scale': ('valid30', 'valid30_msr'),
+              'floor_below': ('valid30', 'valid30_msr', 'valid30_near')}
 # the shipped settings' run on a set, made anyway (the margin sweep's, valid30_msr's own)
 SHIPPED_RUNS = {'valid30': f'margin_{DEFAULT_MARGIN}.json', 'valid30_msr': 'valid30_msr.json'}
 

@@ -218,7 +218,8 @@ SWEEP_TITLES = {
     'cut_height': 'Cut height (`ForegroundConfig.person_min_cut_height_m`, m)',
     'limb_rule': "The limb rule's form (`SlqeConfig.limb_parts`, `limb_rejected_frames`; "
                  'arms or arms and legs, at the second or the first rejected frame)',
-    'person_scale': "The person scale (`ScaleConfig.factors`, `warm_up_frames`)"}
+    'person_scale': "The person scale (`ScaleConfig.factors`, `warm_up_frames`)",
+    'floor_below': 'What may lie below the floor (`ForegroundConfig.floor_max_below`)'}
 
 
 def sweeps_section(v: dict) -> list[str]:

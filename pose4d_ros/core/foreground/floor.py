@@ -17,6 +17,8 @@ from pose4d_ros.core.camera import Intrinsics
 from pose4d_ros.core.foreground.config import FloorConfig
 
 DEFAULT = FloorConfig()  # the defaults, one instance (frozen)
+# how far below a plane a point must lie to count as below it (besides the inlier tolerance)
+FLOOR_BELOW_M = 0.1
 # reductions without their Python wrappers (the per-frame path)
 _sum, _any, _all = np.add.reduce, np.logical_or.reduce, np.logical_and.reduce
 # np.linalg.eigh's LAPACK call (lower triangle), without its wrapper's checks and casts
@@ -107,8 +109,14 @@ def fit_floor(depth_m: NDArray[np.floating], intrinsics: Intrinsics, *,
     if not _any(plausible):
         return None
     normal, d = normal[plausible], d[plausible]
-    dist = np.abs(pts @ normal.T + d[None, :])
-    counts = _sum(dist < tol[:, None], axis=0, dtype=np.intp)  # count_nonzero's
+    signed = pts @ normal.T + d[None, :]
+    counts = _sum(np.abs(signed) < tol[:, None], axis=0, dtype=np.intp)  # count_nonzero's
+    if config.floor_max_below > 0:
+        # a floor has nothing below it: a table top or a seat (a horizontal plane above the
+        # floor, often with more points on it in the lower image than the floor shows) has
+        # the floor and the legs below it
+        below = _sum(signed < -np.maximum(tol, FLOOR_BELOW_M)[:, None], axis=0, dtype=np.intp)
+        counts = np.where(below > config.floor_max_below * counts, 0, counts)
     best = int(counts.argmax())
     if counts[best] < config.floor_min_inliers:
         return None
