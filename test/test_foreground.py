@@ -342,6 +342,7 @@ def test_apply_mask_checks_shapes() -> None:
     ('floor_iterations', 0),
     ('floor_inlier_m', -0.01),
     ('floor_max_tilt_deg', 95.0),
+    ('floor_max_below', -0.5),
     ('occluder_gap_m', -0.1),
     ('close_px', 40),
     ('stability_weight', -1.0),

@@ -103,6 +103,10 @@ def test_nobody_and_bad_configs():
         TrackingConfig(max_people=0)
     with pytest.raises(ValueError, match='max_unseen_s'):
         TrackingConfig(max_unseen_s=0)
+    with pytest.raises(ValueError, match='occluded_width_m'):
+        TrackingConfig(occluded_width_m=-0.1)
+    with pytest.raises(ValueError, match='trust_score'):
+        TrackingConfig(trust_score=float('nan'))
 
 
 # --------------------------------------------------------------- rendered frames

@@ -114,9 +114,12 @@ class TrackingConfig:
         if self.max_people < 1 or self.confirm_frames < 1:
             raise ValueError(f'max_people and confirm_frames must be >= 1, got '
                              f'{self.max_people} and {self.confirm_frames}')
-        for name in ('max_unseen_s', 'torso_std_m', 'max_speed_mps', 'gate_chi2', 'max_gap_s'):
+        for name in ('max_unseen_s', 'torso_std_m', 'max_speed_mps', 'gate_chi2', 'max_gap_s',
+                     'occluded_width_m'):
             if not getattr(self, name) > 0:
                 raise ValueError(f'{name} must be > 0, got {getattr(self, name)}')
+        if math.isnan(self.trust_score):
+            raise ValueError('trust_score must be a number (inf: only the best region), got nan')
 
 
 def torso(joints: JointSet) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
