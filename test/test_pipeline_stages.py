@@ -206,6 +206,32 @@ def test_ik_completes_fourteen_joints_with_inferred_elbows_and_knees():
     assert out.source[i] == cj.TRACKED
 
 
+def test_ik_places_an_ankle_hidden_below_a_table_by_the_legs_lengths():
+    """The person's masked depth has no pixel at the ankles (a table in front hides the
+    legs): the detected ankles are guesses, not measurements; each is placed a leg's length
+    straight down from its hip (no knee seen), INFERRED, and the knee solved between."""
+    parts = _tracked()
+    lengths = {limb: (0.45, 0.4) for limb in ('left_arm', 'right_arm', 'left_leg', 'right_leg')}
+    depth = np.full((INTR.height, INTR.width), 2.5, np.float32)
+    top = int(min(parts.uv[PARTS_10.index(a), 1] for a in ('left_ankle', 'right_ankle'))) - 8
+    depth[top:] = np.nan  # the table: nothing of the person below this row
+    stage = IkStage(lengths=lengths, learn=False, use_depth=False)
+    out = stage.step(parts, depth, INTR)
+    for side in ('left', 'right'):
+        a, h = SKELETON_14.index(f'{side}_ankle'), SKELETON_14.index(f'{side}_hip')
+        assert out.source[a] == cj.INFERRED
+        assert_allclose(out.xyz[a], out.xyz[h] + [0.0, 0.85, 0.0], atol=1e-9)
+        assert_allclose(out.uv[a], project(out.xyz[a][None], INTR)[0], atol=1e-9)
+        assert out.source[SKELETON_14.index(f'{side}_knee')] == cj.INFERRED
+    # with the person's pixels there (or the rule off), the detection stands
+    for depth_m, hidden_legs in ((np.full_like(depth, 2.5), True), (depth, False)):
+        out = IkStage(lengths=lengths, learn=False, use_depth=False,
+                      hidden_legs=hidden_legs).step(parts, depth_m, INTR)
+        a = SKELETON_14.index('left_ankle')
+        assert out.source[a] != cj.INFERRED
+        assert_allclose(out.uv[a], parts.uv[PARTS_10.index('left_ankle')], atol=1e-9)
+
+
 def test_ik_flags_bad_joints_missing():
     parts = _tracked()
     xyz = parts.xyz.copy()

@@ -467,6 +467,30 @@ _any = np.logical_or.reduce
 _all = np.logical_and.reduce
 # the 3 x 3 identity of the inferred joints' covariance (np.eye is a Python call a joint)
 _EYE3 = np.eye(3)
+_DOWN = np.array([0.0, 1.0, 0.0])
+_LEG_ROWS = {side: tuple(SKELETON_14.index(f'{side}_{j}') for j in ('hip', 'knee', 'ankle'))
+             for side in ('left', 'right')}
+
+
+def _hidden_leg_joints(uv: NDArray[np.float64], src: NDArray[np.uint8],
+                       depth_m: NDArray[np.floating], r: int = 2) -> tuple[int, ...]:
+    """Rows of the knees and ankles below their hip in the image with no depth reading within
+    r pixels: no pixel of the person there (the depth is the person's masked depth), so what
+    the part model put there is a guess (legs hidden by a table, the image's bottom edge)."""
+    depth = np.asarray(depth_m)
+    h, w = depth.shape
+    out = []
+    for hip, knee, ankle in _LEG_ROWS.values():
+        for i in (knee, ankle):
+            if src[i] == cj.MISSING or not (_all(np.isfinite(uv[i])) and _all(
+                    np.isfinite(uv[hip])) and uv[i][1] > uv[hip][1]):
+                continue
+            u, v = int(round(uv[i][0])), int(round(uv[i][1]))
+            win = depth[max(v - r, 0):max(min(v + r + 1, h), 0),
+                        max(u - r, 0):max(min(u + r + 1, w), 0)]
+            if win.size == 0 or not np.isfinite(win).any():
+                out.append(i)
+    return tuple(out)
 _EYE3.setflags(write=False)
 
 
@@ -499,6 +523,13 @@ class IkStage:
         eqs. 17-24, the same swivel choice, joint limits as angles, bones of the learned lengths
         exactly, joint angles computed).
     limits : the DH chains' joint limits (method 'dh').
+    hidden_legs : a knee or ankle below the hip where the person's masked depth has no pixel
+        (legs hidden by a table or cut by the image's edge) is not measured: its detection is
+        a guess. The ankle is then placed by the leg's learned lengths (a shin below a seen
+        knee along the thigh, else the leg straight down the camera's y axis from the hip),
+        the knee solved by IK. Chosen on validation (`rgbd_kf_ik` average7, ankles): valid30
+        98.85 -> 98.90 (94.2 -> 94.6), valid30_msr 91.14 -> 91.41 (77.3 -> 79.2),
+        valid30_near 84.40 -> 84.49, valid60_people2 87.27 -> 87.57.
 
     Notes
     -----
@@ -519,17 +550,19 @@ class IkStage:
     USE_DEPTH = True
     METHODS = ('geometric', 'dh')
     METHOD = 'geometric'
+    HIDDEN_LEGS = True
 
     def __init__(self, config: IkConfig | None = None, *,
                  lengths: Mapping[str, tuple[float, float]] | None = None, learn: bool = LEARN,
                  use_depth: bool = USE_DEPTH, method: str = METHOD,
-                 limits: DhLimits | None = None) -> None:
+                 limits: DhLimits | None = None, hidden_legs: bool = HIDDEN_LEGS) -> None:
         if method not in self.METHODS:
             raise ValueError(f"IK method must be one of {self.METHODS}, got {method!r}")
         self.config = config or IkConfig()
         self.use_depth = use_depth
         self.method = method
         self.limits = limits or DhLimits()
+        self.hidden_legs = hidden_legs
         self.track_id: int | None = None
         self.configure(lengths=lengths, learn=learn)
 
@@ -570,6 +603,26 @@ class IkStage:
                   depth, intrinsics, mask=mask)
         self.reset()
 
+    def _place_hidden_ankles(self, hidden: tuple[int, ...], uv: NDArray, xyz: NDArray,
+                             conf: NDArray, src: NDArray, cov: NDArray, points: NDArray,
+                             intrinsics: Intrinsics) -> None:
+        """A hidden ankle (`_hidden_leg_joints`) placed by the leg's learned lengths: a shin
+        below the knee along the thigh where the knee is seen, else a leg straight down (the
+        camera's y axis) from the hip; INFERRED, its standard deviation 10 cm. In place."""
+        lengths = self.lengths()
+        for side, (hip, knee, ankle) in _LEG_ROWS.items():
+            if ankle not in hidden or not _all(np.isfinite(points[hip])):
+                continue
+            thigh, shin = lengths[f'{side}_leg']
+            if knee not in hidden and _all(np.isfinite(points[knee])):
+                d = points[knee] - points[hip]
+                p = points[knee] + shin * d / max(math.sqrt(float(d @ d)), 1e-6)
+            else:
+                p = points[hip] + (thigh + shin) * _DOWN
+            xyz[ankle] = points[ankle] = p
+            uv[ankle] = project(p[None], intrinsics)[0]
+            conf[ankle], src[ankle], cov[ankle] = 0.5, cj.INFERRED, _EYE3 * 0.1 ** 2
+
     def step(self, tracked: JointSet, depth_m: NDArray[np.floating] | None,
              intrinsics: Intrinsics | None, *, mask: NDArray[np.bool_] | None = None
              ) -> JointSet:
@@ -596,8 +649,16 @@ class IkStage:
         uv[bad], xyz[bad], conf[bad], src[bad], cov[bad] = np.nan, np.nan, 0.0, cj.MISSING, 0.0
         points = xyz.copy()
         points[~valid] = np.nan
+        hidden = ()
+        if self.hidden_legs and depth_m is not None and intrinsics is not None:
+            hidden = _hidden_leg_joints(uv, src, depth_m)
+            for i in hidden:  # a guess where no pixel of the person is: not measured
+                points[i] = np.nan
+                uv[i], xyz[i], conf[i], src[i], cov[i] = np.nan, np.nan, 0.0, cj.MISSING, 0.0
         if self.learn:
             self.learner.observe_skeleton(SKELETON_14, points)
+        if hidden:
+            self._place_hidden_ankles(hidden, uv, xyz, conf, src, cov, points, intrinsics)
         # elbows and knees measured by a 14-part detector are kept: only the others are solved
         measured = (src != cj.MISSING) & valid
         unmeasured = [limb for limb, k in _MIDDLE_ROWS if not measured[k]]
