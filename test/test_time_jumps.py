@@ -9,6 +9,8 @@ predicted from before the jump), the IK follows its track id, and both count the
 
 from __future__ import annotations
 
+import re
+
 import numpy as np
 from harness import start
 from helpers import INTR, parts_msg
@@ -106,4 +108,7 @@ def test_a_loop_and_a_gap_start_the_tracker_and_the_ik_anew(ros, tmp_path):
                 if kv.key == 'time_jumps':
                     counts[status.name] = int(kv.value)
     assert counts.get('pose4d: tracker', 0) >= 2 and counts.get('pose4d: ik', 0) >= 2, counts
-    assert 'input stamps jumped forward 10.03' in tracker.output()  # the first (throttled)
+    # the first jump (throttled): the 10 s hole, a frame or two more where the tracker, busy,
+    # dropped the frames that came meanwhile (it drops the oldest, never queues)
+    jumped = re.search(r'input stamps jumped forward ([0-9.]+) s', tracker.output())
+    assert jumped and 10.0 <= float(jumped.group(1)) <= 10.2, tracker.output()
