@@ -106,9 +106,15 @@ SETS: dict[str, DataSet] = {s.name: s for s in (
 # Validation sweeps: the values tried (the shipped default among them); another value is chosen
 # only when it beats the default by more than TIE (points of average7, or of MOTA %)
 MARGINS = (0.3, 0.4, 0.5, 0.6)
-BIRTH_SCORES = (2.5, 5.0, 7.5)
-DEFAULT_MARGIN, DEFAULT_BIRTH_SCORE = 0.4, 5.0
+DEFAULT_MARGIN = 0.4
 TIE = 0.1
+# a value costing more CPU per frame (p50) than this fraction over the shipped one's is not
+# chosen for accuracy alone (the headroom on a slow robot computer comes first)
+MAX_CPU_INCREASE = 0.05
+# the several-person sweep's sets (tools/people_sweep.py) and the settings it chose
+PEOPLE_SWEEP_SETS = ('valid60_people2', 'valid60_people2_alone1', 'valid60_people2_alone2')
+PEOPLE_SHIPPED = {'second_look': True, 'birth_score': 5.0, 'confirm_frames': 2,
+                  'trust_score': 7.0}
 _ARMS = 'left_elbow,left_wrist,right_elbow,right_wrist'
 _LIMBS = _ARMS + ',left_knee,left_ankle,right_knee,right_ankle'
 # settings once chosen on test sets, swept on validation by `pose4d eval --config` (each
@@ -203,9 +209,6 @@ def _validation(ctx: Context) -> list[list[str]]:
              for sweep, values in SWEEPS.items() for label, items in values.items()
              for data in sweep_sets(sweep)
              if sweep_file(sweep, label, data).name not in SHIPPED_RUNS.values()]
-    cmds += [_eval(ctx, str(DATA / 'valid30_people2'), WORK / f'birth_{b}.json', '--model',
-                   'rgbd_14', '--birth-score', str(b), '--no-single-frame', peer=False)
-             for b in BIRTH_SCORES]
     # the several-person tracker's birth score, confirmation and trust score (TrackingConfig)
     # and the foreground's second look, on two people and on each of them alone, the
     # detections computed once per foreground setting (tools/people_sweep.py)
@@ -213,7 +216,7 @@ def _validation(ctx: Context) -> list[list[str]]:
               '3,4,5,6', '--confirm-frames', '2,3', '--trust-score', '5,7,9,inf',
               '--second-look', 'false,true', '--json',
               str(RESULTS / f'people_sweep_{s}.json')]
-             for s in ('valid60_people2', 'valid60_people2_alone1', 'valid60_people2_alone2')]
+             for s in PEOPLE_SWEEP_SETS]
     return cmds
 
 
@@ -225,7 +228,7 @@ JOBS: tuple[Job, ...] = (
         needs_peer=True),
     Job('validation', 'the search margin, the cut height, the limb rule, the person scale and '
         'the birth score, swept on validation renders; the MSR Action3D validation set',
-        ('valid30', 'valid30_near', 'valid30_people2', 'valid60_people2', 'valid60_people2_alone1',
+        ('valid30', 'valid30_near', 'valid60_people2', 'valid60_people2_alone1',
          'valid60_people2_alone2', 'valid30_msr'),
         _validation),
     Job('test', 'held-out test (s07-s08, 400 frames 0.1 s apart): rgbd_14 and rgb_10',
@@ -386,28 +389,20 @@ def _missing(job: Job, ctx: Context) -> str:
 
 def summarize_validation() -> dict:
     """The validation sweeps' figures and the value each chooses."""
-    out: dict = {'set_margin': 'valid30', 'set_birth_score': 'valid30_people2'}
+    out: dict = {'set_margin': 'valid30'}
     margin = {}
     for m in MARGINS:
         rows = json.loads((WORK / f'margin_{m}.json').read_text())['rows']
         r = rows['rgbd_kf_ik']
         margin[str(m)] = {'average7': r['pck']['average7'],
                           'within_10cm': r.get('within_10cm', {}).get('average'),
-                          'rgbd_t_average7': rows['rgbd_t']['pck']['average7']}
+                          'rgbd_t_average7': rows['rgbd_t']['pck']['average7'],
+                          'cpu_ms': r.get('cpu_ms', {}).get('p50')}
     out['margin'] = margin
-    out['margin_chosen'] = choose({k: v['average7'] for k, v in margin.items()},
-                                  DEFAULT_MARGIN)
-    birth = {}
-    for b in BIRTH_SCORES:
-        r = json.loads((WORK / f'birth_{b}.json').read_text())['rows']['rgbd_kf_ik']
-        t = r.get('tracking', {})
-        birth[str(b)] = {'average7': r['pck']['average7'], 'mota': t.get('mota'),
-                         'idf1': t.get('idf1'), 'id_switches_per_1000':
-                         t.get('id_switches_per_1000'), 'false_per_1000':
-                         t.get('false_per_1000')}
-    out['birth_score'] = birth
-    out['birth_score_chosen'] = choose({k: 100 * (v['mota'] or 0) for k, v in birth.items()},
-                                       DEFAULT_BIRTH_SCORE)
+    out['margin_chosen'] = float(choose_label(
+        {k: v['average7'] for k, v in margin.items()}, str(DEFAULT_MARGIN),
+        {k: v['cpu_ms'] for k, v in margin.items()}))
+    out['people'] = summarize_people()
     out['sweeps'] = {}
     for sweep, values in SWEEPS.items():
         table = {}
@@ -423,6 +418,7 @@ def summarize_validation() -> dict:
                     [r['pck']['average7'] for r in rows], frames),
                 'within_10cm': _pooled([r.get('within_10cm', {}).get('average')
                                         for r in rows], frames),
+                'cpu_ms': _pooled([r.get('cpu_ms', {}).get('p50') for r in rows], frames),
                 'groups': {g: _pooled([r['pck'].get(g) for r in rows], frames)
                            for g in GROUPS7},
                 'sets': {d: {'average7': r['pck']['average7'],
@@ -431,8 +427,9 @@ def summarize_validation() -> dict:
         shipped = next(iter(values))
         out['sweeps'][sweep] = {'set': ' + '.join(sweep_sets(sweep)), 'shipped': shipped,
                                 'values': table,
-                                'chosen': choose_label({k: v['average7'] for k, v in
-                                                        table.items()}, shipped)}
+                                'chosen': choose_label(
+                                    {k: v['average7'] for k, v in table.items()}, shipped,
+                                    {k: v['cpu_ms'] for k, v in table.items()})}
     if (WORK / 'valid30_msr.json').exists():
         rows = json.loads((WORK / 'valid30_msr.json').read_text())
         r = rows['rows']['rgbd_kf_ik']
@@ -440,6 +437,7 @@ def summarize_validation() -> dict:
                               'within_10cm': r.get('within_10cm', {}).get('average'),
                               'groups': {g: r['pck'].get(g) for g in GROUPS7}}
     out['tie'] = TIE
+    out['max_cpu_increase'] = MAX_CPU_INCREASE
     return out
 
 
@@ -453,15 +451,37 @@ def _pooled(values: list[float | None], frames: list[int]) -> float | None:
     return sum(v * n for v, n in zip(values, frames, strict=True)) / sum(frames)
 
 
-def choose_label(scores: dict[str, float], shipped: str) -> str:
-    """The best-scoring value's label, unless the shipped one is within `TIE` of it."""
+def choose_label(scores: dict[str, float], shipped: str,
+                 cpu_ms: dict[str, float | None] | None = None) -> str:
+    """The best-scoring value's label, unless the shipped one is within `TIE` of it, or the
+    best costs more than `MAX_CPU_INCREASE` more CPU per frame than the shipped one (then
+    the best of those that do not)."""
     if shipped not in scores:
         return shipped
-    best = max(scores, key=scores.get)
+    base = (cpu_ms or {}).get(shipped)
+    affordable = {k: v for k, v in scores.items() if base is None or (cpu_ms or {}).get(k) is None
+                  or cpu_ms[k] <= base * (1.0 + MAX_CPU_INCREASE)}
+    best = max(affordable, key=affordable.get)
     return shipped if scores[shipped] >= scores[best] - TIE else best
 
 
-def choose(scores: dict[str, float], default: float) -> float:
-    """The best-scoring value, unless the default is within `TIE` of it."""
-    best = max(scores, key=scores.get)
-    return default if scores[str(default)] >= scores[best] - TIE else float(best)
+def summarize_people() -> dict:
+    """The several-person sweep (`tools/people_sweep.py`) over `PEOPLE_SWEEP_SETS`: each
+    setting's mean MOTA over the sets and its figures on the two-person set, best first; the
+    shipped setting marked."""
+    files = [RESULTS / f'people_sweep_{s}.json' for s in PEOPLE_SWEEP_SETS]
+    if not all(f.exists() for f in files):
+        return {}
+    runs = [json.loads(f.read_text()) for f in files]
+    keys = ('second_look', 'birth_score', 'confirm_frames', 'trust_score')
+    table = []
+    for rows in zip(*runs, strict=True):
+        two = rows[0]
+        table.append({**{k: two[k] for k in keys},
+                      'mean_mota': sum(r['mota'] for r in rows) / len(rows),
+                      'average7': two['average7'], 'idf1': two['idf1'], 'mota': two['mota'],
+                      'false_per_1000': two['false_per_1000'],
+                      'alone_false_per_1000': [r['false_per_1000'] for r in rows[1:]],
+                      'shipped': all(two[k] == v for k, v in PEOPLE_SHIPPED.items())})
+    table.sort(key=lambda r: -r['mean_mota'])
+    return {'sets': list(PEOPLE_SWEEP_SETS), 'settings': table, 'tie': TIE}

@@ -184,22 +184,14 @@ def validation_section(results: Path, jobs: dict) -> list[str]:
         return []
     out = ['## Settings chosen on validation', '',
            f"Search margin (`SearchConfig.margin`) on `{v['set_margin']}` "
-           '(`rgbd_kf_ik`):', '', '| margin | average7 | within 10 cm | `rgbd_t` average7 |',
-           '|---|---|---|---|']
+           '(`rgbd_kf_ik`):', '',
+           '| margin | average7 | within 10 cm | `rgbd_t` average7 | CPU ms p50 |',
+           '|---|---|---|---|---|']
     out += [f"| {k} | {fmt(r['average7'])} | {fmt(r['within_10cm'])} | "
-            f"{fmt(r['rgbd_t_average7'])} |" for k, r in v['margin'].items()]
-    tie = v.get('tie', 0.1)
-    out += ['', f"Chosen on validation: {v['margin_chosen']} (another value only when it beats "
-            f"the shipped one by more than {tie} points of average7).", '',
-            f"Birth score (`TrackingConfig.birth_score`) on `{v['set_birth_score']}` "
-            '(`rgbd_kf_ik`, several-person pipeline):', '',
-            '| birth score | average7 | MOTA | IDF1 | id switches /1000 | false /1000 |',
-            '|---|---|---|---|---|---|']
-    out += [f"| {k} | {fmt(r['average7'])} | {fmt(r['mota'] and 100 * r['mota'])} | "
-            f"{fmt(r['idf1'] and 100 * r['idf1'])} | {fmt(r['id_switches_per_1000'])} | "
-            f"{fmt(r['false_per_1000'])} |" for k, r in v['birth_score'].items()]
-    out += ['', f"Chosen on validation: {v['birth_score_chosen']} (another value only when it "
-            f"beats the shipped one by more than {tie} points of MOTA).", '']
+            f"{fmt(r['rgbd_t_average7'])} | {fmt(r.get('cpu_ms'))} |"
+            for k, r in v['margin'].items()]
+    out += ['', f"Chosen on validation: {v['margin_chosen']} ({rule(v)}).", '']
+    out += people_section(v.get('people') or {})
     out += sweeps_section(v)
     msr = v.get('valid30_msr')
     if msr:
@@ -214,6 +206,13 @@ def validation_section(results: Path, jobs: dict) -> list[str]:
     return out
 
 
+def rule(v: dict) -> str:
+    """How a value is chosen over the shipped one (`results.choose_label`)."""
+    return (f"another value only when it beats the shipped one by more than {v.get('tie', 0.1)} "
+            f"points of average7 and costs at most {100 * v.get('max_cpu_increase', 0.05):.0f} % "
+            'more CPU per frame')
+
+
 SWEEP_TITLES = {
     'cut_height': 'Cut height (`ForegroundConfig.person_min_cut_height_m`, m)',
     'limb_rule': "The limb rule's form (`SlqeConfig.limb_parts`, `limb_rejected_frames`; "
@@ -225,7 +224,6 @@ SWEEP_TITLES = {
 def sweeps_section(v: dict) -> list[str]:
     """The validation sweeps of settings once chosen on test sets (`results.SWEEPS`)."""
     out = []
-    tie = v.get('tie', 0.1)
     for name, sweep in v.get('sweeps', {}).items():
         values = sweep['values']
         if not values:
@@ -243,6 +241,31 @@ def sweeps_section(v: dict) -> list[str]:
                 + f" | {fmt(r['average7'])} | {fmt(r['within_10cm'])} |"
                 + ''.join(f" {fmt(r['sets'][d]['average7'])} |" for d in sets if pooled)
                 for k, r in values.items()]
-        out += ['', f"Chosen on validation: {sweep['chosen']} (another value only when it beats "
-                f"the shipped one by more than {tie} points of average7).", '']
+        out += ['', f"Chosen on validation: {sweep['chosen']} ({rule(v)}).", '']
     return out
+
+
+def people_section(people: dict) -> list[str]:
+    """The several-person sweep (`results.summarize_people`): the best settings and the
+    shipped one."""
+    settings = people.get('settings') or []
+    if not settings:
+        return []
+    sets = people['sets']
+    out = ['The several-person tracker (`TrackingConfig.birth_score`, `confirm_frames`, '
+           '`trust_score`) and the foreground\'s second look (`ForegroundConfig.second_look`), '
+           f"`tools/people_sweep.py` on `{sets[0]}` and its alone twins, by the mean MOTA of "
+           f'the {len(sets)} sets ({len(settings)} settings; the best 8 and the shipped one):',
+           '', '| second look | birth score | confirm | trust score | mean MOTA | two people: '
+           'average7 | IDF1 | MOTA | false /1000 | alone: false /1000 |',
+           '|---|---|---|---|---|---|---|---|---|---|']
+    shown = settings[:8] + [r for r in settings[8:] if r['shipped']]
+    for r in shown:
+        trust = 'inf' if r['trust_score'] is None else fmt(r['trust_score'])
+        out.append(f"| {'on' if r['second_look'] else 'off'}{' (shipped)' if r['shipped'] else ''}"
+                   f" | {fmt(r['birth_score'])} | {r['confirm_frames']} | {trust} | "
+                   f"{fmt(100 * r['mean_mota'])} | {fmt(r['average7'])} | "
+                   f"{fmt(100 * r['idf1'])} | {fmt(100 * r['mota'])} | "
+                   f"{fmt(r['false_per_1000'])} | "
+                   f"{', '.join(fmt(x) for x in r['alone_false_per_1000'])} |")
+    return out + ['']
