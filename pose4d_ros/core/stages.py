@@ -470,27 +470,33 @@ _EYE3 = np.eye(3)
 _DOWN = np.array([0.0, 1.0, 0.0])
 _LEG_ROWS = {side: tuple(SKELETON_14.index(f'{side}_{j}') for j in ('hip', 'knee', 'ankle'))
              for side in ('left', 'right')}
+# the knees and ankles, each with its hip, and the pixels around a joint that `_hidden_leg_joints`
+# looks at (2 each way)
+_KNEES_ANKLES = np.array([r for hip, knee, ankle in _LEG_ROWS.values() for r in (knee, ankle)])
+_THEIR_HIPS = np.array([hip for hip, _, _ in _LEG_ROWS.values() for _ in range(2)])
+_WINDOW = np.mgrid[-2:3, -2:3].reshape(2, 1, 25)
 
 
 def _hidden_leg_joints(uv: NDArray[np.float64], src: NDArray[np.uint8],
-                       depth_m: NDArray[np.floating], r: int = 2) -> tuple[int, ...]:
+                       depth_m: NDArray[np.floating]) -> tuple[int, ...]:
     """Rows of the knees and ankles below their hip in the image with no depth reading within
-    r pixels: no pixel of the person there (the depth is the person's masked depth), so what
-    the part model put there is a guess (legs hidden by a table, the image's bottom edge)."""
+    `_WINDOW` pixels: no pixel of the person there (the depth is the person's masked depth),
+    so what the part model put there is a guess (legs hidden by a table, the image's bottom
+    edge). The four joints' windows in one gather (a handful of numpy calls a frame)."""
+    p = uv[_KNEES_ANKLES]
+    with np.errstate(invalid='ignore'):
+        below = p[:, 1] > uv[_THEIR_HIPS, 1]  # NaN: False
+    candidate = (src[_KNEES_ANKLES] != cj.MISSING) & below & np.isfinite(p[:, 0])
+    if not _any(candidate):
+        return ()
     depth = np.asarray(depth_m)
     h, w = depth.shape
-    out = []
-    for hip, knee, ankle in _LEG_ROWS.values():
-        for i in (knee, ankle):
-            if src[i] == cj.MISSING or not (_all(np.isfinite(uv[i])) and _all(
-                    np.isfinite(uv[hip])) and uv[i][1] > uv[hip][1]):
-                continue
-            u, v = int(round(uv[i][0])), int(round(uv[i][1]))
-            win = depth[max(v - r, 0):max(min(v + r + 1, h), 0),
-                        max(u - r, 0):max(min(u + r + 1, w), 0)]
-            if win.size == 0 or not np.isfinite(win).any():
-                out.append(i)
-    return tuple(out)
+    at = np.where(candidate[:, None], p, 0.0)
+    rows = np.rint(at[:, 1]).astype(np.intp)[:, None] + _WINDOW[0]
+    cols = np.rint(at[:, 0]).astype(np.intp)[:, None] + _WINDOW[1]
+    inside = (rows >= 0) & (rows < h) & (cols >= 0) & (cols < w)
+    seen = _any(inside & np.isfinite(depth[rows.clip(0, h - 1), cols.clip(0, w - 1)]), axis=1)
+    return tuple(_KNEES_ANKLES[candidate & ~seen].tolist())
 _EYE3.setflags(write=False)
 
 
