@@ -609,13 +609,14 @@ class IkStage:
                   depth, intrinsics, mask=mask)
         self.reset()
 
-    def _place_hidden_ankles(self, hidden: tuple[int, ...], uv: NDArray, xyz: NDArray,
+    @staticmethod
+    def _place_hidden_ankles(hidden: tuple[int, ...], uv: NDArray, xyz: NDArray,
                              conf: NDArray, src: NDArray, cov: NDArray, points: NDArray,
-                             intrinsics: Intrinsics) -> None:
+                             intrinsics: Intrinsics,
+                             lengths: Mapping[str, tuple[float, float]]) -> None:
         """A hidden ankle (`_hidden_leg_joints`) placed by the leg's learned lengths: a shin
         below the knee along the thigh where the knee is seen, else a leg straight down (the
         camera's y axis) from the hip; INFERRED, its standard deviation 10 cm. In place."""
-        lengths = self.lengths()
         for side, (hip, knee, ankle) in _LEG_ROWS.items():
             if ankle not in hidden or not _all(np.isfinite(points[hip])):
                 continue
@@ -663,15 +664,17 @@ class IkStage:
                 uv[i], xyz[i], conf[i], src[i], cov[i] = np.nan, np.nan, 0.0, cj.MISSING, 0.0
         if self.learn:
             self.learner.observe_skeleton(SKELETON_14, points)
+        lengths = self.lengths()
         if hidden:
-            self._place_hidden_ankles(hidden, uv, xyz, conf, src, cov, points, intrinsics)
+            self._place_hidden_ankles(hidden, uv, xyz, conf, src, cov, points, intrinsics,
+                                      lengths)
         # elbows and knees measured by a 14-part detector are kept: only the others are solved
         measured = (src != cj.MISSING) & valid
         unmeasured = [limb for limb, k in _MIDDLE_ROWS if not measured[k]]
         extra = {'limits': self.limits} if self.method == 'dh' else {}
         solver = infer_middle_joints_dh if self.method == 'dh' else infer_middle_joints
         result = solver(
-            depth_m if self.use_depth else None, points, intrinsics, self.lengths(),
+            depth_m if self.use_depth else None, points, intrinsics, lengths,
             names=SKELETON_14, mask=mask if self.use_depth else None, config=self.config,
             limbs=unmeasured, **extra)
         for k, name in enumerate(result.names):
