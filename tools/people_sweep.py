@@ -22,7 +22,7 @@ from pathlib import Path
 
 import numpy as np
 
-from pose4d_ros.core.dpm.model import load_model
+from pose4d_ros.core.dpm.model import PartModel, load_model
 from pose4d_ros.core.files import write_json
 from pose4d_ros.core.foreground import ForegroundConfig
 from pose4d_ros.core.people import PeopleIk, PeopleTracker, TrackingConfig
@@ -46,9 +46,10 @@ def main(argv: list[str] | None = None) -> int:
     args = p.parse_args(argv)
     frames = load_frames([args.source])
     base = TrackingConfig()
+    model = load_model(model_path(args.model))
     results = []
     for look in [x.strip().lower() in ('true', '1') for x in args.second_look.split(',')]:
-        detections, depths = _detections(frames, args.model, base, look)
+        detections, depths = _detections(frames, model, base, look)
         for birth, confirm, trust in itertools.product(
                 [float(x) for x in args.birth_score.split(',')],
                 [int(x) for x in args.confirm_frames.split(',')],
@@ -72,10 +73,10 @@ def main(argv: list[str] | None = None) -> int:
     return 0
 
 
-def _detections(frames: list, model: str, base: TrackingConfig, second_look: bool
+def _detections(frames: list, model: PartModel, base: TrackingConfig, second_look: bool
                 ) -> tuple[list, list]:
     """Each frame's detections and masked depth, as the several-person pipeline makes them."""
-    pipeline = FramePipeline(DetectorStage(load_model(model_path(model))), people=base,
+    pipeline = FramePipeline(DetectorStage(model), people=base,
                              foreground=ForegroundStage(ForegroundConfig(second_look=second_look)))
     detections, depths = [], []
     for f in frames:

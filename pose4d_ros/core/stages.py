@@ -467,6 +467,7 @@ _any = np.logical_or.reduce
 _all = np.logical_and.reduce
 # the 3 x 3 identity of the inferred joints' covariance (np.eye is a Python call a joint)
 _EYE3 = np.eye(3)
+_EYE3.setflags(write=False)
 _DOWN = np.array([0.0, 1.0, 0.0])
 _LEG_ROWS = {side: tuple(SKELETON_14.index(f'{side}_{j}') for j in ('hip', 'knee', 'ankle'))
              for side in ('left', 'right')}
@@ -497,7 +498,6 @@ def _hidden_leg_joints(uv: NDArray[np.float64], src: NDArray[np.uint8],
     inside = (rows >= 0) & (rows < h) & (cols >= 0) & (cols < w)
     seen = _any(inside & np.isfinite(depth[rows.clip(0, h - 1), cols.clip(0, w - 1)]), axis=1)
     return tuple(_KNEES_ANKLES[candidate & ~seen].tolist())
-_EYE3.setflags(write=False)
 
 
 @functools.lru_cache(maxsize=16)
@@ -659,9 +659,11 @@ class IkStage:
         hidden = ()
         if self.hidden_legs and depth_m is not None and intrinsics is not None:
             hidden = _hidden_leg_joints(uv, src, depth_m)
-            for i in hidden:  # a guess where no pixel of the person is: not measured
-                points[i] = np.nan
-                uv[i], xyz[i], conf[i], src[i], cov[i] = np.nan, np.nan, 0.0, cj.MISSING, 0.0
+            # a guess where no pixel of the person is: not measured
+            rows = list(hidden)
+            points[rows] = np.nan
+            uv[rows], xyz[rows], conf[rows], src[rows], cov[rows] = \
+                np.nan, np.nan, 0.0, cj.MISSING, 0.0
         if self.learn:
             self.learner.observe_skeleton(SKELETON_14, points)
         lengths = self.lengths()

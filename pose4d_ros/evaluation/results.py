@@ -23,6 +23,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from pose4d_ros.core.files import write_json
+from pose4d_ros.core.foreground import ForegroundConfig
+from pose4d_ros.core.people import TrackingConfig
 from pose4d_ros.peer import peer_python
 from pose4d_ros.util.machine import git_commit, machine
 from pose4d_ros.util.progress import log
@@ -104,17 +106,15 @@ SETS: dict[str, DataSet] = {s.name: s for s in (
 )}
 
 # Validation sweeps: the values tried (the shipped default among them); another value is chosen
-# only when it beats the default by more than TIE (points of average7, or of MOTA %)
+# only when it beats the default by more than TIE points of average7 (`choose_label`)
 MARGINS = (0.3, 0.4, 0.5, 0.6)
 DEFAULT_MARGIN = 0.4
 TIE = 0.1
 # a value costing more CPU per frame (p50) than this fraction over the shipped one's is not
 # chosen for accuracy alone (the headroom on a slow robot computer comes first)
 MAX_CPU_INCREASE = 0.05
-# the several-person sweep's sets (tools/people_sweep.py) and the settings it chose
+# the several-person sweep's sets (tools/people_sweep.py)
 PEOPLE_SWEEP_SETS = ('valid60_people2', 'valid60_people2_alone1', 'valid60_people2_alone2')
-PEOPLE_SHIPPED = {'second_look': True, 'birth_score': 5.0, 'confirm_frames': 2,
-                  'trust_score': 7.0}
 _ARMS = 'left_elbow,left_wrist,right_elbow,right_wrist'
 _LIMBS = _ARMS + ',left_knee,left_ankle,right_knee,right_ankle'
 # settings once chosen on test sets, swept on validation by `pose4d eval --config` (each
@@ -226,8 +226,9 @@ JOBS: tuple[Job, ...] = (
             'pose4d', 'eval', str(DATA / 'train'), '--json', str(WORK / 'peer_depth_train.json'),
             '--peer', 'mediapipe', '--fit-peer-depth', str(RESULTS / 'peer_depth.json')]],
         needs_peer=True),
-    Job('validation', 'the search margin, the cut height, the limb rule, the person scale and '
-        'the birth score, swept on validation renders; the MSR Action3D validation set',
+    Job('validation', 'the search margin, the cut height, the limb rule, the person scale, the '
+        'floor and the several-person tracker, swept on validation renders; the MSR Action3D '
+        'validation set',
         ('valid30', 'valid30_near', 'valid60_people2', 'valid60_people2_alone1',
          'valid60_people2_alone2', 'valid30_msr'),
         _validation),
@@ -473,15 +474,18 @@ def summarize_people() -> dict:
     if not all(f.exists() for f in files):
         return {}
     runs = [json.loads(f.read_text()) for f in files]
-    keys = ('second_look', 'birth_score', 'confirm_frames', 'trust_score')
+    tracking = TrackingConfig()
+    shipped = {'second_look': ForegroundConfig().second_look,
+               **{k: getattr(tracking, k) for k in ('birth_score', 'confirm_frames',
+                                                    'trust_score')}}
     table = []
     for rows in zip(*runs, strict=True):
         two = rows[0]
-        table.append({**{k: two[k] for k in keys},
+        table.append({**{k: two[k] for k in shipped},
                       'mean_mota': sum(r['mota'] for r in rows) / len(rows),
                       'average7': two['average7'], 'idf1': two['idf1'], 'mota': two['mota'],
                       'false_per_1000': two['false_per_1000'],
                       'alone_false_per_1000': [r['false_per_1000'] for r in rows[1:]],
-                      'shipped': all(two[k] == v for k, v in PEOPLE_SHIPPED.items())})
+                      'shipped': all(two[k] == v for k, v in shipped.items())})
     table.sort(key=lambda r: -r['mean_mota'])
     return {'sets': list(PEOPLE_SWEEP_SETS), 'settings': table, 'tie': TIE}
