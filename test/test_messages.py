@@ -223,3 +223,87 @@ def test_skeletons_to_cdr_is_the_serialised_message(people):
                  list(j.position_covariance)) for j in got.joints] == \
             [(j.name, j.source, j.u, j.v, j.position, np.float32(j.confidence),
               list(j.position_covariance)) for j in want.joints]
+
+
+def _people(count: int, seed: int = 0) -> list:
+    """`count` people of 14, 3, 1, 14 ... joints (names of several lengths: every alignment)."""
+    from pose4d_ros.core.joints import JointSet
+    from pose4d_ros.core.skeleton import SKELETON_14
+
+    rng = np.random.default_rng(seed)
+    sets = []
+    for k in range(count):
+        n = (14, 3, 1)[k % 3]
+        uv = rng.normal(size=(n, 2)) * 100
+        uv[:1] = np.nan
+        sets.append(JointSet(SKELETON_14[k % 3:k % 3 + n], uv, rng.normal(size=(n, 3)),
+                             confidence=rng.random(n).astype(np.float32),
+                             source=rng.integers(0, 4, n).astype(np.uint8),
+                             covariance=rng.normal(size=(n, 3, 3)), score=0.5, track_id=k + 1))
+    return sets
+
+
+def _same_joints(got, want) -> None:
+    assert (got.names, got.track_id, got.score) == (want.names, want.track_id, want.score)
+    for name in ('uv', 'xyz', 'confidence', 'source', 'covariance'):
+        a, b = getattr(got, name), getattr(want, name)
+        assert a.dtype == b.dtype and a.flags.c_contiguous and not a.flags.writeable, name
+        assert_array_equal(a, b, err_msg=name)
+
+
+@pytest.mark.parametrize('people', [0, 1, 3])
+@pytest.mark.parametrize('frame_id', ['', 'cam', 'camera_color_optical_frame'])
+def test_skeletons_from_cdr_reads_what_the_message_holds(people, frame_id):
+    """The nodes' reader of SkeletonArray bytes gives what deserialising the message and
+    reading its fields gives, from rclpy's serialisation and from ours alike."""
+    from builtin_interfaces.msg import Time
+    from pose4d_msgs.msg import JointArray, SkeletonArray
+    from rclpy.serialization import deserialize_message, serialize_message
+    from std_msgs.msg import Header
+
+    from pose4d_ros.datasets.messages import cdr_header, joints_from_cdr, skeletons_from_cdr
+    from pose4d_ros.nodes.convert import (
+        joints_from_msg,
+        joints_to_msg,
+        skeletons_from_msg,
+        skeletons_to_cdr,
+        skeletons_to_msg,
+    )
+
+    sets = _people(people, seed=people)
+    header = Header(frame_id=frame_id, stamp=Time(sec=-3, nanosec=999_999_999))
+    for data in (serialize_message(skeletons_to_msg(sets, header)),
+                 skeletons_to_cdr(sets, header)):
+        sec, nanosec, frame, at = cdr_header(data)
+        assert (sec, nanosec, frame) == (-3, 999_999_999, frame_id)
+        want = skeletons_from_msg(deserialize_message(data, SkeletonArray))
+        got = skeletons_from_cdr(data, at)
+        assert len(got) == len(want) == people
+        for a, b in zip(got, want, strict=True):
+            _same_joints(a, b)
+    for joints in sets:
+        data = serialize_message(joints_to_msg(joints, header))
+        _same_joints(joints_from_cdr(data), joints_from_msg(deserialize_message(data, JointArray)))
+
+
+def test_skeletons_from_cdr_refuses_damaged_bytes():
+    """Cut short, a byte changed anywhere, or another encapsulation: a ValueError or people
+    that decode (values are checked by the stages), never another exception."""
+    from builtin_interfaces.msg import Time
+    from std_msgs.msg import Header
+
+    from pose4d_ros.datasets.messages import cdr_header, skeletons_from_cdr
+    from pose4d_ros.nodes.convert import skeletons_to_cdr
+
+    data = skeletons_to_cdr(_people(2), Header(frame_id='cam', stamp=Time(sec=1, nanosec=2)))
+    refused = 0
+    for k in range(len(data)):
+        for damaged in (data[:k], data[:k] + bytes([data[k] ^ 0xff]) + data[k + 1:]):
+            try:
+                skeletons_from_cdr(damaged, cdr_header(damaged)[3])
+            except ValueError:
+                refused += 1
+    # every cut is refused, and so is any change to the encapsulation, a length or a name
+    assert refused >= len(data) + 4
+    with pytest.raises(ValueError, match='little-endian'):
+        cdr_header(b'\x00\x00' + data[2:])

@@ -8,7 +8,9 @@ bag readers) carry the same fields, so this module reads both without importing 
   reading, returned in the core's convention (float32 metres, NaN = no reading);
 - `sensor_msgs/CameraInfo` -> `core.camera.Intrinsics`;
 - `pose4d_msgs/JointArray` -> `core.joints.JointSet`; `pose4d_msgs/SkeletonArray` -> a tuple
-  of them;
+  of them; both also straight from their serialised bytes (`cdr_header`, `skeletons_from_cdr`,
+  `joints_from_cdr`: little-endian CDR, as Fast DDS and `nodes.convert.skeletons_to_cdr` write
+  it), without a message object per joint;
 - `builtin_interfaces/Time` -> integer nanoseconds.
 
 Messages are built from arrays in `nodes/convert.py` (rclpy) and `cad60_bag.py` (rosbags).
@@ -16,13 +18,14 @@ Messages are built from arrays in `nodes/convert.py` (rclpy) and `cad60_bag.py` 
 
 from __future__ import annotations
 
+import struct
 from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
 
 from pose4d_ros.core.camera import Intrinsics, depth_to_metres
-from pose4d_ros.core.joints import JointSet
+from pose4d_ros.core.joints import MISSING, JointSet
 
 # encoding -> (dtype, channels)
 ENCODINGS: dict[str, tuple[str, int]] = {
@@ -126,3 +129,102 @@ def joints_from_msg(msg: Any) -> JointSet:
 def skeletons_from_msg(msg: Any) -> tuple[JointSet, ...]:
     """A `pose4d_msgs/SkeletonArray` as JointSets, in the message's order."""
     return tuple(joints_from_msg(m) for m in msg.skeletons)
+
+
+# --------------------------------------------------------------------------- serialised (CDR)
+
+CDR_LE = b'\x00\x01\x00\x00'  # encapsulation: plain CDR, little-endian
+_U32 = struct.Struct('<I')
+_TIME = struct.Struct('<iI')      # builtin_interfaces/Time
+_TRACK = struct.Struct('<If')     # JointArray's track_id, score
+# a Joint after its name, from an 8-byte boundary: u, v, position x, y, z, confidence, source,
+# 3 bytes to the covariance's 8-byte boundary, position_covariance
+_JOINT = np.dtype([('uv', '<f8', 2), ('xyz', '<f8', 3), ('confidence', '<f4'), ('source', 'u1'),
+                   ('pad', 'V3'), ('covariance', '<f8', 9)])
+_SPAN = np.arange(_JOINT.itemsize)
+_JOINT_MIN = 4 + 1 + _JOINT.itemsize  # the fewest bytes a joint takes (a name of no characters)
+
+
+def _string(buf: memoryview, at: int) -> tuple[str, int]:
+    """The CDR string at payload offset `at` (aligned to 4 first) and the offset after it."""
+    at += -at % 4
+    (n,) = _U32.unpack_from(buf, at)
+    end = at + 4 + n
+    if n < 1 or end > len(buf) or buf[end - 1] != 0:
+        raise ValueError(f'bad string at byte {at}: length {n}, {len(buf)} bytes in all')
+    return str(buf[at + 4:end - 1], 'utf-8'), end
+
+
+def cdr_header(data: bytes) -> tuple[int, int, str, int]:
+    """A serialised message that starts with a `std_msgs/Header` (little-endian CDR): its
+    stamp's (sec, nanosec), frame_id, and the payload offset after it. ValueError for bytes
+    that are not such a message (other encapsulations included: the caller deserialises those
+    the general way)."""
+    if len(data) < 16 or data[:4] != CDR_LE:
+        raise ValueError(f'{len(data)} bytes that are not little-endian CDR')
+    buf = memoryview(data)[4:]
+    sec, nanosec = _TIME.unpack_from(buf, 0)
+    frame_id, at = _string(buf, 8)
+    return sec, nanosec, frame_id, at
+
+
+def _joints_at(buf: memoryview, at: int) -> tuple[JointSet, int]:
+    """The JointArray at payload offset `at` (its header first) and the offset after it."""
+    _, at = _string(buf, at + (-at % 4) + 8)  # header: stamp, frame_id
+    at += -at % 4
+    track_id, score = _TRACK.unpack_from(buf, at)
+    (n,) = _U32.unpack_from(buf, at + 8)
+    at += 12
+    if n * _JOINT_MIN > len(buf) - at:
+        raise ValueError(f'{n} joints announced, {len(buf) - at} bytes left')
+    names, starts = [], []
+    for _ in range(n):
+        name, at = _string(buf, at)
+        at += -at % 8
+        names.append(name)
+        starts.append(at)
+        at += _JOINT.itemsize
+    if at > len(buf):
+        raise ValueError(f'{n} joints need {at} bytes, {len(buf)} in all')
+    # every joint's fields in one gather (names end where they end: the offsets vary)
+    rows = np.array(starts, np.intp)[:, None] + _SPAN
+    v = np.frombuffer(buf, np.uint8)[rows].view(_JOINT).reshape(n)
+    source = v['source'].copy()  # each field contiguous, as the stages' arrays are
+    if n and source.max() > MISSING:
+        raise ValueError(f'unknown joint source code(s) {sorted(set(source[source > MISSING]))}')
+    return JointSet.of_arrays(tuple(names), v['uv'].copy(), v['xyz'].copy(),
+                              v['confidence'].copy(), source,
+                              v['covariance'].reshape(n, 3, 3).copy(),
+                              score=score, track_id=track_id), at
+
+
+def _read(data: bytes, what: str, read: Any) -> Any:
+    if data[:4] != CDR_LE:
+        raise ValueError(f'{what}: {len(data)} bytes that are not little-endian CDR')
+    try:
+        return read(memoryview(data)[4:])
+    except struct.error as exc:
+        raise ValueError(f'{what}: {len(data)} bytes end too soon ({exc})') from None
+
+
+def skeletons_from_cdr(data: bytes, at: int) -> tuple[JointSet, ...]:
+    """The people of a serialised `pose4d_msgs/SkeletonArray` (little-endian CDR), read from
+    payload offset `at` (after its header, `cdr_header`), as `skeletons_from_msg` gives them.
+    ValueError for bytes that do not hold one."""
+    def read(buf: memoryview) -> tuple[JointSet, ...]:
+        start = at + (-at % 4)
+        (n,) = _U32.unpack_from(buf, start)
+        if n * 20 > len(buf) - start:
+            raise ValueError(f'{n} skeletons announced, {len(buf) - start} bytes left')
+        people, where = [], start + 4
+        for _ in range(n):
+            joints, where = _joints_at(buf, where)
+            people.append(joints)
+        return tuple(people)
+    return _read(data, 'SkeletonArray', read)
+
+
+def joints_from_cdr(data: bytes) -> JointSet:
+    """A serialised `pose4d_msgs/JointArray` (little-endian CDR) as `joints_from_msg` gives it.
+    ValueError for bytes that do not hold one."""
+    return _read(data, 'JointArray', lambda buf: _joints_at(buf, 0)[0])
