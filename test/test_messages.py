@@ -153,6 +153,32 @@ def test_color_and_camera_info_round_trip():
     assert intrinsics_from_msg(intrinsics_to_msg(intr, Header())) == intr
 
 
+@pytest.mark.parametrize('encoding,shape,dtype', [
+    ('rgb8', (5, 7, 3), np.uint8), ('mono8', (4, 3), np.uint8), ('16UC1', (3, 5), np.uint16),
+    ('32FC1', (2, 3), np.float32)])
+@pytest.mark.parametrize('frame_id', ['', 'cam', 'camera_depth_optical_frame'])
+def test_image_to_cdr_is_the_serialised_message(encoding, shape, dtype, frame_id):
+    """The foreground's image bytes decode to the message array_to_image builds, and have its
+    length (a non-contiguous array included)."""
+    from builtin_interfaces.msg import Time
+    from rclpy.serialization import deserialize_message, serialize_message
+    from sensor_msgs.msg import Image
+    from std_msgs.msg import Header
+
+    from pose4d_ros.nodes.convert import array_to_image, image_to_cdr
+
+    rng = np.random.default_rng(len(frame_id))
+    img = (rng.random((shape[0], 2 * shape[1], *shape[2:])) * 200).astype(dtype)[:, ::2]
+    header = Header(frame_id=frame_id, stamp=Time(sec=7, nanosec=8))
+    msg = array_to_image(img, encoding, header)
+    data = image_to_cdr(img, encoding, header)
+    assert len(data) == len(serialize_message(msg))
+    back = deserialize_message(data, Image)
+    assert back == msg
+    with pytest.raises(ValueError, match='does not fit'):
+        image_to_cdr(img[..., None], encoding, header)
+
+
 @pytest.mark.parametrize('frame_id', ['', 'c', 'camera_color_optical_frame'])
 @pytest.mark.parametrize('n', [0, 1, 10, 14])
 def test_joints_to_cdr_is_the_serialised_message(frame_id, n):

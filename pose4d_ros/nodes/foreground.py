@@ -45,10 +45,10 @@ from pose4d_ros.core.stages import ForegroundStage
 from pose4d_ros.nodes import qos
 from pose4d_ros.nodes.common import PairedInputs, StageMonitor, run
 from pose4d_ros.nodes.convert import (
-    array_to_image,
     cloud_to_msg,
     color_from_msg,
     depth_from_msg,
+    image_to_cdr,
     intrinsics_from_msg,
     stamp_to_ns,
 )
@@ -109,13 +109,13 @@ def foreground_stage(p: dict[str, Any]) -> ForegroundStage:
 
 
 def foreground_messages(labels: np.ndarray, color_m: np.ndarray, depth_m: np.ndarray,
-                        encoding: str, header: Header) -> tuple[Image, Image, Image]:
+                        encoding: str, header: Header) -> tuple[bytes, bytes, bytes]:
     """Mask (mono8 labels, `core.people.people_labels`), masked colour (rgb8) and masked depth
-    (in the input's `encoding`)."""
-    depth = (array_to_image(depth_m, '32FC1', header) if encoding == '32FC1'
-             else array_to_image(depth_to_millimetres(depth_m), '16UC1', header))
-    return (array_to_image(labels, 'mono8', header),
-            array_to_image(color_m, 'rgb8', header), depth)
+    (in the input's `encoding`), as the serialised Image messages (`convert.image_to_cdr`)."""
+    depth = (image_to_cdr(depth_m, '32FC1', header) if encoding == '32FC1'
+             else image_to_cdr(depth_to_millimetres(depth_m), '16UC1', header))
+    return (image_to_cdr(labels, 'mono8', header),
+            image_to_cdr(color_m, 'rgb8', header), depth)
 
 
 class ForegroundNode(Node):

@@ -17,7 +17,8 @@ Publications (all with the colour image's header)
     JointArray, 14 joints, the primary person), pose4d/skeleton/markers, /tf (the joints, as
     the ik node publishes them),
     pose4d/parts, pose4d/parts/tracked (JointArray, the model's parts; while subscribed),
-    pose4d/foreground/{mask,color,depth} (if pipeline.publish_foreground), /diagnostics
+    pose4d/foreground/{mask,color,depth} (if pipeline.publish_foreground; while subscribed),
+    /diagnostics
 Parameters (config/pipeline.yaml)
     those of the foreground, detector, tracker and ik nodes, and pipeline.publish_foreground
 """
@@ -125,12 +126,15 @@ class PipelineNode(Node):
         for name, joints in (('parts', out.parts), ('tracked', out.tracked)):
             if self.pubs[name].get_subscription_count():  # intermediate results: on demand
                 self.pubs[name].publish(joints_to_cdr(joints, header))
-        if self.publish_foreground:
+        wanted = [name for name in ('mask', 'color', 'depth')
+                  if self.publish_foreground and self.pubs[name].get_subscription_count()]
+        if wanted:  # the foreground images: on demand too
             labels = people_labels(out.foregrounds, out.depth_masked.shape)
-            msgs = foreground.foreground_messages(labels, out.color_masked,
-                                                  out.depth_masked, depth_msg.encoding, header)
-            for name, msg in zip(('mask', 'color', 'depth'), msgs, strict=True):
-                self.pubs[name].publish(msg)
+            msgs = dict(zip(('mask', 'color', 'depth'), foreground.foreground_messages(
+                labels, out.color_masked, out.depth_masked, depth_msg.encoding, header),
+                strict=True))
+            for name in wanted:
+                self.pubs[name].publish(msgs[name])
         self.monitor.frame(stamp, time.perf_counter() - t0)
 
 
