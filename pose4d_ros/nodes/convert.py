@@ -54,14 +54,21 @@ def ns_to_stamp(ns: int) -> Time:
     return Time(sec=int(ns // 1_000_000_000), nanosec=int(ns % 1_000_000_000))
 
 
-def array_to_image(img: NDArray, encoding: str, header: Header) -> Image:
-    """An Image message holding `img` (a copy), rows packed (step = width x pixel size)."""
+def _image_array(img: NDArray, encoding: str) -> tuple[NDArray, int]:
+    """`img` as the C-contiguous pixels of `encoding`, and its channels; ValueError when it
+    cannot be."""
     if encoding not in ENCODINGS:
         raise ValueError(f'unsupported image encoding {encoding!r}')
     kind, channels = ENCODINGS[encoding]
     img = np.ascontiguousarray(img, dtype=np.dtype(kind))
     if img.ndim != (3 if channels > 1 else 2) or (channels > 1 and img.shape[2] != channels):
         raise ValueError(f'array of shape {img.shape} does not fit encoding {encoding}')
+    return img, channels
+
+
+def array_to_image(img: NDArray, encoding: str, header: Header) -> Image:
+    """An Image message holding `img` (a copy), rows packed (step = width x pixel size)."""
+    img, channels = _image_array(img, encoding)
     msg = Image(header=header, height=img.shape[0], width=img.shape[1], encoding=encoding,
                 is_bigendian=int(sys.byteorder == 'big'),
                 step=img.shape[1] * channels * img.dtype.itemsize)
@@ -156,12 +163,7 @@ def image_to_cdr(img: NDArray, encoding: str, header: Header) -> bytes:
     """`array_to_image(img, encoding, header)` serialised (little-endian CDR, as
     `rclpy.serialization.serialize_message` gives it), built without the message: the pixels
     are copied once, into the bytes (the message costs three copies and its conversion)."""
-    if encoding not in ENCODINGS:
-        raise ValueError(f'unsupported image encoding {encoding!r}')
-    kind, channels = ENCODINGS[encoding]
-    img = np.ascontiguousarray(img, dtype=np.dtype(kind))
-    if img.ndim != (3 if channels > 1 else 2) or (channels > 1 and img.shape[2] != channels):
-        raise ValueError(f'array of shape {img.shape} does not fit encoding {encoding}')
+    img, channels = _image_array(img, encoding)
     out = bytearray()
     _header_cdr(out, header)
     out += bytes(-len(out) % 4)
