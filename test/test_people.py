@@ -207,6 +207,58 @@ def test_work_is_bounded_by_max_people():
     assert len(detector.slots) == 4
 
 
+def test_a_still_region_that_scored_low_keeps_its_detection_a_few_frames():
+    """`quiet_frames`: a region scoring under the birth score that has not moved is searched
+    every (quiet_frames + 1)-th frame; a person (scoring over it), or a region that moves by
+    more than a pixel or 2 cm, every frame."""
+    from pose4d_ros.core.foreground import ForegroundResult
+    from pose4d_ros.core.people import STILL_IOU, STILL_M, STILL_PX, PeopleDetector
+
+    searched = []
+
+    class Scoring:
+        def step(self, color, depth, intrinsics, *, mask, stamp_s, blanked):
+            x = int(np.flatnonzero(mask.any(axis=0))[0])
+            searched.append((round(stamp_s / DT), x))
+            # the region at x 0 is a wall's edge (score 1), the one at x 100 a person (12)
+            return JointSet.missing(PARTS_10.names).with_(score=1.0 if x < 100 else 12.0)
+
+    color = np.zeros((INTR.height, INTR.width, 3), np.uint8)
+    depth = np.full((INTR.height, INTR.width), 3.0, np.float32)
+
+    def region(x: int, depth_m: float = 3.0) -> ForegroundResult:
+        mask = np.zeros(depth.shape, bool)
+        mask[50:200, x:x + 40] = True
+        return ForegroundResult(mask=mask, box=(x, 50, x + 40, 200), depth_m=depth_m,
+                                found=True)
+
+    detector = PeopleDetector(Scoring, TrackingConfig(quiet_frames=3))
+    for k in range(10):
+        out = detector.step(color, depth, INTR, [region(0), region(100)], stamp_s=k * DT)
+        assert [d.score for d in out] == [1.0, 12.0]
+    assert [k for k, x in searched if x == 100] == list(range(10))
+    assert [k for k, x in searched if x == 0] == [0, 4, 8]
+    # moved by more than STILL_PX, farther by more than STILL_M, or a tenth of its pixels
+    # changed within the same box (an arm of a person partly hidden): searched at once
+    searched.clear()
+    detector.step(color, depth, INTR, [region(STILL_PX + 1)], stamp_s=10 * DT)
+    detector.step(color, depth, INTR, [region(STILL_PX + 1, 3.0 + 2 * STILL_M)],
+                  stamp_s=11 * DT)
+    moved = region(STILL_PX + 1, 3.0 + 2 * STILL_M)
+    moved.mask[60:75, STILL_PX + 1:STILL_PX + 41] = False
+    assert 1 - STILL_IOU < 1 - moved.mask.sum() / region(0).mask.sum() < 0.15
+    detector.step(color, depth, INTR, [moved], stamp_s=12 * DT)
+    assert [x for _, x in searched] == [STILL_PX + 1] * 3
+    # quiet_frames 0: every region every frame
+    searched.clear()
+    detector = PeopleDetector(Scoring, TrackingConfig(quiet_frames=0))
+    for k in range(3):
+        detector.step(color, depth, INTR, [region(0)], stamp_s=k * DT)
+    assert len(searched) == 3
+    with pytest.raises(ValueError, match='quiet_frames'):
+        TrackingConfig(quiet_frames=-1)
+
+
 def test_without_camera_info_people_are_told_apart_in_the_image():
     """No intrinsics (no camera_info yet): no 3-D out of the tracker, the association works
     on the torso's pixel; two people keep their two tracks."""

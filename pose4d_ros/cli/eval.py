@@ -189,9 +189,9 @@ def table_rows(args: argparse.Namespace, kind: str, models: dict[str, PartModel 
     max_people = args.max_people
     if max_people is None and any(getattr(f, 'people', ()) for f in frames):
         max_people = TrackingConfig.max_people
-    people = None if max_people is None else TrackingConfig(max_people=max_people,
-                                                            birth_score=args.birth_score)
     settings = overrides.parse(args.config)
+    people = None if max_people is None else overrides.apply(TrackingConfig(
+        max_people=max_people, birth_score=args.birth_score), settings, 'tracking')
     rows: dict[str, Row] = {}
     used: set[str] = set()
     for given, m in models.items():

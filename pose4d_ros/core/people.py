@@ -86,6 +86,14 @@ class TrackingConfig:
         average7 86.59 without, 87.36 / 87.47 / 87.23 / 88.43 with widths 0.06 / 0.09 / 0.12
         / 0.22 m (0.16 m and more lose MOTA: 0.953 -> 0.912-0.917); `valid30_people2`
         unchanged (81.02: its hidden people are never tracked). On, 0.09 m.
+    quiet_frames : a candidate region whose last search scored under `birth_score` (a region
+        that cannot start a track: a door jamb or a wall's edge at the image's border, a
+        cabinet) and has not moved since (its box within `STILL_PX` pixels, its depth within
+        `STILL_M`, its pixels those of then up to `STILL_IOU`) keeps that detection for up to
+        this many frames before it is searched again (0: every candidate searched every
+        frame). Such regions cost the detector a full search each frame; a person's region
+        scores over it, or moves.
+
 
     `confirm_frames`, `birth_score` and `trust_score`, and the foreground's second look, were
     chosen on validation renders (training subjects s01-s06, seed 201: `valid60_people2`, two
@@ -109,11 +117,13 @@ class TrackingConfig:
     trust_score: float = 7.0
     hold_occluded: bool = True
     occluded_width_m: float = 0.09
+    quiet_frames: int = 4
 
     def __post_init__(self) -> None:
-        if self.max_people < 1 or self.confirm_frames < 1:
-            raise ValueError(f'max_people and confirm_frames must be >= 1, got '
-                             f'{self.max_people} and {self.confirm_frames}')
+        if self.max_people < 1 or self.confirm_frames < 1 or self.quiet_frames < 0:
+            raise ValueError(f'max_people and confirm_frames must be >= 1 and quiet_frames >= '
+                             f'0, got {self.max_people}, {self.confirm_frames} and '
+                             f'{self.quiet_frames}')
         for name in ('max_unseen_s', 'torso_std_m', 'max_speed_mps', 'gate_chi2', 'max_gap_s',
                      'occluded_width_m'):
             if not getattr(self, name) > 0:
@@ -186,13 +196,27 @@ def _mahalanobis2_all(d: NDArray[np.float64], s: NDArray[np.float64]) -> NDArray
         return np.array([_mahalanobis2(a, b) for a, b in zip(d, s, strict=True)])
 
 
+# A candidate region has not moved when its box is within this many pixels of the last one
+# searched, every side, its median depth within this many metres, and its pixels overlap
+# those of the last one by at least this share (intersection over union; `quiet_frames`)
+STILL_PX = 1
+STILL_M = 0.02
+STILL_IOU = 0.95
+
+
 @dataclass
 class _Slot:
-    """One person's detector state and where their region last was."""
+    """One person's detector state, where their region last was, and its last search: the
+    region's box and depth, the detection, and the frames it has been kept since."""
 
     stage: object
     centre: NDArray[np.float64]
     seen_s: float
+    box: tuple[int, int, int, int] | None = None
+    depth_m: float = math.nan
+    mask: NDArray[np.bool_] | None = None
+    last: JointSet | None = None
+    kept: int = 0
 
 
 class PeopleDetector:
@@ -234,11 +258,31 @@ class PeopleDetector:
                 slot = _Slot(self.make(), centre, stamp_s)
                 self.slots.append(slot)
             slot.centre, slot.seen_s = centre, stamp_s
+            if self._quiet(slot, person):
+                slot.kept += 1
+                out.append(slot.last)
+                continue
             color_m, depth_mm = apply_mask(color, depth_m, person.mask)
-            out.append(slot.stage.step(color_m, depth_mm, intrinsics, mask=person.mask,
-                                       stamp_s=stamp_s, blanked=True))
+            slot.last = slot.stage.step(color_m, depth_mm, intrinsics, mask=person.mask,
+                                        stamp_s=stamp_s, blanked=True)
+            slot.box, slot.depth_m, slot.mask, slot.kept = person.box, person.depth_m, \
+                person.mask, 0
+            out.append(slot.last)
         self.slots = [s for s in self.slots if stamp_s - s.seen_s <= cfg.max_unseen_s]
         return out
+
+    def _quiet(self, slot: _Slot, person: ForegroundResult) -> bool:
+        """Whether the slot's last detection stands for this frame (`quiet_frames`)."""
+        cfg = self.config
+        if not (slot.kept < cfg.quiet_frames and slot.last is not None
+                and slot.last.score < cfg.birth_score and person.box is not None
+                and slot.box is not None and abs(person.depth_m - slot.depth_m) <= STILL_M
+                and max(abs(a - b) for a, b in zip(person.box, slot.box, strict=True))
+                <= STILL_PX and slot.mask.shape == person.mask.shape):
+            return False
+        # a person partly hidden scores as low, but moves within their region
+        union = np.count_nonzero(slot.mask | person.mask)
+        return np.count_nonzero(slot.mask & person.mask) >= STILL_IOU * union
 
 
 def _centre(person: ForegroundResult, intrinsics: Intrinsics | None) -> NDArray[np.float64]:

@@ -17,10 +17,12 @@ from typing import Any, TypeVar
 from pose4d_ros.core.dpm.infer import SearchConfig
 from pose4d_ros.core.dpm.scale import ScaleConfig
 from pose4d_ros.core.foreground import ForegroundConfig
+from pose4d_ros.core.people import TrackingConfig
 from pose4d_ros.core.slqe import SlqeConfig
 
 SECTIONS: dict[str, type] = {'foreground': ForegroundConfig, 'search': SearchConfig,
-                             'scale': ScaleConfig, 'slqe': SlqeConfig}
+                             'scale': ScaleConfig, 'slqe': SlqeConfig,
+                             'tracking': TrackingConfig}
 C = TypeVar('C')
 
 

@@ -24,7 +24,7 @@ Publications (input header)
 Parameters (config/detector.yaml)
     detector.model, detector.n_levels, detector.margin, detector.person_scales,
     detector.scale_warm_up_frames, detector.scale_probe_every, detector.min_confidence,
-    detector.max_people
+    detector.max_people, detector.quiet_frames
     (a part's depth look-up is the model's: `core.lifting.lift_parts`)
 """
 
@@ -109,6 +109,10 @@ PARAMS = (
     Param('detector.max_people', TrackingConfig.max_people, 'People searched per frame at '
           'most (the best regions of the mask first); more in view are counted on /diagnostics '
           '(people_over_limit).', range=(1, 16), live=True),
+    Param('detector.quiet_frames', TrackingConfig.quiet_frames, 'A region that scored under '
+          "the tracker's birth score and has not moved (box within 1 px, depth within 2 cm) "
+          'keeps its last detection this many frames before it is searched again; 0 = every '
+          'region searched every frame.', range=(0, 30), live=True),
     Param('detector.arm_prior', _S.arm_prior, "Weight of the previous frame's elbows and "
           'wrists (at most 0.25 s old) when each arm is chosen among the few best the part model '
           'allows, per squared person scale of distance; 0 = the part model alone.',
@@ -138,7 +142,8 @@ def detector_stage(p: dict[str, Any]) -> DetectorStage:
 
 
 def people_config(p: dict[str, Any]) -> TrackingConfig:
-    return TrackingConfig(max_people=p['detector.max_people'])
+    return TrackingConfig(max_people=p['detector.max_people'],
+                          quiet_frames=p['detector.quiet_frames'])
 
 
 class DetectorNode(Node):

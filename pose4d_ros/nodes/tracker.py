@@ -95,8 +95,9 @@ def tracker_stage(p: dict[str, Any]) -> TrackerStage:
 
 def people_config(p: dict[str, Any]) -> TrackingConfig:
     """How people are told apart (`core.people.TrackingConfig`) from the parameters (the
-    pipeline node's include detector.max_people)."""
+    pipeline node's include detector.max_people and detector.quiet_frames)."""
     return TrackingConfig(max_people=p.get('detector.max_people', TrackingConfig.max_people),
+                          quiet_frames=p.get('detector.quiet_frames', TrackingConfig.quiet_frames),
                           confirm_frames=p['tracker.confirm_frames'],
                           max_unseen_s=p['tracker.max_unseen_s'])
 
