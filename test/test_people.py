@@ -330,8 +330,9 @@ def test_with_nobody_tracked_every_sure_detection_is_confirmed_at_once():
 
 def test_the_second_look_runs_where_someone_may_be_hidden(monkeypatch):
     """`segment_people` looks again for people hidden behind those found (`_behind`) at a
-    stream's start, while that look finds someone, or when fewer people are found than in the
-    previous frame; not while the same people stand in the open. What it finds is marked
+    stream's start, while that look finds someone, or when someone of the previous frame is
+    missing beside a person found; not while the same people stand in the open, nor for a
+    region gone far from everyone found. What it finds is marked
     `behind` and comes after the people found in the open."""
     from dataclasses import replace
 
@@ -364,7 +365,11 @@ def test_the_second_look_runs_where_someone_may_be_hidden(monkeypatch):
     segment_people(near, INTR, previous=alone)
     assert len(calls) == 2  # the same person in the open: no second look
     segment_people(near, INTR, previous=alone + [replace(people[0], box=(0, 0, 9, 9))])
-    assert len(calls) == 3  # two people before, one now
+    assert len(calls) == 2  # two before, one now, the other gone far from them: no look
+    x0, y0, x1, y1 = people[0].box
+    beside = (x1 + 2, y0, x1 + 2 + (x1 - x0), y1)  # just beside, not overlapping
+    segment_people(near, INTR, previous=alone + [replace(people[0], box=beside)])
+    assert len(calls) == 3  # two before, one now, the other gone where this one stands
     segment_people(near, INTR, config=config)
     assert len(calls) == 3  # off
 

@@ -50,13 +50,15 @@ def test_every_figure_of_the_readme_summary_is_the_jsons() -> None:
     for key, _ in doc.SUMMARY_ROWS:
         if any(key in tables[s]['rows'] for s in sets):
             assert key in rows, f'{key} is in docs/results but not in the README summary'
-    bench = RESULTS / 'bench.json'
-    ratio = re.search(r'MediaPipe \(p50, same run, demo bag\): ([0-9]+\.[0-9]+)', block)
-    if bench.exists() and 'ratio_to_peer' in json.loads(bench.read_text()):
-        assert ratio and float(ratio.group(1)) == pytest.approx(
-            json.loads(bench.read_text())['ratio_to_peer'], abs=5e-4)
-    else:
-        assert ratio is None
+    for name, pattern in (('bench', r'MediaPipe \(p50, same run, demo bag\): ([0-9.]+[0-9])'),
+                          ('bench_people', r'every person region searched\): ([0-9.]+[0-9])')):
+        bench = RESULTS / f'{name}.json'
+        ratio = re.search(pattern, block)
+        if bench.exists() and 'ratio_to_peer' in json.loads(bench.read_text()):
+            assert ratio and float(ratio.group(1)) == pytest.approx(
+                json.loads(bench.read_text())['ratio_to_peer'], abs=5e-4), name
+        else:
+            assert ratio is None, name
 
 
 def test_the_summary_is_what_the_generator_writes() -> None:

@@ -264,9 +264,12 @@ JOBS: tuple[Job, ...] = (
                          '--model', 'lspet_convnet', '--model', 'lspet_rgb_14',
                          '--model', 'rgbd_14')],
         needs='lspet'),
-    Job('bench', 'CPU per stage on the demo bag, and MediaPipe in the same run', (),
-        lambda c: [['pose4d', 'bench', 'bags/sample', '--json', str(RESULTS / 'bench.json'),
-                    *(['--peer', 'mediapipe'] if c.peer else [])]]),
+    Job('bench', 'CPU per stage on the demo bag, and MediaPipe in the same run; again on '
+        "the nodes' several-person path", (),
+        lambda c: [['pose4d', 'bench', 'bags/sample', '--json', str(RESULTS / name),
+                    *people, *(['--peer', 'mediapipe'] if c.peer else [])]
+                   for name, people in (('bench.json', []),
+                                        ('bench_people.json', ['--people', 'several']))]),
     Job('bench_graph', 'the node graph on the demo bag: frames in and out, latency', (),
         lambda c: [['pose4d', 'bench', 'bags/sample', '--json',
                     str(RESULTS / 'bench_graph.json'), '--frames', '20', '--graph']]),

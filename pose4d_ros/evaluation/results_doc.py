@@ -56,6 +56,10 @@ def summary(results: Path) -> str:
     if bench and 'ratio_to_peer' in bench:
         lines += ['', f"CPU per frame, our four stages / MediaPipe (p50, same run, demo bag): "
                       f"{bench['ratio_to_peer']:.3f}."]
+        several = load(results, 'bench_people')
+        if several and 'ratio_to_peer' in several:
+            lines[-1] += (f" As the nodes run them (every person region searched): "
+                          f"{several['ratio_to_peer']:.3f}.")
     return '\n'.join(lines)
 
 
@@ -156,20 +160,27 @@ def write_all(results: Path, index: dict, *, readme: Path = Path('README.md'),
 
 def bench_section(results: Path, jobs: dict) -> list[str]:
     out = []
-    bench = load(results, 'bench')
-    if bench:
-        out += ['## CPU per stage (demo bag)', '', '| stage | CPU p50 ms | p95 | wall p50 ms |',
-                '|---|---|---|---|']
+    for name, title in (('bench', 'CPU per stage (demo bag)'),
+                        ('bench_people', "CPU per stage as the nodes run them (demo bag, the "
+                                         'several-person path: every person region searched)')):
+        bench = load(results, name)
+        if not bench:
+            continue
+        out += [f'## {title}', '', '| stage | CPU p50 ms | p95 | wall p50 ms | Python calls |',
+                '|---|---|---|---|---|']
+        calls = bench.get('stages', {})
         for k, v in bench.get('stages_ms', {}).items():
             w = bench.get('wall_ms', {}).get(k, {})
             out.append(f"| {k} | {fmt(v.get('p50'))} | {fmt(v.get('p95'))} | "
-                       f"{fmt(w.get('p50'))} |")
+                       f"{fmt(w.get('p50'))} | {fmt(calls.get(k, {}).get('calls_per_frame'))} |")
         if 'peer_ms' in bench:
             out.append(f"| MediaPipe | {fmt(bench['peer_ms']['p50'])} | "
                        f"{fmt(bench['peer_ms']['p95'])} | "
-                       f"{fmt(bench.get('peer_wall_ms', {}).get('p50'))} |")
+                       f"{fmt(bench.get('peer_wall_ms', {}).get('p50'))} | |")
             out += ['', f"Ratio ours / MediaPipe (CPU p50): {bench['ratio_to_peer']:.3f}."]
-        out += ['', *commands(jobs.get('bench'))]
+        out.append('')
+    if load(results, 'bench'):
+        out += [*commands(jobs.get('bench'))]
     graph = load(results, 'bench_graph')
     if graph and 'graph' in graph:
         out += ['## The node graph (demo bag)', '', '```',

@@ -281,10 +281,12 @@ class ForegroundConfig(MaskConfig, FloorConfig, PersonConfig, RegionConfig):
         nearer object (an occluder) from the person, metres; 0 disables the cut.
     second_look : `segment_people` looks again for people partly hidden by those found (their
         pixels left out; `occluded_rules`), where someone may be hidden: at a stream's start
-        (no previous people), when fewer people are found than in the previous frame, and
-        while it finds someone (`ForegroundResult.behind`); a lone person in the open costs
-        no second look. On, chosen on validation (`tools/people_sweep.py`, valid60_people2 and
-        its alone twins, with the tracker's `trust_score`): two people MOTA 0.910 -> 0.953,
+        (no previous people), when someone of the previous frame is missing beside a person
+        found (`segmentation._gone_beside`: not a region gone elsewhere, such as a wall's edge
+        at the image's border found one frame in two), and while it finds someone
+        (`ForegroundResult.behind`); a lone person in the open costs no second look. On,
+        chosen on validation (`tools/people_sweep.py`, valid60_people2 and its alone twins,
+        with the tracker's `trust_score`): two people MOTA 0.910 -> 0.953,
         average7 84.8 -> 86.6, false skeletons 0 -> 8 per 1000 frames; alone unchanged. (Off
         before: looking on every frame, with a lone person's best region trusted at once, it
         took a door behind a lone person for a second one.)

@@ -25,6 +25,7 @@ from pose4d_ros.core.foreground.floor import fit_floor, floor_height
 from pose4d_ros.core.foreground.mask import complete, upsample_mask
 from pose4d_ros.core.foreground.person import (
     Part,
+    _overlap,
     depth_parts,
     occluded_rules,
     part_score,
@@ -167,9 +168,11 @@ def segment_people(depth_m: NDArray[np.floating], intrinsics: Intrinsics, *,
     picked = _distinct_people(ok, depth.shape, config, boxes, [])
     first = len(picked)
     if config.second_look and picked and first < max_people and (
-            not previous or first < len(previous) or any(p.behind for p in previous)):
-        # where someone may be hidden: at a stream's start, when fewer people are found than
-        # before (one went behind another) or while the second look finds someone
+            not previous or any(p.behind for p in previous)
+            or _gone_beside(previous, [pt.box for pt, _ in picked])):
+        # where someone may be hidden: at a stream's start, when someone of the previous frame
+        # is missing beside a person found (gone behind them) or while the second look finds
+        # someone
         picked += _behind(depth, intrinsics, config, above, drop, boxes, picked)
     people = [replace(_result(pt, depth, valid, floor, config), behind=k >= first)
               for k, (pt, _) in enumerate(picked[:max_people])]
@@ -197,6 +200,28 @@ def _distinct_people(parts: list[Part], shape: tuple[int, ...], config: Foregrou
             continue
         out.append((pt, mask))
     return out
+
+
+def _gone_beside(previous: list[ForegroundResult] | tuple[ForegroundResult, ...],
+                 boxes: list[tuple[int, int, int, int]]) -> bool:
+    """Whether a person of the previous frame is not found again (each box found taken by
+    the previous box it overlaps most, one to one) where their box, grown by a tenth of its
+    height, meets the box of a person found: they may have gone behind them. A region that
+    is gone elsewhere (out of view, or a wall's edge at the image's border that passes the
+    rules one frame in two) is no reason for a second look."""
+    left = [p.box for p in previous if p.box is not None]
+    if len(left) <= len(boxes):
+        return False
+    for b in boxes:
+        best = max(left, key=lambda a: _overlap(a, b))
+        if _overlap(best, b) > 0:
+            left.remove(best)
+    for x0, y0, x1, y1 in left:
+        g = (y1 - y0) // 10
+        grown = (x0 - g, y0 - g, x1 + g, y1 + g)
+        if any(_overlap(grown, b) > 0 for b in boxes):
+            return True
+    return False
 
 
 def _behind(depth: NDArray[np.float32], intrinsics: Intrinsics, config: ForegroundConfig,
