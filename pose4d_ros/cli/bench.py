@@ -201,12 +201,15 @@ def graph_bench(bag_path: Path, args: argparse.Namespace) -> dict:
                      'latency_p50_ms_by_third': [ms_stats(part.tolist())['p50']
                                                  for part in np.array_split(lat, 3)],
                      'cpu_ms_per_frame': {exe: round(t * 1e3 / max(r.frames, 1), 2)
-                                          for exe, t in r.cpu_s.items()}}
+                                          for exe, t in r.cpu_s.items()},
+                     # where frames were lost: each stage's count on /diagnostics
+                     'dropped_by_stage': r.dropped}
         st = out[name]
         print(f"graph {name:<9} {st['frames_replayed']}/{st['frames_in']} frames replayed, "
               f"{st['frames_out']} out, in "
               f"{st['input_rate_hz']} Hz, out {st['output_rate_hz']} Hz, latency p50 "
               f"{st['latency_ms']['p50']} ms p95 {st['latency_ms']['p95']} ms (p50 by third of "
               f"the run {st['latency_p50_ms_by_third']}); CPU ms per frame: "
-              + ', '.join(f'{k} {v}' for k, v in st['cpu_ms_per_frame'].items()))
+              + ', '.join(f'{k} {v}' for k, v in st['cpu_ms_per_frame'].items())
+              + '; dropped by stage: ' + ', '.join(f'{k} {v}' for k, v in r.dropped.items()))
     return out

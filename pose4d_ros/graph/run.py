@@ -13,7 +13,7 @@ import subprocess
 import sys
 import time
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -143,6 +143,8 @@ class GraphRun:
     logs : {executable: log file}.
     cpu_s : {executable: CPU seconds used while the bag played and drained} (replay's whole
         run).
+    dropped : {stage: frames it dropped} (`dropped` on its last /diagnostics, which comes
+        after the last frame).
     """
 
     recorded: Path
@@ -151,6 +153,7 @@ class GraphRun:
     left: dict[int, float]
     logs: dict[str, Path]
     cpu_s: dict[str, float]
+    dropped: dict[str, int] = field(default_factory=dict)
 
     def latency_ms(self) -> np.ndarray:
         """Colour frame in -> skeleton out, per frame that came out (both seen here, on one
@@ -171,6 +174,7 @@ def run_graph(bag_path: Path, out: Path, *, rate: float = 1.0, model: str = 'rgb
     `best_effort`: the replay publishes best effort, as camera drivers do. `load`: processes
     run beside the graph while the bag plays (`graph.load`: 'busy', 'query')."""
     import rclpy
+    from diagnostic_msgs.msg import DiagnosticArray
     from pose4d_msgs.msg import JointArray
     from rclpy.qos import QoSProfile, ReliabilityPolicy
     from sensor_msgs.msg import CameraInfo
@@ -201,6 +205,15 @@ def run_graph(bag_path: Path, out: Path, *, rate: float = 1.0, model: str = 'rgb
         CameraInfo, 'camera/color/camera_info',
         lambda m: entered.setdefault(stamp_to_ns(m.header.stamp), time.monotonic()),
         QoSProfile(depth=300, reliability=ReliabilityPolicy.BEST_EFFORT))
+    dropped: dict[str, int] = {}
+
+    def on_diagnostics(msg: DiagnosticArray) -> None:
+        for status in msg.status:
+            if status.name.startswith('pose4d: '):
+                values = {kv.key: kv.value for kv in status.values}
+                dropped[status.name.removeprefix('pose4d: ')] = int(values.get('dropped', 0))
+
+    node.create_subscription(DiagnosticArray, '/diagnostics', on_diagnostics, 100)
     ex = executor(node)
     stages = ('pipeline',) if pipeline else STAGES
     connections = PIPELINE_CONNECTIONS if pipeline else CONNECTIONS
@@ -246,12 +259,16 @@ def run_graph(bag_path: Path, out: Path, *, rate: float = 1.0, model: str = 'rgb
             ex.spin_once(timeout_sec=0.05)
         cpu = {exe: t - cpu_before.get(exe, 0.0) for exe, t in graph.cpu_seconds().items()}
         cpu['replay'] = replay_cpu
+        # each stage's /diagnostics of after its last frame (one a second)
+        until = time.monotonic() + 1.2
+        while time.monotonic() < until:
+            ex.spin_once(timeout_sec=0.05)
     finally:
         node.destroy_node()
         rclpy.try_shutdown()
         codes = graph.stop()
     graph.raise_unless_clean(codes)
-    return GraphRun(recorded, frames, entered, left, dict(graph.logs), cpu)
+    return GraphRun(recorded, frames, entered, left, dict(graph.logs), cpu, dict(dropped))
 
 
 def tf_per_skeleton(recorded: Path, skeletons: dict[int, JointSet], *,

@@ -463,7 +463,8 @@ class PeopleInputs:
 
 
 class _Pivot:
-    """A frame's people, decoded when the frame is processed."""
+    """A frame's header and its people (`people()`: read as they arrived, or, for a message
+    deserialised the general way, when the frame is processed)."""
 
     def __init__(self, header: object, people: Callable[[], list]) -> None:
         self.header = header
@@ -471,10 +472,10 @@ class _Pivot:
 
     @classmethod
     def of_bytes(cls, data: bytes, msg_type: type) -> _Pivot:
-        """A serialised SkeletonArray's or JointArray's frame: its header read now, its people
-        when the frame is processed, straight from the bytes (`datasets.messages`: a third of
-        the CPU of deserialising the message and reading its fields); bytes in another
-        encoding than little-endian CDR are deserialised the general way."""
+        """A serialised SkeletonArray's or JointArray's frame, read straight from the bytes
+        (`datasets.messages`: a third of the CPU of deserialising the message and reading its
+        fields) as it arrives, so that bytes which hold none are counted at once (ValueError);
+        bytes in another encoding than little-endian CDR are deserialised the general way."""
         from builtin_interfaces.msg import Time
         from pose4d_msgs.msg import SkeletonArray
 
@@ -487,6 +488,6 @@ class _Pivot:
             msg = deserialize_message(data, msg_type)
             return cls(msg.header, (lambda: list(m.skeletons_from_msg(msg))) if several
                        else (lambda: [m.joints_from_msg(msg)]))
-        header = Header(stamp=Time(sec=sec, nanosec=nanosec), frame_id=frame_id)
-        return cls(header, (lambda: list(m.skeletons_from_cdr(data, at))) if several
-                   else (lambda: [m.joints_from_cdr(data)]))
+        people = list(m.skeletons_from_cdr(data, at)) if several else [m.joints_from_cdr(data)]
+        return cls(Header(stamp=Time(sec=sec, nanosec=nanosec), frame_id=frame_id),
+                   lambda: people)
