@@ -273,11 +273,13 @@ def subscribe(node: Node, msg_type: type, topic: str, callback: Callable[[object
     return node.create_subscription(msg_type, topic, on_bytes, profile, raw=True)
 
 
-# Frames the detector (and the pipeline node, which runs it) may hold: a new track's first
-# frames search every person scale (`ScaleConfig.warm_up_frames`, 3x the work), a burst a
-# queue of one turned into lost frames under load (`make test`, `pose4d demo --load busy`);
-# two absorb it, and latency stays bounded (at most two frames waiting)
-DETECTOR_QUEUE = 2
+# Frames the stages that take images (foreground, detector, and the pipeline node) may hold:
+# a new track's first frames search every person scale (`ScaleConfig.warm_up_frames`, 3x the
+# work), and the machine stalls now and then (the ros2 command line's queries), bursts that a
+# queue of one turned into lost frames under load (`make test`, `pose4d demo --load busy`,
+# `pose4d bench --graph --load query`: the foreground's drops); two absorb them, and latency
+# stays bounded (at most two frames waiting)
+IMAGE_QUEUE = 2
 
 
 class FrameQueue:

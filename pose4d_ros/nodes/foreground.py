@@ -1,9 +1,9 @@
 """`foreground`: the person's mask from the depth image (floor removal + MSER), applied.
 
 Colour, depth and camera_info are paired by stamp (exact, or nearest within
-`foreground.slop_s`), never "the latest depth", and processed in order; one frame at most
-waits to be processed, so a stage slower than the camera works on the newest frame and drops
-the older ones (counted on /diagnostics).
+`foreground.slop_s`), never "the latest depth", and processed in order; two frames at most
+wait to be processed (`common.IMAGE_QUEUE`), so a stage slower than the camera works on the
+newest frames and drops the older ones (counted on /diagnostics).
 
 Subscriptions
     camera/color/image_raw (sensor_msgs/Image, rgb8/bgr8/mono8)
@@ -43,7 +43,7 @@ from pose4d_ros.core.foreground import ForegroundConfig
 from pose4d_ros.core.people import people_labels
 from pose4d_ros.core.stages import ForegroundStage
 from pose4d_ros.nodes import qos
-from pose4d_ros.nodes.common import PairedInputs, StageMonitor, run
+from pose4d_ros.nodes.common import IMAGE_QUEUE, PairedInputs, StageMonitor, run
 from pose4d_ros.nodes.convert import (
     cloud_to_msg,
     color_from_msg,
@@ -138,7 +138,8 @@ class ForegroundNode(Node):
         self.pub_cloud = (self.create_publisher(PointCloud2, 'pose4d/foreground/points',
                                                 qos.OUTPUT_QOS) if self.publish_cloud else None)
         self.inputs = PairedInputs(self, CAMERA_TOPICS, self.process, self.monitor,
-                                   slop_ns=int(p['foreground.slop_s'] * 1e9))
+                                   slop_ns=int(p['foreground.slop_s'] * 1e9),
+                                   queue_size=IMAGE_QUEUE)
         self.get_logger().info(
             f'masking {self.resolve_topic_name("camera/color/image_raw")} + '
             f'{self.resolve_topic_name("camera/depth/image_raw")} -> '
