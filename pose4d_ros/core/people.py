@@ -94,7 +94,6 @@ class TrackingConfig:
         frame). Such regions cost the detector a full search each frame; a person's region
         scores over it, or moves.
 
-
     `confirm_frames`, `birth_score` and `trust_score`, and the foreground's second look, were
     chosen on validation renders (training subjects s01-s06, seed 201: `valid60_people2`, two
     people, 720 frames, and its twins with each person alone) by `tools/people_sweep.py`, for

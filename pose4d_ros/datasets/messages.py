@@ -133,10 +133,11 @@ def skeletons_from_msg(msg: Any) -> tuple[JointSet, ...]:
 
 # --------------------------------------------------------------------------- serialised (CDR)
 
+# The layout the readers below and `nodes.convert`'s writers share
 CDR_LE = b'\x00\x01\x00\x00'  # encapsulation: plain CDR, little-endian
-_U32 = struct.Struct('<I')
-_TIME = struct.Struct('<iI')      # builtin_interfaces/Time
-_TRACK = struct.Struct('<If')     # JointArray's track_id, score
+CDR_U32 = struct.Struct('<I')     # a sequence's or string's length
+CDR_TIME = struct.Struct('<iI')   # builtin_interfaces/Time
+CDR_TRACK = struct.Struct('<If')  # JointArray's track_id, score
 # a Joint after its name, from an 8-byte boundary: u, v, position x, y, z, confidence, source,
 # 3 bytes to the covariance's 8-byte boundary, position_covariance
 _JOINT = np.dtype([('uv', '<f8', 2), ('xyz', '<f8', 3), ('confidence', '<f4'), ('source', 'u1'),
@@ -148,7 +149,7 @@ _JOINT_MIN = 4 + 1 + _JOINT.itemsize  # the fewest bytes a joint takes (a name o
 def _string(buf: memoryview, at: int) -> tuple[str, int]:
     """The CDR string at payload offset `at` (aligned to 4 first) and the offset after it."""
     at += -at % 4
-    (n,) = _U32.unpack_from(buf, at)
+    (n,) = CDR_U32.unpack_from(buf, at)
     end = at + 4 + n
     if n < 1 or end > len(buf) or buf[end - 1] != 0:
         raise ValueError(f'bad string at byte {at}: length {n}, {len(buf)} bytes in all')
@@ -163,7 +164,7 @@ def cdr_header(data: bytes) -> tuple[int, int, str, int]:
     if len(data) < 16 or data[:4] != CDR_LE:
         raise ValueError(f'{len(data)} bytes that are not little-endian CDR')
     buf = memoryview(data)[4:]
-    sec, nanosec = _TIME.unpack_from(buf, 0)
+    sec, nanosec = CDR_TIME.unpack_from(buf, 0)
     frame_id, at = _string(buf, 8)
     return sec, nanosec, frame_id, at
 
@@ -172,8 +173,8 @@ def _joints_at(buf: memoryview, at: int) -> tuple[JointSet, int]:
     """The JointArray at payload offset `at` (its header first) and the offset after it."""
     _, at = _string(buf, at + (-at % 4) + 8)  # header: stamp, frame_id
     at += -at % 4
-    track_id, score = _TRACK.unpack_from(buf, at)
-    (n,) = _U32.unpack_from(buf, at + 8)
+    track_id, score = CDR_TRACK.unpack_from(buf, at)
+    (n,) = CDR_U32.unpack_from(buf, at + 8)
     at += 12
     if n * _JOINT_MIN > len(buf) - at:
         raise ValueError(f'{n} joints announced, {len(buf) - at} bytes left')
@@ -213,7 +214,7 @@ def skeletons_from_cdr(data: bytes, at: int) -> tuple[JointSet, ...]:
     ValueError for bytes that do not hold one."""
     def read(buf: memoryview) -> tuple[JointSet, ...]:
         start = at + (-at % 4)
-        (n,) = _U32.unpack_from(buf, start)
+        (n,) = CDR_U32.unpack_from(buf, start)
         if n * 20 > len(buf) - start:
             raise ValueError(f'{n} skeletons announced, {len(buf) - start} bytes left')
         people, where = [], start + 4

@@ -24,7 +24,9 @@ from collections.abc import Callable
 
 import numpy as np
 import rclpy
+from builtin_interfaces.msg import Time
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+from pose4d_msgs.msg import JointArray, SkeletonArray
 from rclpy.clock import Clock, ClockType
 from rclpy.executors import Executor, ExternalShutdownException, SingleThreadedExecutor
 from rclpy.experimental import EventsExecutor
@@ -39,6 +41,7 @@ from std_msgs.msg import Header
 from pose4d_ros.core.camera import Intrinsics
 from pose4d_ros.core.sync import TIME_JUMP_S, StampJumps, StampSync
 from pose4d_ros.core.threads import set_blas_threads
+from pose4d_ros.datasets import messages
 from pose4d_ros.nodes import qos
 from pose4d_ros.nodes.convert import intrinsics_from_msg, stamp_to_ns
 from pose4d_ros.nodes.params import ParameterError
@@ -391,10 +394,10 @@ class LatestIntrinsics:
                   decode=self._decode)
 
     def _decode(self, data: bytes) -> tuple[bytes, CameraInfo] | None:
-        # bytes 0-3: the encapsulation, 4-11: the stamp
-        if self._read is not None and data[12:] == self._read:
+        body = data[12:]  # bytes 0-3: the encapsulation, 4-11: the stamp
+        if body == self._read:
             return None
-        return data[12:], deserialize_message(data, CameraInfo)
+        return body, deserialize_message(data, CameraInfo)
 
     def _on(self, item: tuple[bytes, CameraInfo]) -> None:
         try:
@@ -426,8 +429,6 @@ class PeopleInputs:
                  extra: list[tuple[type, str, object]],
                  process: Callable[[list, object, tuple], None], monitor: StageMonitor, *,
                  slop_ns: int = 0) -> None:
-        from pose4d_msgs.msg import JointArray, SkeletonArray
-
         self._process = process
         self._last_people = -float('inf')
         self._monitor = monitor
@@ -478,18 +479,14 @@ class _Pivot:
         (`datasets.messages`: a third of the CPU of deserialising the message and reading its
         fields) as it arrives, so that bytes which hold none are counted at once (ValueError);
         bytes in another encoding than little-endian CDR are deserialised the general way."""
-        from builtin_interfaces.msg import Time
-        from pose4d_msgs.msg import SkeletonArray
-
-        from pose4d_ros.datasets import messages as m
-
         several = msg_type is SkeletonArray
         try:
-            sec, nanosec, frame_id, at = m.cdr_header(data)
+            sec, nanosec, frame_id, at = messages.cdr_header(data)
         except ValueError:
             msg = deserialize_message(data, msg_type)
-            return cls(msg.header, (lambda: list(m.skeletons_from_msg(msg))) if several
-                       else (lambda: [m.joints_from_msg(msg)]))
-        people = list(m.skeletons_from_cdr(data, at)) if several else [m.joints_from_cdr(data)]
+            return cls(msg.header, (lambda: list(messages.skeletons_from_msg(msg))) if several
+                       else (lambda: [messages.joints_from_msg(msg)]))
+        people = (list(messages.skeletons_from_cdr(data, at)) if several
+                  else [messages.joints_from_cdr(data)])
         return cls(Header(stamp=Time(sec=sec, nanosec=nanosec), frame_id=frame_id),
                    lambda: people)

@@ -34,6 +34,9 @@ from pose4d_ros.core.draw import person_rgb
 from pose4d_ros.core.joints import DETECTED, INFERRED, MISSING, TRACKED, JointSet
 from pose4d_ros.datasets.messages import (
     CDR_LE,
+    CDR_TIME,
+    CDR_TRACK,
+    CDR_U32,
     ENCODINGS,
     color_from_msg,
     depth_from_msg,
@@ -99,10 +102,7 @@ def joints_to_msg(joints: JointSet, header: Header) -> JointArray:
     return msg
 
 
-_HEAD = struct.Struct('<iI')        # builtin_interfaces/Time
-_COUNT = struct.Struct('<I')
 _SIZE = struct.Struct('<II')        # an Image's height and width; its step and data length
-_TRACK = struct.Struct('<If')       # track_id, score
 _JOINT = struct.Struct('<5dfB')     # u, v, position x, y, z, confidence, source
 _COVARIANCE = struct.Struct('<9d')
 
@@ -111,7 +111,7 @@ def _cdr_string(out: bytearray, text: str) -> None:
     """A CDR string at a 4-byte boundary: length with the terminating NUL, bytes, NUL."""
     out += bytes(-len(out) % 4)
     raw = text.encode()
-    out += _COUNT.pack(len(raw) + 1) + raw + b'\x00'
+    out += CDR_U32.pack(len(raw) + 1) + raw + b'\x00'
 
 
 def joints_to_cdr(joints: JointSet, header: Header) -> bytes:
@@ -130,7 +130,7 @@ def skeletons_to_cdr(people: list[JointSet], header: Header) -> bytes:
     out = bytearray()
     _header_cdr(out, header)
     out += bytes(-len(out) % 4)
-    out += _COUNT.pack(len(people))
+    out += CDR_U32.pack(len(people))
     for joints in people:
         _joints_cdr(out, joints, header)
     return CDR_LE + bytes(out)
@@ -138,7 +138,7 @@ def skeletons_to_cdr(people: list[JointSet], header: Header) -> bytes:
 
 def _header_cdr(out: bytearray, header: Header) -> None:
     out += bytes(-len(out) % 4)
-    out += _HEAD.pack(int(header.stamp.sec), int(header.stamp.nanosec))
+    out += CDR_TIME.pack(int(header.stamp.sec), int(header.stamp.nanosec))
     _cdr_string(out, header.frame_id)
 
 
@@ -146,8 +146,8 @@ def _joints_cdr(out: bytearray, joints: JointSet, header: Header) -> None:
     """One JointArray appended to a CDR payload `out` (alignment from the payload's start)."""
     _header_cdr(out, header)
     out += bytes(-len(out) % 4)
-    out += _TRACK.pack(int(joints.track_id), float(joints.score))
-    out += _COUNT.pack(len(joints.names))
+    out += CDR_TRACK.pack(int(joints.track_id), float(joints.score))
+    out += CDR_U32.pack(len(joints.names))
     uv, xyz = joints.uv.tolist(), joints.xyz.tolist()
     conf, src = joints.confidence.tolist(), joints.source.tolist()
     cov = joints.covariance.reshape(-1, 9).tolist()
