@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -10,15 +11,18 @@ from numpy.testing import assert_allclose
 
 from pose4d_ros.core.skeleton import PARTS_10, PartTree
 from pose4d_ros.core.slqe import (
+    REFERENCE_SCALE_PX,
     ConstantVelocityTracker,
     CvConfig,
     SlqeConfig,
     SlqeTracker,
     Source,
+    TrackOutput,
     axis_process_noise,
     axis_transition,
     coupling_at,
     initial_state,
+    output,
     predict,
     process_noise_matrix,
     transition_matrix,
@@ -472,3 +476,82 @@ def test_scale_px_must_be_positive() -> None:
     for bad in (0.0, -1.0, math.nan, math.inf):
         with pytest.raises(ValueError, match='scale_px'):
             tracker.step(np.zeros((10, 2)), None, 0.0, scale_px=bad)
+
+
+# --- the compiled step ----------------------------------------------------------------------
+
+def _python_step(tracker: SlqeTracker, uv: np.ndarray, conf: np.ndarray | None, stamp: float,
+                 scale_px: float | None) -> TrackOutput:
+    """`SlqeTracker.step` by the Python functions (`predict`, `update`, `output`)."""
+    gain = 1.0 if scale_px is None else scale_px / REFERENCE_SCALE_PX
+    last = tracker.state.stamp
+    if last is not None and not 0.0 <= stamp - last <= tracker.config.max_dt_s:
+        tracker.reset()
+        last = None
+    state = predict(tracker.state, 0.0 if last is None else stamp - last, tracker.config,
+                    tracker.tree, gain)
+    new, info = update(state, uv, conf, tracker.config, tracker.tree, gain,
+                       before=tracker.state)
+    tracker.state = replace(new, stamp=stamp)
+    return output(tracker.state, info, uv, conf, tracker.config, gain)
+
+
+@pytest.mark.parametrize('config', [
+    SlqeConfig(), SlqeConfig(output='detection'), SlqeConfig(order=2),
+    SlqeConfig(limb_rejected_frames=0, min_confidence=0.2, accel_time_s=math.inf),
+    CvConfig().to_slqe()], ids=['default', 'detection', 'order2', 'limb0', 'cv'])
+def test_compiled_step_is_the_python_functions(config: SlqeConfig) -> None:
+    """The kernel behind `SlqeTracker.step` does the Python functions' work: the same sources
+    and state counters every frame, the same numbers but for the matrix products' rounding,
+    over detections with noise, outliers (every hypothesis taken), dropouts, unknown
+    confidences, scale changes, repeated and skipped stamps, gaps and stamps going back."""
+    rng = np.random.default_rng(3)
+    hypotheses = set()
+    for _ in range(6):
+        compiled, python = SlqeTracker(config, PARTS_10), SlqeTracker(config, PARTS_10)
+        base, vel = rng.uniform(50, 250, (10, 2)), rng.normal(0, 60, (10, 2))
+        stamp = 0.0
+        for _ in range(120):
+            stamp += rng.choice([1 / FPS, 1 / FPS, 2 / FPS, 0.0, 0.7 if rng.random() < 0.03
+                                 else 1 / FPS]) - (1.0 if rng.random() < 0.01 else 0.0)
+            if rng.random() < 0.05:
+                vel = rng.normal(0, 200, (10, 2))
+            base = base + vel / FPS
+            uv = base + rng.normal(0, 3, (10, 2))
+            outliers = rng.random(10) < 0.15
+            uv[outliers] += rng.uniform(-80, 80, (outliers.sum(), 2))
+            uv[rng.random(10) < 0.1] = np.nan
+            conf = None if rng.random() < 0.1 else rng.uniform(0, 1, 10)
+            scale = None if rng.random() < 0.3 else rng.uniform(20, 120)
+            want = _python_step(python, uv, conf, stamp, scale)
+            got = compiled.step(uv, conf, stamp, scale)
+            for name in ('positions', 'covariances', 'velocities', 'source', 'confidence'):
+                a, b = getattr(got, name), getattr(want, name)
+                assert a.dtype == b.dtype, name
+                assert_allclose(a, b, rtol=1e-9, atol=1e-9, err_msg=name)
+            assert np.array_equal(got.source, want.source)
+            for name in ('active', 'missed', 'rejected', 'shadow_left'):
+                assert np.array_equal(getattr(compiled.state, name),
+                                      getattr(python.state, name)), name
+            for name in ('x', 'cov', 'last_rejected', 'confidence', 'shadow_x', 'shadow_cov'):
+                assert_allclose(getattr(compiled.state, name), getattr(python.state, name),
+                                rtol=1e-9, atol=1e-6, err_msg=name)
+            assert (compiled.state.stamp, compiled.state.dt) == (python.state.stamp,
+                                                                 python.state.dt)
+            hypotheses.add(int(compiled.state.shadow_left.max()))
+    assert len(hypotheses) > 1 or config.shadow_frames == 0  # restarts happened
+
+
+def test_compiled_step_refuses_a_singular_innovation() -> None:
+    """Two parts whose x positions the covariance holds for one (a state no update makes):
+    their joint innovation covariance is singular, and the step says so."""
+    tracker = SlqeTracker(SlqeConfig(), CHAIN)
+    uv = np.array([[10.0, 10.0], [20.0, 10.0], [30.0, 10.0]])
+    tracker.step(uv, None, 0.0)
+    cov, b = tracker.state.cov.copy(), tracker.config.block
+    r = tracker.config.measurement_noise_px ** 2
+    cov[0, 0] = cov[b, b] = 1.0
+    cov[0, b] = cov[b, 0] = 1.0 + r
+    tracker.state = replace(tracker.state, cov=cov)
+    with pytest.raises(np.linalg.LinAlgError):
+        tracker.step(uv, None, 0.0)  # the same stamp: no prediction, innovations 0

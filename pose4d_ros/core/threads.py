@@ -1,12 +1,12 @@
 """Who owns the two cores: the BLAS thread count of the loaded OpenBLAS libraries.
 
-numpy and scipy each ship an OpenBLAS; its thread pool is sized at load time from
-`OPENBLAS_NUM_THREADS` (default: all cores). These helpers read and set it at run time through
-OpenBLAS's own C entry points (as threadpoolctl does), so a process can choose after numpy has
-been imported. On the project's 2-core machine the detector runs best with ONE BLAS thread and
-single-threaded numba (measured with `pose4d bench`: a multi-threaded GEMM on 2 cores shared
-with the other pipeline stages is several times slower, because its threads spin-wait for a
-core); see `core.dpm.infer`.
+numpy and scipy each ship an OpenBLAS (scipy's does the numba kernels' matrix products); its
+thread pool is sized at load time from `OPENBLAS_NUM_THREADS` (default: all cores). These
+helpers read and set it at run time through OpenBLAS's own C entry points (as threadpoolctl
+does), so a process can choose after numpy has been imported. On the project's 2-core machine
+the detector runs best with ONE BLAS thread and single-threaded numba (measured with `pose4d
+bench`: a multi-threaded GEMM on 2 cores shared with the other pipeline stages is several times
+slower, because its threads spin-wait for a core); see `core.dpm.infer`.
 """
 
 from __future__ import annotations
@@ -22,6 +22,7 @@ _GETTERS = ('openblas_get_num_threads', 'scipy_openblas_get_num_threads64_',
 
 def _openblas_libs() -> list[ctypes.CDLL]:
     import numpy  # noqa: F401  (make sure numpy's BLAS is loaded)
+    import scipy.linalg.cython_blas  # noqa: F401  (and scipy's: the numba kernels' products)
 
     paths: list[str] = []
     try:

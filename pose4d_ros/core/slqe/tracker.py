@@ -3,6 +3,7 @@
 
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass, field
 
@@ -18,8 +19,8 @@ from pose4d_ros.core.slqe.config import (
     evolve,
     initial_state,
 )
-from pose4d_ros.core.slqe.motion import predict
-from pose4d_ros.core.slqe.update import output, update_arrays
+from pose4d_ros.core.slqe.kernel import config_params, slqe_step
+from pose4d_ros.core.slqe.update import check_measurement
 
 
 @dataclass
@@ -42,6 +43,8 @@ class SlqeTracker:
 
     def __post_init__(self) -> None:
         self.state = initial_state(len(self.tree), self.config)
+        self._parents = np.array(self.tree.parents, np.int64)
+        self._params_of: SlqeConfig | None = None
 
     def reset(self) -> None:
         """Forget every part (a lost track or a new person)."""
@@ -64,11 +67,33 @@ class SlqeTracker:
             self.reset()  # time went backwards (a looped bag) or the track was lost in a gap
             last = None
         dt = 0.0 if last is None else stamp_s - last
-        state = predict(self.state, dt, self.config, self.tree, px_gain)
-        w, info = update_arrays(state, uv, confidence, self.config, self.tree, px_gain,
-                          before=self.state)
-        self.state = evolve(state, stamp=stamp_s, **vars(w))
-        return output(self.state, info, uv, confidence, self.config, px_gain)
+        s = self.state
+        z, c = check_measurement(uv, confidence, s.n_parts)
+        if self._params_of is not self.config:  # a new config (`TrackerStage.configure`)
+            self._params_of = self.config
+            self._params = config_params(self.config)
+            self._limb = _limb_mask(self.tree, self.config.limb_parts)
+        # predict, update and output in one compiled call (`kernel`: the Python functions'
+        # work, in their order)
+        (x, cov, active, missed, rejected, last_rejected, conf, shadow_x, shadow_cov,
+         shadow_left, state_dt, positions, covariances, velocities, source, conf_out) = \
+            slqe_step(s.x, s.cov, s.active, s.missed, s.rejected, s.last_rejected, s.confidence,
+                      s.shadow_x, s.shadow_cov, s.shadow_left, s.dt, dt, z, c, px_gain,
+                      self._params, self._parents, self._limb)
+        self.state = evolve(s, x=x, cov=cov, active=active, missed=missed, rejected=rejected,
+                            last_rejected=last_rejected, confidence=conf, shadow_x=shadow_x,
+                            shadow_cov=shadow_cov, shadow_left=shadow_left, stamp=stamp_s,
+                            dt=state_dt)
+        return TrackOutput(positions=positions, covariances=covariances, velocities=velocities,
+                           source=source, confidence=conf_out, stamp=stamp_s)
+
+
+@functools.lru_cache(maxsize=16)
+def _limb_mask(tree: PartTree, limb_parts: tuple[str, ...]) -> NDArray[np.bool_]:
+    """(P,) bool: the parts of `tree` the limb hypothesis applies to (read-only)."""
+    mask = np.array([name in limb_parts for name in tree.names], bool)
+    mask.setflags(write=False)
+    return mask
 
 
 @dataclass(frozen=True)

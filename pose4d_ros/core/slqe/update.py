@@ -26,7 +26,7 @@ from pose4d_ros.core.slqe.config import (
 MIN_WEIGHT = 1e-3
 
 
-def _check_measurement(uv: NDArray, confidence: NDArray | None, n_parts: int
+def check_measurement(uv: NDArray, confidence: NDArray | None, n_parts: int
                        ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
     z = np.asarray(uv, dtype=np.float64)
     if z.shape != (n_parts, 2):
@@ -127,7 +127,7 @@ def update_arrays(state: TrackState, uv: NDArray[np.floating],
     n_parts = state.n_parts
     if n_parts != len(tree):
         raise ValueError(f'state has {n_parts} parts, tree {len(tree)}')
-    z, conf = _check_measurement(uv, confidence, n_parts)
+    z, conf = check_measurement(uv, confidence, n_parts)
     valid = _all(np.isfinite(z), axis=1) & np.isfinite(conf) & (conf > 0) & \
         (conf >= config.min_confidence)
     # R / confidence, the confidence floored: a detection of confidence 1e-6 would otherwise
@@ -322,7 +322,7 @@ def output(state: TrackState, info: UpdateInfo, uv: NDArray[np.floating],
     at = _block_xy(n_parts, b)
     covs = state.cov[at[:, :, None], at[:, None, :]]
     if config.output == 'detection':
-        z, conf = _check_measurement(uv, confidence, n_parts)
+        z, conf = check_measurement(uv, confidence, n_parts)
         det = info.source == _DETECTED
         pos[det] = z[det]
         safe = np.where(det, np.maximum(np.nan_to_num(conf, nan=1.0), 1e-6), 1.0)
