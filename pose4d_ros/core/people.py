@@ -38,6 +38,7 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
+from numpy.linalg import _umath_linalg
 from numpy.typing import NDArray
 from scipy.optimize import linear_sum_assignment
 
@@ -156,13 +157,16 @@ def torso_px(joints: JointSet) -> tuple[NDArray[np.float64], float]:
     """A person's torso point in the image (the mean pixel of the located `TORSO` joints, NaN
     if none) and their size in pixels (the height of their located joints' box, NaN if under
     two): the association's fallback when there is no 3-D (no camera_info yet)."""
-    located = (joints.source != cj.MISSING) & np.isfinite(joints.uv).all(axis=1)
-    idx = [k for name in TORSO if (k := joints.get(name)) is not None and located[k]]
-    if not idx:
+    located = (joints.source != cj.MISSING) & np.logical_and.reduce(np.isfinite(joints.uv),
+                                                                    axis=1)
+    rows = _torso_rows(joints.names)
+    idx = rows[located[rows]]
+    if not len(idx):
         return np.full(2, np.nan), math.nan
     v = joints.uv[located, 1]
-    size = float(v.max() - v.min()) if v.size >= 2 else math.nan
-    return joints.uv[idx].mean(axis=0), size
+    size = float(np.maximum.reduce(v) - np.minimum.reduce(v)) if v.size >= 2 else math.nan
+    # np.mean's value (the sums in `TORSO` order over the count), without its Python wrapper
+    return np.add.reduce(joints.uv[idx], axis=0) / len(idx), size
 
 
 def assign(cost: NDArray[np.float64], gate: float) -> list[tuple[int, int]]:
@@ -178,6 +182,9 @@ def assign(cost: NDArray[np.float64], gate: float) -> list[tuple[int, int]]:
     return [(int(r), int(c)) for r, c in zip(rows, cols, strict=True) if cost[r, c] <= gate]
 
 
+_solve = _umath_linalg.solve
+
+
 def _mahalanobis2(d: NDArray[np.float64], s: NDArray[np.float64]) -> float:
     try:
         return float(d @ np.linalg.solve(s, d))
@@ -189,10 +196,11 @@ def _mahalanobis2_all(d: NDArray[np.float64], s: NDArray[np.float64]) -> NDArray
     """`_mahalanobis2` of each pair of `d` (K, 3) and `s` (K, 3, 3), in one solve (the same
     LAPACK solve per pair, and np.vecdot is the dot's sum); one by one when a matrix is
     singular (inf for it)."""
-    try:
-        return np.vecdot(d, np.linalg.solve(s, d[:, :, None])[:, :, 0])
-    except np.linalg.LinAlgError:
-        return np.array([_mahalanobis2(a, b) for a, b in zip(d, s, strict=True)])
+    # np.linalg.solve's LAPACK call without its wrapper: NaN where it would raise
+    out = np.vecdot(d, _solve(s, d[:, :, None], signature='dd->d')[:, :, 0])
+    if np.logical_and.reduce(np.isfinite(out)):
+        return out
+    return np.array([_mahalanobis2(a, b) for a, b in zip(d, s, strict=True)])
 
 
 # A candidate region has not moved when its box is within this many pixels of the last one
