@@ -74,6 +74,16 @@ def reorder(joints: JointSet, names: tuple[str, ...]) -> JointSet:
     is in that order already: a JointSet is immutable)."""
     if joints.names == names:
         return joints
+    return JointSet.of_arrays(names, *reordered_arrays(joints, names), score=joints.score,
+                              track_id=joints.track_id)
+
+
+def reordered_arrays(joints: JointSet, names: tuple[str, ...]) -> tuple[NDArray, ...]:
+    """New arrays (uv, xyz, confidence, source, covariance) of `joints` in the order of
+    `names`, MISSING rows for names it lacks: `reorder`'s, for a stage that changes them."""
+    if joints.names == names:
+        return (joints.uv.copy(), joints.xyz.copy(), joints.confidence.copy(),
+                joints.source.copy(), joints.covariance.copy())
     n = len(names)
     rows, found = _reordering(joints.names, names)
     # np.full's arrays, without its Python wrapper (the per-frame path)
@@ -87,8 +97,7 @@ def reorder(joints: JointSet, names: tuple[str, ...]) -> JointSet:
     uv[rows], xyz[rows], conf[rows], src[rows], cov[rows] = (
         joints.uv[found], joints.xyz[found], joints.confidence[found], joints.source[found],
         joints.covariance[found])
-    return JointSet.of_arrays(names, uv, xyz, conf, src, cov, score=joints.score,
-                              track_id=joints.track_id)
+    return uv, xyz, conf, src, cov
 
 
 @functools.lru_cache(maxsize=64)
@@ -485,8 +494,7 @@ def _hidden_leg_joints(uv: NDArray[np.float64], src: NDArray[np.uint8],
     so what the part model put there is a guess (legs hidden by a table, the image's bottom
     edge). The four joints' windows in one gather (a handful of numpy calls a frame)."""
     p = uv[_KNEES_ANKLES]
-    with np.errstate(invalid='ignore'):
-        below = p[:, 1] > uv[_THEIR_HIPS, 1]  # NaN: False
+    below = p[:, 1] > uv[_THEIR_HIPS, 1]  # NaN: False (a comparison warns of nothing)
     candidate = (src[_KNEES_ANKLES] != cj.MISSING) & below & np.isfinite(p[:, 0])
     if not _any(candidate):
         return ()
@@ -496,7 +504,10 @@ def _hidden_leg_joints(uv: NDArray[np.float64], src: NDArray[np.uint8],
     rows = np.rint(at[:, 1]).astype(np.intp)[:, None] + _WINDOW[0]
     cols = np.rint(at[:, 0]).astype(np.intp)[:, None] + _WINDOW[1]
     inside = (rows >= 0) & (rows < h) & (cols >= 0) & (cols < w)
-    seen = _any(inside & np.isfinite(depth[rows.clip(0, h - 1), cols.clip(0, w - 1)]), axis=1)
+    # np.clip's values, without its Python wrapper
+    at_rows = np.minimum(np.maximum(rows, 0), h - 1)
+    at_cols = np.minimum(np.maximum(cols, 0), w - 1)
+    seen = _any(inside & np.isfinite(depth[at_rows, at_cols]), axis=1)
     return tuple(_KNEES_ANKLES[candidate & ~seen].tolist())
 
 
@@ -647,10 +658,8 @@ class IkStage:
         if tracked.track_id != self.track_id:  # a new person: learn their limbs anew
             self.learner = LimbLengths(self.defaults)
             self.track_id = tracked.track_id
-        out = reorder(tracked, SKELETON_14)
-        valid = valid_xyz(out.xyz)
-        uv, xyz = out.uv.copy(), out.xyz.copy()
-        conf, src, cov = out.confidence.copy(), out.source.copy(), out.covariance.copy()
+        uv, xyz, conf, src, cov = reordered_arrays(tracked, SKELETON_14)
+        valid = valid_xyz(xyz)
         bad = (src != cj.MISSING) & ~valid & _any(np.isfinite(xyz), axis=1)
         # a 3-D position behind the camera is never passed on as valid
         uv[bad], xyz[bad], conf[bad], src[bad], cov[bad] = np.nan, np.nan, 0.0, cj.MISSING, 0.0
