@@ -304,6 +304,25 @@ def test_limb_lengths_learn_and_fall_back() -> None:
         lengths.lengths('tail')
 
 
+def test_limb_lengths_keep_the_last_window() -> None:
+    """The rings hold the last `window` observations: the learned bones follow a limb whose
+    lengths changed once the old ones have left the window, a frame at a time or many."""
+    one, many = LimbLengths(window=7, min_samples=3), LimbLengths(window=7, min_samples=3)
+    root, ends = np.zeros(3), []
+    for k in range(20):
+        upper, lower = (0.30, 0.25) if k < 13 else (0.20, 0.15)
+        mid, end = np.array([0.0, upper, 0.0]), np.array([0.0, upper + lower, 0.0])
+        one.observe('left_arm', root, mid, end)
+        ends.append((mid, end))
+    mids, tips = (np.array(a) for a in zip(*ends, strict=True))
+    many.observe_many('left_arm', np.zeros((20, 3)), mids, tips)
+    for learner in (one, many):
+        assert_allclose(learner.lengths('left_arm'), (0.20, 0.15))
+        assert_allclose(learner.as_dict()['left_arm'], (0.20, 0.15))
+    one.observe('left_arm', root, np.array([0.0, 0.3, 0.0]), np.array([0.0, 0.55, 0.0]))
+    assert_allclose(one.lengths('left_arm'), (0.20, 0.15))  # 6 of the last 7 still short
+
+
 def test_circle_points_are_on_the_circle() -> None:
     circle = middle_joint_circle(np.array([0.0, 0.0, 2.0]), np.array([0.3, 0.2, 2.1]),
                                  UPPER, LOWER)

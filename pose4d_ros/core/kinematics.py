@@ -652,7 +652,7 @@ def infer_middle_joints(depth_m: NDArray[np.floating] | None, points: NDArray[np
 
     solved = {limb: joints for limb, joints in LIMBS.items() if limbs is None or limb in limbs}
     if not solved:  # every middle joint measured (a 14-part detector's frame)
-        return _NOTHING_SOLVED
+        return NOTHING_SOLVED
     frame = body_frame(get('left_shoulder'), get('right_shoulder'), get('left_hip'),
                        get('right_hip'))
     sols = []
@@ -672,8 +672,8 @@ def infer_middle_joints(depth_m: NDArray[np.floating] | None, points: NDArray[np
 
 
 # `infer_middle_joints` with no limb to solve (its arrays read-only: shared)
-_NOTHING_SOLVED = IkResult(names=(), positions=np.zeros((0, 3)), pixels=np.zeros((0, 2)),
+NOTHING_SOLVED = IkResult(names=(), positions=np.zeros((0, 3)), pixels=np.zeros((0, 2)),
                            confidence=np.zeros(0, np.float32), flags=np.zeros(0, np.uint8))
-for _a in (_NOTHING_SOLVED.positions, _NOTHING_SOLVED.pixels, _NOTHING_SOLVED.confidence,
-           _NOTHING_SOLVED.flags):
+for _a in (NOTHING_SOLVED.positions, NOTHING_SOLVED.pixels, NOTHING_SOLVED.confidence,
+           NOTHING_SOLVED.flags):
     _a.setflags(write=False)

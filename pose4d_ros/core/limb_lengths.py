@@ -7,6 +7,7 @@ otherwise the longest observed reach split in the default ratio; otherwise the d
 from __future__ import annotations
 
 import functools
+import math
 from collections.abc import Mapping, Sequence
 
 import numpy as np
@@ -50,23 +51,10 @@ class LimbLengths:
         self.window = window
         # the last `window` upper, lower and reach lengths of each limb (rows `_UPPER + k`,
         # `_LOWER + k`, `_REACH + k` for the k-th of LIMBS), each row a ring: `_count` values
-        # held, the next written at `_head`; the rows grow (doubling) up to `window`
-        self._values = np.empty((3 * len(LIMBS), min(window, 64)))
+        # held, the next written at `_head`
+        self._values = np.empty((3 * len(LIMBS), window))
         self._count = np.zeros(3 * len(LIMBS), np.int64)
         self._head = np.zeros(3 * len(LIMBS), np.int64)
-
-    def _append(self, rows: NDArray[np.intp], values: NDArray[np.float64]) -> None:
-        """One more value in each of `rows` (distinct)."""
-        if not len(rows):
-            return
-        cap = self._values.shape[1]
-        if cap < self.window and np.maximum.reduce(self._count[rows]) >= cap:
-            grown = np.empty((len(self._values), min(2 * cap, self.window)))
-            grown[:, :cap] = self._values  # below the window no ring has wrapped yet
-            self._values = grown
-        self._values[rows, self._head[rows]] = values
-        self._head[rows] = (self._head[rows] + 1) % self.window
-        self._count[rows] = np.minimum(self._count[rows] + 1, self.window)
 
     def _held(self, row: int) -> NDArray[np.float64]:
         """The values of a row, oldest first."""
@@ -81,21 +69,11 @@ class LimbLengths:
         if limb not in LIMBS:
             raise ValueError(f'unknown limb {limb!r}; expected one of {tuple(LIMBS)}')
         nan3 = np.full(3, np.nan)
-        self._observe(np.array([_LIMB_ROW[limb]]), np.asarray(root, float).reshape(1, 3),
-                      (nan3 if middle is None else np.asarray(middle, float)).reshape(1, 3),
-                      np.asarray(end, float).reshape(1, 3))
-
-    def _observe(self, limbs: NDArray[np.intp], r0: NDArray[np.float64],
-                 m0: NDArray[np.float64], e0: NDArray[np.float64]) -> None:
-        """One frame of the limbs `limbs` (indices into LIMBS): roots, middles, ends (L, 3)."""
-        ends = _all(np.isfinite(r0), axis=1) & _all(np.isfinite(e0), axis=1)
-        both = ends & _all(np.isfinite(m0), axis=1)
-        # |v| as np.linalg.norm gives it (sqrt of the BLAS dot, which np.vecdot matches)
-        up = np.sqrt(np.vecdot(m0 - r0, m0 - r0))
-        lo = np.sqrt(np.vecdot(e0 - m0, e0 - m0))
-        reach = np.sqrt(np.vecdot(e0 - r0, e0 - r0))
-        rows = np.concatenate([_UPPER + limbs[both], _LOWER + limbs[both], _REACH + limbs[ends]])
-        self._append(rows, np.concatenate([up[both], lo[both], reach[ends]]))
+        points = np.array([np.asarray(root, float).reshape(3),
+                           (nan3 if middle is None else np.asarray(middle, float)).reshape(3),
+                           np.asarray(end, float).reshape(3)])
+        _observe_rows(self._values, self._count, self._head, np.array([_LIMB_ROW[limb]]),
+                      np.array([0]), np.array([1]), np.array([2]), points)
 
     def observe_many(self, limb: str, roots: NDArray[np.floating],
                      middles: NDArray[np.floating] | None, ends: NDArray[np.floating]) -> None:
@@ -116,21 +94,16 @@ class LimbLengths:
     def _extend(self, row: int, values: NDArray[np.float64]) -> None:
         """Many values into a row (the last `window` of what it held and them, kept)."""
         kept = np.concatenate([self._held(row), values])[-self.window:]
-        if len(kept) > self._values.shape[1]:
-            grown = np.empty((len(self._values), len(kept)))
-            grown[:, :self._values.shape[1]] = self._values
-            self._values = grown
         self._values[row, :len(kept)] = kept
         self._count[row] = len(kept)
         self._head[row] = len(kept) % self.window
 
     def observe_skeleton(self, names: Sequence[str], points: NDArray[np.floating]) -> None:
         """Record every limb of one frame: `points` (J, 3) metres named by `names`."""
-        pts = np.asarray(points, dtype=np.float64)
         limbs, roots, middles, ends = _skeleton_rows(tuple(names))
         if len(limbs):
-            padded = np.concatenate([pts, np.full((1, 3), np.nan)])  # row -1: no middle
-            self._observe(limbs, padded[roots], padded[middles], padded[ends])
+            _observe_rows(self._values, self._count, self._head, limbs, roots, middles, ends,
+                          np.asarray(points, dtype=np.float64))
 
     def lengths(self, limb: str) -> tuple[float, float]:
         """(upper, lower) metres for `limb`."""
@@ -161,8 +134,6 @@ class LimbLengths:
                 for k, limb in enumerate(LIMBS)}
 
 
-# ndarray.all without its Python wrapper (the per-frame path)
-_all = np.logical_and.reduce
 # each limb's row in the rings of `LimbLengths`: upper bones, lower bones, reaches
 _LIMB_ROW = {limb: k for k, limb in enumerate(LIMBS)}
 _UPPER, _LOWER, _REACH = 0, len(LIMBS), 2 * len(LIMBS)
@@ -180,6 +151,34 @@ def _skeleton_rows(names: tuple[str, ...]) -> tuple[NDArray[np.intp], ...]:
     for a in out:
         a.setflags(write=False)
     return out
+
+
+@njit(cache=True)
+def _observe_rows(values, count, head, limbs, roots, middles, ends, points):
+    """One frame of the limbs `limbs` (indices into LIMBS) into the rings of a `LimbLengths`
+    (`values`, `count`, `head`, in place): each limb's root, middle (-1: none) and end rows
+    of `points` (J, 3); its bones' lengths where all three are finite, its reach where the
+    root and end are (|v| as np.linalg.norm gives it: the square root of the BLAS dot)."""
+    window = values.shape[1]
+    n = len(count) // 3
+    for j in range(len(limbs)):
+        r, e = points[roots[j]], points[ends[j]]
+        if not (np.isfinite(r).all() and np.isfinite(e).all()):
+            continue
+        if middles[j] >= 0 and np.isfinite(points[middles[j]]).all():
+            m = points[middles[j]]
+            _ring_append(values, count, head, limbs[j], math.sqrt(np.dot(m - r, m - r)), window)
+            _ring_append(values, count, head, n + limbs[j], math.sqrt(np.dot(e - m, e - m)),
+                         window)
+        _ring_append(values, count, head, 2 * n + limbs[j], math.sqrt(np.dot(e - r, e - r)),
+                     window)
+
+
+@njit(cache=True)
+def _ring_append(values, count, head, row, value, window):
+    values[row, head[row]] = value
+    head[row] = (head[row] + 1) % window
+    count[row] = min(count[row] + 1, window)
 
 
 @njit(cache=True)

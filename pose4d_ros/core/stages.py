@@ -26,6 +26,7 @@ import math
 from collections.abc import Mapping
 from dataclasses import replace
 
+import numba as nb
 import numpy as np
 from numpy.typing import NDArray
 
@@ -48,7 +49,14 @@ from pose4d_ros.core.foreground import (
     segment_people,
 )
 from pose4d_ros.core.joints import JointSet
-from pose4d_ros.core.kinematics import IkConfig, IkFlag, LimbLengths, infer_middle_joints
+from pose4d_ros.core.kinematics import (
+    NOTHING_SOLVED,
+    IkConfig,
+    IkFlag,
+    IkResult,
+    LimbLengths,
+    infer_middle_joints,
+)
 from pose4d_ros.core.lifting import lift_parts, medoid_parts, person_scale_px, valid_xyz
 from pose4d_ros.core.skeleton import LIMBS, PARTS_10, SKELETON_14, PartTree, tree_for
 from pose4d_ros.core.slqe import ConstantVelocityTracker, CvConfig, SlqeConfig, SlqeTracker
@@ -484,7 +492,7 @@ _LEG_ROWS = {side: tuple(SKELETON_14.index(f'{side}_{j}') for j in ('hip', 'knee
 # looks at (2 each way)
 _KNEES_ANKLES = np.array([r for hip, knee, ankle in _LEG_ROWS.values() for r in (knee, ankle)])
 _THEIR_HIPS = np.array([hip for hip, _, _ in _LEG_ROWS.values() for _ in range(2)])
-_WINDOW = np.mgrid[-2:3, -2:3].reshape(2, 1, 25)
+_WINDOW = 2
 
 
 def _hidden_leg_joints(uv: NDArray[np.float64], src: NDArray[np.uint8],
@@ -492,23 +500,34 @@ def _hidden_leg_joints(uv: NDArray[np.float64], src: NDArray[np.uint8],
     """Rows of the knees and ankles below their hip in the image with no depth reading within
     `_WINDOW` pixels: no pixel of the person there (the depth is the person's masked depth),
     so what the part model put there is a guess (legs hidden by a table, the image's bottom
-    edge). The four joints' windows in one gather (a handful of numpy calls a frame)."""
-    p = uv[_KNEES_ANKLES]
-    below = p[:, 1] > uv[_THEIR_HIPS, 1]  # NaN: False (a comparison warns of nothing)
-    candidate = (src[_KNEES_ANKLES] != cj.MISSING) & below & np.isfinite(p[:, 0])
-    if not _any(candidate):
-        return ()
-    depth = np.asarray(depth_m)
+    edge)."""
+    return tuple(_hidden_rows(uv, src, np.asarray(depth_m), _KNEES_ANKLES, _THEIR_HIPS,
+                              cj.MISSING, _WINDOW).tolist())
+
+
+@nb.njit(cache=True)
+def _hidden_rows(uv, src, depth, rows, hips, missing, window):
+    """`_hidden_leg_joints`' rows of `rows` (in their order): located (not `missing`, u
+    finite), below their hip (v greater: NaN is not), no finite depth at the pixels within
+    `window` of their rounded pixel that lie on the image."""
     h, w = depth.shape
-    at = np.where(candidate[:, None], p, 0.0)
-    rows = np.rint(at[:, 1]).astype(np.intp)[:, None] + _WINDOW[0]
-    cols = np.rint(at[:, 0]).astype(np.intp)[:, None] + _WINDOW[1]
-    inside = (rows >= 0) & (rows < h) & (cols >= 0) & (cols < w)
-    # np.clip's values, without its Python wrapper
-    at_rows = np.minimum(np.maximum(rows, 0), h - 1)
-    at_cols = np.minimum(np.maximum(cols, 0), w - 1)
-    seen = _any(inside & np.isfinite(depth[at_rows, at_cols]), axis=1)
-    return tuple(_KNEES_ANKLES[candidate & ~seen].tolist())
+    out = np.empty(len(rows), np.int64)
+    n = 0
+    for j in range(len(rows)):
+        k = rows[j]
+        u, v = uv[k, 0], uv[k, 1]
+        if src[k] == missing or not v > uv[hips[j], 1] or not math.isfinite(u):
+            continue
+        seen = False
+        if math.isfinite(v):
+            r0, c0 = int(np.rint(v)), int(np.rint(u))
+            for r in range(max(r0 - window, 0), min(r0 + window + 1, h)):
+                for c in range(max(c0 - window, 0), min(c0 + window + 1, w)):
+                    seen = seen or math.isfinite(depth[r, c])
+        if not seen:
+            out[n] = k
+            n += 1
+    return out[:n]
 
 
 @functools.lru_cache(maxsize=16)
@@ -641,6 +660,19 @@ class IkStage:
             uv[ankle] = project(p[None], intrinsics)[0]
             conf[ankle], src[ankle], cov[ankle] = 0.5, cj.INFERRED, _EYE3 * 0.1 ** 2
 
+    def _solve(self, limbs: list[str], depth_m: NDArray[np.floating] | None,
+               points: NDArray[np.float64], intrinsics: Intrinsics | None,
+               mask: NDArray[np.bool_] | None) -> IkResult:
+        """The middle joints of `limbs` by the chosen solver (none to solve: a 14-part
+        detector's frame, nothing done)."""
+        if not limbs:
+            return NOTHING_SOLVED
+        extra = {'limits': self.limits} if self.method == 'dh' else {}
+        solver = infer_middle_joints_dh if self.method == 'dh' else infer_middle_joints
+        return solver(depth_m if self.use_depth else None, points, intrinsics, self.lengths(),
+                      names=SKELETON_14, mask=mask if self.use_depth else None,
+                      config=self.config, limbs=limbs, **extra)
+
     def step(self, tracked: JointSet, depth_m: NDArray[np.floating] | None,
              intrinsics: Intrinsics | None, *, mask: NDArray[np.bool_] | None = None
              ) -> JointSet:
@@ -675,19 +707,13 @@ class IkStage:
                 np.nan, np.nan, 0.0, cj.MISSING, 0.0
         if self.learn:
             self.learner.observe_skeleton(SKELETON_14, points)
-        lengths = self.lengths()
         if hidden:
             self._place_hidden_ankles(hidden, uv, xyz, conf, src, cov, points, intrinsics,
-                                      lengths)
+                                      self.lengths())
         # elbows and knees measured by a 14-part detector are kept: only the others are solved
         measured = (src != cj.MISSING) & valid
         unmeasured = [limb for limb, k in _MIDDLE_ROWS if not measured[k]]
-        extra = {'limits': self.limits} if self.method == 'dh' else {}
-        solver = infer_middle_joints_dh if self.method == 'dh' else infer_middle_joints
-        result = solver(
-            depth_m if self.use_depth else None, points, intrinsics, lengths,
-            names=SKELETON_14, mask=mask if self.use_depth else None, config=self.config,
-            limbs=unmeasured, **extra)
+        result = self._solve(unmeasured, depth_m, points, intrinsics, mask)
         for k, name in enumerate(result.names):
             i = SKELETON_14.index(name)
             if result.flags[k] in (IkFlag.MISSING, IkFlag.BEHIND_CAMERA) or \
