@@ -118,8 +118,9 @@ class JointSet:
         attributes, and no other user that writes to them (they are made read-only, as the
         constructor's; another JointSet's arrays may be shared)."""
         self = object.__new__(cls)
-        for arr in (uv, xyz, confidence, source, covariance):
-            arr.setflags(write=False)
+        # the flag set as an attribute: `setflags` is a Python-level call an array a frame
+        uv.flags.writeable = xyz.flags.writeable = confidence.flags.writeable = False
+        source.flags.writeable = covariance.flags.writeable = False
         self.__dict__.update(names=names, uv=uv, xyz=xyz, confidence=confidence, source=source,
                              covariance=covariance, score=score, track_id=track_id)
         return self

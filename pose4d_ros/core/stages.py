@@ -92,16 +92,9 @@ def reordered_arrays(joints: JointSet, names: tuple[str, ...]) -> tuple[NDArray,
     if joints.names == names:
         return (joints.uv.copy(), joints.xyz.copy(), joints.confidence.copy(),
                 joints.source.copy(), joints.covariance.copy())
-    n = len(names)
-    rows, found = _reordering(joints.names, names)
-    # np.full's arrays, without its Python wrapper (the per-frame path)
-    uv, xyz = np.empty((n, 2)), np.empty((n, 3))
-    uv.fill(np.nan)
-    xyz.fill(np.nan)
-    conf = np.zeros(n, np.float32)
-    src = np.zeros(n, np.uint8)
-    src.fill(cj.MISSING)
-    cov = np.zeros((n, 3, 3))
+    rows, found, empty = _reordering(joints.names, names)
+    uv, xyz, conf, src, cov = (empty[0].copy(), empty[1].copy(), empty[2].copy(),
+                               empty[3].copy(), empty[4].copy())
     uv[rows], xyz[rows], conf[rows], src[rows], cov[rows] = (
         joints.uv[found], joints.xyz[found], joints.confidence[found], joints.source[found],
         joints.covariance[found])
@@ -110,13 +103,17 @@ def reordered_arrays(joints: JointSet, names: tuple[str, ...]) -> tuple[NDArray,
 
 @functools.lru_cache(maxsize=64)
 def _reordering(given: tuple[str, ...], names: tuple[str, ...]
-                ) -> tuple[NDArray[np.intp], NDArray[np.intp]]:
-    """The rows of `names` that `given` has, and where `given` has them (read-only)."""
+                ) -> tuple[NDArray[np.intp], NDArray[np.intp], tuple[NDArray, ...]]:
+    """The rows of `names` that `given` has, where `given` has them, and the arrays of
+    `names` all MISSING (uv, xyz, confidence, source, covariance) to fill (read-only)."""
     pairs = [(i, given.index(name)) for i, name in enumerate(names) if name in given]
     rows, found = (np.array([p[k] for p in pairs], np.intp) for k in (0, 1))
-    rows.setflags(write=False)
-    found.setflags(write=False)
-    return rows, found
+    n = len(names)
+    empty = (np.full((n, 2), np.nan), np.full((n, 3), np.nan), np.zeros(n, np.float32),
+             np.full(n, cj.MISSING, np.uint8), np.zeros((n, 3, 3)))
+    for a in (rows, found, *empty):
+        a.setflags(write=False)
+    return rows, found, empty
 
 
 def _read_only(a: NDArray) -> NDArray:
@@ -493,36 +490,32 @@ _LEG_ROWS = {side: tuple(SKELETON_14.index(f'{side}_{j}') for j in ('hip', 'knee
 _KNEES_ANKLES = np.array([r for hip, knee, ankle in _LEG_ROWS.values() for r in (knee, ankle)])
 _THEIR_HIPS = np.array([hip for hip, _, _ in _LEG_ROWS.values() for _ in range(2)])
 _WINDOW = 2
-
-
-def _hidden_leg_joints(uv: NDArray[np.float64], src: NDArray[np.uint8],
-                       depth_m: NDArray[np.floating]) -> tuple[int, ...]:
-    """Rows of the knees and ankles below their hip in the image with no depth reading within
-    `_WINDOW` pixels: no pixel of the person there (the depth is the person's masked depth),
-    so what the part model put there is a guess (legs hidden by a table, the image's bottom
-    edge)."""
-    return tuple(_hidden_rows(uv, src, np.asarray(depth_m), _KNEES_ANKLES, _THEIR_HIPS,
-                              cj.MISSING, _WINDOW).tolist())
+_MISSING = cj.MISSING
+_NONE_HIDDEN = np.zeros(0, np.int64)
+_NONE_HIDDEN.setflags(write=False)
 
 
 @nb.njit(cache=True)
-def _hidden_rows(uv, src, depth, rows, hips, missing, window):
-    """`_hidden_leg_joints`' rows of `rows` (in their order): located (not `missing`, u
-    finite), below their hip (v greater: NaN is not), no finite depth at the pixels within
-    `window` of their rounded pixel that lie on the image."""
+def _hidden_leg_joints(uv: NDArray[np.float64], src: NDArray[np.uint8],
+                       depth: NDArray[np.floating]) -> NDArray[np.int64]:
+    """Rows of the knees and ankles below their hip in the image with no depth reading within
+    `_WINDOW` pixels: no pixel of the person there (the depth is the person's masked depth),
+    so what the part model put there is a guess (legs hidden by a table, the image's bottom
+    edge). Located: not MISSING, u finite; below: v greater (NaN is not); the window's pixels
+    on the image only."""
     h, w = depth.shape
-    out = np.empty(len(rows), np.int64)
+    out = np.empty(len(_KNEES_ANKLES), np.int64)
     n = 0
-    for j in range(len(rows)):
-        k = rows[j]
+    for j in range(len(_KNEES_ANKLES)):
+        k = _KNEES_ANKLES[j]
         u, v = uv[k, 0], uv[k, 1]
-        if src[k] == missing or not v > uv[hips[j], 1] or not math.isfinite(u):
+        if src[k] == _MISSING or not v > uv[_THEIR_HIPS[j], 1] or not math.isfinite(u):
             continue
         seen = False
         if math.isfinite(v):
             r0, c0 = int(np.rint(v)), int(np.rint(u))
-            for r in range(max(r0 - window, 0), min(r0 + window + 1, h)):
-                for c in range(max(c0 - window, 0), min(c0 + window + 1, w)):
+            for r in range(max(r0 - _WINDOW, 0), min(r0 + _WINDOW + 1, h)):
+                for c in range(max(c0 - _WINDOW, 0), min(c0 + _WINDOW + 1, w)):
                     seen = seen or math.isfinite(depth[r, c])
         if not seen:
             out[n] = k
@@ -640,7 +633,7 @@ class IkStage:
         self.reset()
 
     @staticmethod
-    def _place_hidden_ankles(hidden: tuple[int, ...], uv: NDArray, xyz: NDArray,
+    def _place_hidden_ankles(hidden: NDArray[np.int64], uv: NDArray, xyz: NDArray,
                              conf: NDArray, src: NDArray, cov: NDArray, points: NDArray,
                              intrinsics: Intrinsics,
                              lengths: Mapping[str, tuple[float, float]]) -> None:
@@ -663,10 +656,7 @@ class IkStage:
     def _solve(self, limbs: list[str], depth_m: NDArray[np.floating] | None,
                points: NDArray[np.float64], intrinsics: Intrinsics | None,
                mask: NDArray[np.bool_] | None) -> IkResult:
-        """The middle joints of `limbs` by the chosen solver (none to solve: a 14-part
-        detector's frame, nothing done)."""
-        if not limbs:
-            return NOTHING_SOLVED
+        """The middle joints of `limbs` by the chosen solver."""
         extra = {'limits': self.limits} if self.method == 'dh' else {}
         solver = infer_middle_joints_dh if self.method == 'dh' else infer_middle_joints
         return solver(depth_m if self.use_depth else None, points, intrinsics, self.lengths(),
@@ -685,8 +675,10 @@ class IkStage:
         the intrinsics'.
         """
         check_known(tracked, SKELETON_14, intrinsics)
-        if depth_m is not None and intrinsics is not None:
-            intrinsics.check_size(np.asarray(depth_m).shape, 'depth image')
+        if depth_m is not None:
+            depth_m = np.asarray(depth_m)
+            if intrinsics is not None:
+                intrinsics.check_size(depth_m.shape, 'depth image')
         if tracked.track_id != self.track_id:  # a new person: learn their limbs anew
             self.learner = LimbLengths(self.defaults)
             self.track_id = tracked.track_id
@@ -697,23 +689,23 @@ class IkStage:
         uv[bad], xyz[bad], conf[bad], src[bad], cov[bad] = np.nan, np.nan, 0.0, cj.MISSING, 0.0
         points = xyz.copy()
         points[~valid] = np.nan
-        hidden = ()
+        hidden = _NONE_HIDDEN
         if self.hidden_legs and depth_m is not None and intrinsics is not None:
             hidden = _hidden_leg_joints(uv, src, depth_m)
             # a guess where no pixel of the person is: not measured
-            rows = list(hidden)
-            points[rows] = np.nan
-            uv[rows], xyz[rows], conf[rows], src[rows], cov[rows] = \
+            points[hidden] = np.nan
+            uv[hidden], xyz[hidden], conf[hidden], src[hidden], cov[hidden] = \
                 np.nan, np.nan, 0.0, cj.MISSING, 0.0
         if self.learn:
             self.learner.observe_skeleton(SKELETON_14, points)
-        if hidden:
+        if len(hidden):
             self._place_hidden_ankles(hidden, uv, xyz, conf, src, cov, points, intrinsics,
                                       self.lengths())
         # elbows and knees measured by a 14-part detector are kept: only the others are solved
         measured = (src != cj.MISSING) & valid
         unmeasured = [limb for limb, k in _MIDDLE_ROWS if not measured[k]]
-        result = self._solve(unmeasured, depth_m, points, intrinsics, mask)
+        result = self._solve(unmeasured, depth_m, points, intrinsics, mask) if unmeasured \
+            else NOTHING_SOLVED
         for k, name in enumerate(result.names):
             i = SKELETON_14.index(name)
             if result.flags[k] in (IkFlag.MISSING, IkFlag.BEHIND_CAMERA) or \
@@ -729,7 +721,8 @@ class IkStage:
             sigma = -self.config.confidence_scale_m * math.log(max(float(conf[i]), 1e-3))
             cov[i] = _EYE3 * sigma ** 2
         live = conf[src != cj.MISSING]
+        n_live = len(live)
         # np.mean's value (float32 sum over the count), without its Python wrapper
-        score = float(np.add.reduce(live) / len(live)) if len(live) else math.nan
+        score = float(np.add.reduce(live) / n_live) if n_live else math.nan
         return JointSet.of_arrays(SKELETON_14, uv, xyz, conf, src, cov, score=score,
                                   track_id=tracked.track_id)
