@@ -292,6 +292,20 @@ def test_a_person_hidden_behind_a_nearer_one_keeps_their_last_pose():
     assert torso(back)[0][0] == pytest.approx(0.8, abs=0.03)
 
 
+def test_a_pose_held_longer_than_max_held_s_is_kept_but_not_published():
+    """Hidden 25 frames: the far person's last pose is published for `max_held_s` (0.31 s
+    here: the first 10 held frames), then not, and they come back with their id."""
+    tr = tracker(max_held_s=0.31)
+    for k in range(10):
+        out = tr.step([person(0.0, z=2.2), person(-0.2 + 0.03 * k, z=3.4)], k * DT, INTR)
+    far = max(out, key=lambda t: torso(t)[0][2]).track_id
+    published = [any(t.track_id == far for t in tr.step([person(0.0, z=2.2)], k * DT, INTR))
+                 for k in range(10, 35)]
+    assert published == [True] * 10 + [False] * 15
+    out = tr.step([person(0.0, z=2.2), person(0.1, z=3.4)], 35 * DT, INTR)
+    assert far in [t.track_id for t in out]
+
+
 def test_an_unseen_track_beside_another_is_taken_back_only_by_a_persons_detection():
     """Two people; the right one unseen for 5 frames (not behind anyone). A detection there
     scoring under `birth_score` (a part of the room) is not theirs; one scoring above is."""
