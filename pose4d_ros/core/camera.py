@@ -201,18 +201,37 @@ def robust_depth(depth_m: NDArray[np.floating], uv: NDArray[np.floating], *,
     depth_m = np.asarray(depth_m)
     if depth_m.ndim != 2:
         raise ValueError(f'depth image must be 2-D, got shape {depth_m.shape}')
-    if mask is not None and np.shape(mask) != depth_m.shape:
-        raise ValueError(f'mask {np.shape(mask)} and depth {depth_m.shape} differ in shape')
+    mask = _NO_MASK if mask is None else np.asarray(mask, dtype=bool)
+    if mask is not _NO_MASK and mask.shape != depth_m.shape:
+        raise ValueError(f'mask {mask.shape} and depth {depth_m.shape} differ in shape')
     uv = np.asarray(uv, dtype=np.float64).reshape(-1, 2)
-    radii = np.broadcast_to(np.asarray(radius, dtype=np.int64), (len(uv),))
-    q = np.broadcast_to(np.asarray(quantile, dtype=np.float64), (len(uv),))
-    if (radii < 0).any():
+    radii = _per_pixel(radius, len(uv), np.int64, 'radius')
+    q = _per_pixel(quantile, len(uv), np.float64, 'quantile')
+    # ufuncs' reductions, without ndarray.any/all's Python wrappers (the per-frame path)
+    if np.logical_or.reduce(radii < 0):
         raise ValueError(f'radius must be >= 0, got {radii.min()}')
-    if not ((q >= 0) & (q <= 1)).all():
+    if not np.logical_and.reduce((q >= 0) & (q <= 1)):
         raise ValueError(f'quantile must be in [0, 1], got {np.asarray(quantile).tolist()}')
-    return _robust_depth(depth_m, np.zeros((0, 0), bool) if mask is None else
-                         np.asarray(mask, dtype=bool), uv, np.ascontiguousarray(radii),
-                         np.ascontiguousarray(q))
+    return _robust_depth(depth_m, mask, uv, radii, q)
+
+
+# `robust_depth` without a mask: the kernel's empty one (left writable: numba compiles a
+# read-only array as another type)
+_NO_MASK = np.zeros((0, 0), bool)
+
+
+def _per_pixel(value: float | NDArray, n: int, dtype: type, what: str) -> NDArray:
+    """`value` (one, or one per pixel) as a contiguous (n,) array of `dtype` (np.broadcast_to
+    and np.ascontiguousarray's result, in two or three calls instead of a dozen)."""
+    a = np.asarray(value, dtype=dtype)
+    if a.shape == (n,):
+        return np.ascontiguousarray(a)
+    if a.size != 1:
+        raise ValueError(f'{what} must be one value or one per pixel ({n}), got shape '
+                         f'{a.shape}')
+    out = np.empty(n, dtype)
+    out.fill(a.flat[0])
+    return out
 
 
 # Largest window of `lift_depth`, half-size in pixels (a 41 x 41 window)

@@ -277,8 +277,9 @@ class Level:
         py, px = self.pad
         s = self.sbin
         # unpadded cell i covers level pixels (i + 1) * sbin ... (i + 2) * sbin - 1
-        yl = (np.asarray(row, np.float64) - py + 1) * s + (fh * s - 1) / 2.0
-        xl = (np.asarray(col, np.float64) - px + 1) * s + (fw * s - 1) / 2.0
+        # integer cells are exact in either type: no conversion call needed
+        yl = (row - py + 1) * s + (fh * s - 1) / 2.0
+        xl = (col - px + 1) * s + (fw * s - 1) / 2.0
         u = (xl + 0.5) / self.scale - 0.5 + self.origin[0]
         v = (yl + 0.5) / self.scale - 0.5 + self.origin[1]
         return u, v

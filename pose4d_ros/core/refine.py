@@ -28,6 +28,7 @@ set of ensembles per group, the horizontal offsets of right parts mirrored).
 from __future__ import annotations
 
 import functools
+import math
 from collections.abc import Sequence
 from dataclasses import dataclass
 
@@ -37,6 +38,7 @@ from numpy.typing import NDArray
 
 from pose4d_ros.core.boost import BoostedTrees, fit, predict_kernel
 from pose4d_ros.core.camera import Intrinsics
+from pose4d_ros.core.stats import median
 
 # Window half-sizes on the body, metres, and the quantiles of their depths
 WINDOWS_M = (0.03, 0.06, 0.12)
@@ -70,7 +72,7 @@ def person_scale(z: NDArray[np.floating], fx: float) -> float:
     ignored); NaN when none is known."""
     z = np.asarray(z, np.float64)
     z = z[np.isfinite(z) & (z > 0)]
-    return fx * SCALE_M / float(np.median(z)) if len(z) else float('nan')
+    return fx * SCALE_M / median(z) if len(z) else float('nan')
 
 
 @nb.njit(cache=True)
@@ -176,16 +178,21 @@ def features(names: Sequence[str], parents: Sequence[int], uv: NDArray[np.floati
     if depth.shape != (intrinsics.height, intrinsics.width):
         raise ValueError(f'depth image {depth.shape[::-1]} is not the camera\'s '
                          f'{intrinsics.width}x{intrinsics.height}')
-    if mask is not None and np.shape(mask) != depth.shape:
-        raise ValueError(f'mask {np.shape(mask)} and depth {depth.shape} differ in shape')
-    par = np.asarray(parents, np.int64)
+    mask = _NO_MASK if mask is None else np.asarray(mask, np.bool_)
+    if mask is not _NO_MASK and mask.shape != depth.shape:
+        raise ValueError(f'mask {mask.shape} and depth {depth.shape} differ in shape')
+    up, root = _tree_rows(tuple(parents))
     k = intrinsics
-    return _features(depth, _NO_MASK if mask is None else np.asarray(mask, np.bool_),
-                     np.asarray(uv, np.float64), np.asarray(z, np.float64),
-                     np.asarray(confidence, np.float64),
-                     np.where(par >= 0, par, np.arange(len(par))), int(np.argmin(par)),
-                     _mirrored(tuple(names)), _WINDOWS, _QUANTILES, _PROBES, k.fx, k.fy, k.cx,
-                     k.cy)
+    return _features(depth, mask, np.asarray(uv, np.float64), np.asarray(z, np.float64),
+                     np.asarray(confidence, np.float64), up, root, _mirrored(tuple(names)),
+                     _WINDOWS, _QUANTILES, _PROBES, k.fx, k.fy, k.cx, k.cy)
+
+
+@functools.lru_cache(maxsize=16)
+def _tree_rows(parents: tuple[int, ...]) -> tuple[NDArray[np.int64], int]:
+    """Each part's parent row (the root's own) and the root's row."""
+    par = np.array(parents, np.int64)
+    return np.where(par >= 0, par, np.arange(len(par))), int(np.argmin(par))
 
 
 @functools.lru_cache(maxsize=16)
@@ -265,17 +272,41 @@ class PartRefiner:
             raise ValueError(f'features must be ({len(names)}, {N_FEATURES}), got {x.shape}')
         if not 0 <= stage < self.stages:
             raise ValueError(f'stage {stage} of a {self.stages}-stage part refiner')
-        first = _first_ensembles(self.groups, tuple(names))
-        first = np.where(known_parts(x) & (first >= 0),
-                         first + stage * len(self.groups) * len(OUTPUTS), -1)
         k = len(OUTPUTS)
+        # each part's ensembles at this stage, -1 where its group has none or where they
+        # predict 0 whatever their input (made once per set of names); -1 too for a part
+        # whose features are unknown
+        key = (tuple(names), stage)
+        made = self._ensembles.get(key)
+        if made is None:
+            made = self._ensembles[key] = self._ensembles_of(*key)
+        ensemble = made.copy()
+        ensemble[~known_parts(x).repeat(k)] = -1
+        # the arrays were checked when the refiner was made: straight to the kernel
+        out = predict_kernel(x.repeat(k, axis=0), ensemble, self._base64, self.feature,
+                             self.threshold, self.leaf).reshape(len(names), k)
+        # np.clip's values, without its Python wrapper
+        return np.minimum(np.maximum(out, -_LIMITS), _LIMITS)
+
+    @functools.cached_property
+    def _base64(self) -> NDArray[np.float64]:
+        return self.base.astype(np.float64)
+
+    @functools.cached_property
+    def _ensembles(self) -> dict[tuple[tuple[str, ...], int], NDArray[np.int64]]:
+        """`_ensembles_of` made so far, by (names, stage)."""
+        return {}
+
+    def _ensembles_of(self, names: tuple[str, ...], stage: int) -> NDArray[np.int64]:
+        """(P * len(OUTPUTS),) each part's ensemble per output at `stage` (`corrections`),
+        before the unknown parts are left out."""
+        first = _first_ensembles(self.groups, names)
+        k = len(OUTPUTS)
+        first = np.where(first >= 0, first + stage * len(self.groups) * k, -1)
         ensemble = np.where(first[:, None] >= 0, first[:, None] + np.arange(k), -1).ravel()
         ensemble[self._silent[ensemble] & (ensemble >= 0)] = -1
-        # the arrays were checked when the refiner was made: straight to the kernel
-        out = predict_kernel(np.ascontiguousarray(np.repeat(x, k, axis=0)), ensemble,
-                             self.base.astype(np.float64), self.feature, self.threshold,
-                             self.leaf).reshape(len(names), k)
-        return np.clip(out, -_LIMITS, _LIMITS)
+        ensemble.setflags(write=False)
+        return ensemble
 
     def apply(self, names: Sequence[str], parents: Sequence[int], uv: NDArray[np.floating],
               z: NDArray[np.floating], confidence: NDArray[np.floating],
@@ -287,14 +318,17 @@ class PartRefiner:
         `stages` stages of the cascade (None: all)."""
         uv, z = np.asarray(uv, np.float64), np.asarray(z, np.float64)
         edge = np.array([intrinsics.width - 1, intrinsics.height - 1], np.float64)
+        mirrored = _mirrored(tuple(names))
         for stage in range(self.stages if stages is None else stages):
             scale = person_scale(z, intrinsics.fx)
-            if not np.isfinite(scale):
+            if not math.isfinite(scale):
                 break
             x = features(names, parents, uv, z, confidence, depth_m, intrinsics, mask)
             c = self.corrections(names, x, stage)
-            du = np.where(_mirrored(tuple(names)), -c[:, 0], c[:, 0])
-            uv = np.clip(uv + scale * np.column_stack([du, c[:, 1]]), 0.0, edge)
+            shift = c[:, :2].copy()  # du mirrored back for right parts, dv
+            shift[mirrored, 0] = -shift[mirrored, 0]
+            # np.clip's values, without its Python wrapper
+            uv = np.minimum(np.maximum(uv + scale * shift, 0.0), edge)
             z = z + c[:, 2]
         return uv, z
 
