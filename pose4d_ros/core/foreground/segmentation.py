@@ -101,7 +101,8 @@ def segment(depth_m: NDArray[np.floating], intrinsics: Intrinsics, *,
 
 
 def _result(part: Part, depth: NDArray[np.float32], valid: NDArray[np.bool_],
-            floor: NDArray[np.float64] | None, config: ForegroundConfig) -> ForegroundResult:
+            floor: NDArray[np.float64] | None, config: ForegroundConfig,
+            behind: bool = False) -> ForegroundResult:
     """The foreground of one chosen part: its pixels completed (step 5), its median depth."""
     mask = _part_mask(part, depth.shape)
     complete(mask, ~valid, part.box, config)
@@ -109,7 +110,7 @@ def _result(part: Part, depth: NDArray[np.float32], valid: NDArray[np.bool_],
     zr = zr[np.isfinite(zr)]
     return ForegroundResult(mask=mask, box=part.box, depth_m=median(zr), found=True,
                             reason=REASON_OK, stability=part.variation, level=part.lo,
-                            floor=floor)
+                            floor=floor, behind=behind)
 
 
 def _part_mask(part: Part, shape: tuple[int, ...]) -> NDArray[np.bool_]:
@@ -174,12 +175,13 @@ def segment_people(depth_m: NDArray[np.floating], intrinsics: Intrinsics, *,
         # is missing beside a person found (gone behind them) or while the second look finds
         # someone
         picked += _behind(depth, intrinsics, config, above, drop, boxes, picked)
-    people = [replace(_result(pt, depth, valid, floor, config), behind=k >= first)
+    people = [_result(pt, depth, valid, floor, config, behind=k >= first)
               for k, (pt, _) in enumerate(picked[:max_people])]
-    # completion may add a pixel to two people: it stays with the better one
+    # completion may add a pixel to two people: it stays with the better one (the masks are
+    # these results' own, just made: changed in place)
     taken = np.zeros(depth.shape, bool)
-    for k, person in enumerate(people):
-        people[k] = replace(person, mask=person.mask & ~taken)
+    for person in people:
+        person.mask[taken] = False
         taken |= person.mask
     return people, len(picked)
 
