@@ -25,6 +25,7 @@ Parameters (config/tracker.yaml)
 
 from __future__ import annotations
 
+import math
 import time
 from typing import Any
 
@@ -68,9 +69,9 @@ PARAMS = (
     Param('tracker.max_unseen_s', TrackingConfig.max_unseen_s, 'A person unseen this long '
           'ends their track (till then it is predicted), seconds.', range=(0.01, 60.0),
           live=True),
-    Param('tracker.max_held_s', TrackingConfig.max_held_s, 'A person hidden behind another '
-          'is published at their last pose this long at most, seconds (then kept unpublished '
-          'till seen again or ended).', range=(0.001, 60.0), live=True),
+    Param('tracker.max_held_s', 0.0, 'A person hidden behind another is published at their '
+          'last pose this long at most, seconds (then kept unpublished till seen again or '
+          'ended); 0: till then.', range=(0.0, 60.0), live=True),
     Param('tracker.depth_std_m', TrackerStage.DEPTH_STD_M,
           "Standard deviation of a tracked part's depth in its "
           'covariance, metres.', range=(0.0, 10.0), live=True),
@@ -103,7 +104,7 @@ def people_config(p: dict[str, Any]) -> TrackingConfig:
                           quiet_frames=p.get('detector.quiet_frames', TrackingConfig.quiet_frames),
                           confirm_frames=p['tracker.confirm_frames'],
                           max_unseen_s=p['tracker.max_unseen_s'],
-                          max_held_s=p['tracker.max_held_s'])
+                          max_held_s=p['tracker.max_held_s'] or math.inf)
 
 
 class TrackerNode(Node):
