@@ -143,21 +143,30 @@ _MAX_PIXEL = 1e5
 _all = np.logical_and.reduce
 
 
-@functools.lru_cache(maxsize=16)
 def _pixel_bounds(intrinsics: Intrinsics | None) -> tuple[NDArray, NDArray, str]:
     """(lo, hi) of the pixels accepted as on or near the image (read-only), and the rule in
     words."""
     if intrinsics is None:
-        lo, hi = np.array([-_MAX_PIXEL] * 2), np.array([_MAX_PIXEL] * 2)
-        where = f'within +-{_MAX_PIXEL:g} px'
-    else:
-        size = np.array([intrinsics.width, intrinsics.height], np.float64)
-        lo, hi = -size, 2 * size
-        where = (f'on or near the {intrinsics.width}x{intrinsics.height} image '
-                 f'({-size[0]:g}..{2 * size[0]:g}, {-size[1]:g}..{2 * size[1]:g})')
+        return _ANYWHERE
+    # cached by the image size: two ints hash in C (the dataclass's __hash__ and __eq__ are
+    # Python-level calls, every frame)
+    return _near_image_of_size(intrinsics.width, intrinsics.height)
+
+
+@functools.lru_cache(maxsize=16)
+def _near_image_of_size(width: int, height: int) -> tuple[NDArray, NDArray, str]:
+    size = np.array([width, height], np.float64)
+    lo, hi = -size, 2 * size
     lo.setflags(write=False)
     hi.setflags(write=False)
-    return lo, hi, where
+    return lo, hi, (f'on or near the {width}x{height} image '
+                    f'({-size[0]:g}..{2 * size[0]:g}, {-size[1]:g}..{2 * size[1]:g})')
+
+
+_ANYWHERE = (np.array([-_MAX_PIXEL] * 2), np.array([_MAX_PIXEL] * 2),
+             f'within +-{_MAX_PIXEL:g} px')
+for _a in _ANYWHERE[:2]:
+    _a.setflags(write=False)
 
 
 def near_image(uv: NDArray[np.floating], intrinsics: Intrinsics | None) -> NDArray[np.bool_]:

@@ -437,7 +437,8 @@ class PeopleTracker:
             if hidden is not None:
                 # the joints on a nearer person's body: their last estimates kept
                 det = _without(det, hidden)
-            out = track.stage.step(det, stamp_s, intrinsics)
+            # checked above (`_without` and `JointSet.missing` only make joints MISSING)
+            out = track.stage.step(det, stamp_s, intrinsics, checked=True)
             if hidden is not None:
                 out = _kept(out, track.last, hidden)
             track.names = out.names

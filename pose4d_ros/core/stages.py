@@ -404,7 +404,8 @@ class TrackerStage:
         check_known(parts, tree.names, intrinsics)
         return tree
 
-    def step(self, parts: JointSet, stamp_s: float, intrinsics: Intrinsics | None) -> JointSet:
+    def step(self, parts: JointSet, stamp_s: float, intrinsics: Intrinsics | None, *,
+             checked: bool = False) -> JointSet:
         """Track one frame of detected parts; returns the tracked parts in the tree's order.
 
         Parts the detector missed are predicted (TRACKED); parts lost for too long are MISSING.
@@ -412,9 +413,12 @@ class TrackerStage:
         of its detection in this frame when the filter accepts it, else that of its last
         accepted detection (a rejected detection lies elsewhere in the image).
         ValueError (and the track untouched) for parts no camera could have seen
-        (`joints.check_joints`) or none of which the tree has.
+        (`joints.check_joints`) or none of which the tree has. `checked`: the caller has
+        passed `parts` through `check` already (the several-person tracker checks a frame's
+        detections before any track changes).
         """
-        tree = self.check(parts, intrinsics)
+        tree = (self.fixed_tree or _tree_for(parts.names)) if checked \
+            else self.check(parts, intrinsics)
         if tree is not self.tree:
             self._use(tree)
         parts = reorder(parts, self.tree.names)
@@ -440,7 +444,8 @@ class TrackerStage:
         # an accepted detection lies on the image, and so does its filtered estimate (the
         # prediction may overshoot an edge the part moves towards); np.clip's values
         if intrinsics is not None:
-            held = np.minimum(np.maximum(positions, 0.0), _image_max(intrinsics))
+            held = np.minimum(np.maximum(positions, 0.0),
+                              _image_max(intrinsics.width, intrinsics.height))
             accepted = source == cj.DETECTED
             positions[accepted] = held[accepted]  # `output`'s own array
         # a part predicted off the image (coasting away) is lost: no stage takes such pixels
@@ -530,9 +535,10 @@ def _tree_for(names: tuple[str, ...]) -> PartTree:
 
 
 @functools.lru_cache(maxsize=16)
-def _image_max(intrinsics: Intrinsics) -> NDArray[np.float64]:
-    """The largest pixel (u, v) of the image (read-only)."""
-    hi = np.array([intrinsics.width - 1, intrinsics.height - 1], np.float64)
+def _image_max(width: int, height: int) -> NDArray[np.float64]:
+    """The largest pixel (u, v) of an image of that size (read-only; cached by two ints,
+    whose hash is C's, not by the intrinsics, whose dataclass hash is a Python call)."""
+    hi = np.array([width - 1, height - 1], np.float64)
     hi.setflags(write=False)
     return hi
 

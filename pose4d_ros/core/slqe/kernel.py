@@ -177,10 +177,10 @@ def slqe_step(x0, cov0, active0, missed0, rejected0, last_rejected0, confidence0
     and confidences `conf` (P,), and output. `params` from `config_params`, `parents` the
     tree's, `limb` (P,) bool the parts of `limb_parts`.
 
-    Returns the new state's arrays (x, cov, active, missed, rejected, last_rejected,
-    confidence, shadow_x, shadow_cov, shadow_left, its dt) and the output's (positions,
-    covariances, velocities, source, confidence). LinAlgError for a singular innovation
-    covariance.
+    Returns the new state's arrays (x, cov, active, counters: (3, P) missed, rejected and
+    shadow_left, last_rejected, confidence, shadow_x, shadow_cov, its dt) and the output's
+    (motion: (2, P, 2) positions and velocities, covariances, source, confidence).
+    LinAlgError for a singular innovation covariance.
     """
     n_parts = len(active0)
     order = int(params[_ORDER])
@@ -212,11 +212,14 @@ def slqe_step(x0, cov0, active0, missed0, rejected0, last_rejected0, confidence0
         state_dt = dt
     # --- update (update.update_arrays): the gate and the hypotheses
     active = active0.copy()
-    missed = missed0.copy()
-    rejected = rejected0.copy()
+    # the counters in one array (each returned array is a Python-level call to box it)
+    counters = np.empty((3, n_parts), np.int64)
+    missed, rejected, shadow_left = counters[0], counters[1], counters[2]
+    missed[:] = missed0
+    rejected[:] = rejected0
+    shadow_left[:] = np.maximum(shadow_left0 - 1, 0)
     last_rejected = last_rejected0.copy()
     confidence = confidence0.copy()
-    shadow_left = np.maximum(shadow_left0 - 1, 0)
     valid = np.empty(n_parts, np.bool_)
     r_var = np.empty(n_parts)
     noise = px_gain * params[_MEASUREMENT_NOISE]
@@ -323,8 +326,8 @@ def slqe_step(x0, cov0, active0, missed0, rejected0, last_rejected0, confidence0
             confidence[i] = 0.0
             shadow_left[i] = 0
     # --- output (update.output)
-    positions = np.empty((n_parts, 2))
-    velocities = np.empty((n_parts, 2))
+    motion = np.empty((2, n_parts, 2))  # positions and velocities, one array
+    positions, velocities = motion[0], motion[1]
     covariances = np.empty((n_parts, 2, 2))
     conf_out = np.empty(n_parts, np.float32)
     for i in range(n_parts):
@@ -346,8 +349,8 @@ def slqe_step(x0, cov0, active0, missed0, rejected0, last_rejected0, confidence0
             covariances[i, 0, 0] = r
             covariances[i, 1, 1] = r
         conf_out[i] = min(max(confidence[i], 0.0), 1.0)
-    return (x, cov, active, missed, rejected, last_rejected, confidence, shadow_x, shadow_cov,
-            shadow_left, state_dt, positions, covariances, velocities, source, conf_out)
+    return (x, cov, active, counters, last_rejected, confidence, shadow_x, shadow_cov,
+            state_dt, motion, covariances, source, conf_out)
 
 
 @nb.njit(cache=True)

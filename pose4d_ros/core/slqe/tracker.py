@@ -75,16 +75,16 @@ class SlqeTracker:
             self._limb = _limb_mask(self.tree, self.config.limb_parts)
         # predict, update and output in one compiled call (`kernel`: the Python functions'
         # work, in their order)
-        (x, cov, active, missed, rejected, last_rejected, conf, shadow_x, shadow_cov,
-         shadow_left, state_dt, positions, covariances, velocities, source, conf_out) = \
+        (x, cov, active, counters, last_rejected, conf, shadow_x, shadow_cov, state_dt,
+         motion, covariances, source, conf_out) = \
             slqe_step(s.x, s.cov, s.active, s.missed, s.rejected, s.last_rejected, s.confidence,
                       s.shadow_x, s.shadow_cov, s.shadow_left, s.dt, dt, z, c, px_gain,
                       self._params, self._parents, self._limb)
-        self.state = evolve(s, x=x, cov=cov, active=active, missed=missed, rejected=rejected,
-                            last_rejected=last_rejected, confidence=conf, shadow_x=shadow_x,
-                            shadow_cov=shadow_cov, shadow_left=shadow_left, stamp=stamp_s,
-                            dt=state_dt)
-        return TrackOutput(positions=positions, covariances=covariances, velocities=velocities,
+        self.state = evolve(s, x=x, cov=cov, active=active, missed=counters[0],
+                            rejected=counters[1], last_rejected=last_rejected, confidence=conf,
+                            shadow_x=shadow_x, shadow_cov=shadow_cov, shadow_left=counters[2],
+                            stamp=stamp_s, dt=state_dt)
+        return TrackOutput(positions=motion[0], covariances=covariances, velocities=motion[1],
                            source=source, confidence=conf_out, stamp=stamp_s)
 
 
