@@ -305,8 +305,9 @@ class DetectorStage:
         `last_flags` tells why a result is doubtful ('no_person', 'low_score', 'no_depth').
         ValueError when `intrinsics` are for another image size.
         """
+        color = np.asarray(color)
         if intrinsics is not None:
-            intrinsics.check_size(np.shape(color))
+            intrinsics.check_size(color.shape)
         scaled = depth_m is not None and self.model.channels == 'rgbd'
         factors = self.person_scale.factors(stamp_s) if scaled else (1.0,)
         prior = self._prior(stamp_s)
@@ -321,7 +322,8 @@ class DetectorStage:
             chosen = self.person_scale.update(
                 {f: poses[0].score if poses else math.nan for f, poses in found.items()})
             pose = found[chosen][0]
-            poses = [v[0] for v in found.values() if v and np.isfinite(v[0].uv).all()]
+            poses = [v[0] for v in found.values()
+                     if v and np.logical_and.reduce(np.isfinite(v[0].uv), axis=None)]
             if len(poses) >= 3:
                 # the person's scale still undecided (a track's first frames): each part where
                 # the poses found at the factors agree most, not where the leading one put it
@@ -333,8 +335,10 @@ class DetectorStage:
         src = np.where(conf >= self.min_confidence, cj.DETECTED, cj.MISSING).astype(np.uint8)
         # a part the model places beyond the image's edge (its filter hanging over the border)
         # is put on the edge: a detection is a pixel of the image
-        h, w = np.shape(color)[:2]
-        uv = np.where(src[:, None] == cj.DETECTED, np.clip(pose.uv, 0.0, [w - 1, h - 1]), np.nan)
+        h, w = color.shape[:2]
+        # np.clip's values, without its Python wrapper
+        on_image = np.minimum(np.maximum(pose.uv, 0.0), _image_max(w, h))
+        uv = np.where(src[:, None] == cj.DETECTED, on_image, np.nan)
         self._previous = None if stamp_s is None else (uv, float(stamp_s))
         xyz = np.full((len(self.names), 3), np.nan)
         if depth_m is not None and intrinsics is not None:

@@ -26,6 +26,7 @@ BLAS thread and numba threads never made the per-frame detector faster on the sh
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -128,7 +129,8 @@ class Pose:
 
 
 def _sigmoid(x: NDArray) -> NDArray:
-    return 1.0 / (1.0 + np.exp(-np.clip(x, -50, 50)))
+    # np.clip's values, without its Python wrapper
+    return 1.0 / (1.0 + np.exp(-np.minimum(np.maximum(x, -50), 50)))
 
 
 def _box_iou(a: NDArray, b: NDArray) -> float:
@@ -201,10 +203,11 @@ class Detector:
         if mask is not None:
             if mask.shape != (h, w):
                 raise ValueError(f'mask shape {mask.shape} does not match the image {(h, w)}')
-            rows = np.flatnonzero(mask.any(axis=1))
+            # np.flatnonzero(mask.any(axis=...)), without their Python wrappers
+            rows = np.logical_or.reduce(mask, axis=1).nonzero()[0]
             if rows.size == 0:
                 return None
-            cols = np.flatnonzero(mask.any(axis=0))
+            cols = np.logical_or.reduce(mask, axis=0).nonzero()[0]
             bx = (float(cols[0]), float(rows[0]), float(cols[-1] + 1), float(rows[-1] + 1))
         elif box is not None:
             bx = tuple(float(v) for v in box)
@@ -237,8 +240,8 @@ class Detector:
             # model was trained on is searched at the nearest trained scale, never on a pyramid
             # blown up by a depth or focal length no camera gives.
             lo, hi = m.scale_range_px
-            s_pred = float(np.clip(k.fx * m.scale_length_m / z * scale, lo / _SCALE_SLACK,
-                                   hi * _SCALE_SLACK))
+            s_pred = min(max(k.fx * m.scale_length_m / z * scale, lo / _SCALE_SLACK),
+                         hi * _SCALE_SLACK)
             f0 = m.canonical_scale_px / s_pred
             n = cfg.n_levels
             scales = tuple(f0 * cfg.level_step ** (i - (n - 1) / 2) for i in range(n))
@@ -379,19 +382,20 @@ class Detector:
         wrist to `prior`, in person scales."""
         _, parents, springs, anchors, bias = self._arrays
         person_px = self.model.canonical_scale_px / res.level.scale
+        shape = self.model.filter_shape
         for mid, end in self._limbs:
             cand, loc = limb_candidates(res.resp, res.score, res.ix, res.iy, res.ik, parents,
                                         springs, anchors, bias, parts, mid, end,
                                         LIMB_CANDIDATES)
-            cost = -loc.sum(axis=1)
+            cost = -np.add.reduce(loc, axis=1)  # loc.sum's, without its Python wrapper
             for slot, part in ((0, mid), (1, end)):
-                if part < 0 or not np.isfinite(prior[part]).all():
+                if part < 0 or not (math.isfinite(prior[part, 0])
+                                    and math.isfinite(prior[part, 1])):
                     continue
-                u, v = res.level.cell_to_pixel(cand[:, slot, 1], cand[:, slot, 2],
-                                               self.model.filter_shape)
+                u, v = res.level.cell_to_pixel(cand[:, slot, 1], cand[:, slot, 2], shape)
                 cost += self.config.arm_prior * ((u - prior[part, 0]) ** 2 +
                                                  (v - prior[part, 1]) ** 2) / person_px ** 2
-            best = int(np.argmin(cost))  # the DP's own arm is first: it wins ties
+            best = int(cost.argmin())  # the DP's own arm is first: it wins ties
             if best:
                 parts[mid] = cand[best, 0]
                 local[mid] = loc[best, 0]
