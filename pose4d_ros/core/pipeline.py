@@ -159,8 +159,11 @@ class FramePipeline:
 
     def warm_up(self, intrinsics: Intrinsics) -> None:
         """Compile the kernels on a synthetic frame, twice (the second frame guided by the
-        first, `SearchConfig.arm_prior`), then forget it (`warm_up_frame`)."""
+        first, `SearchConfig.arm_prior`), then forget it (`warm_up_frame`). The IK's solver
+        too: the 14-part model measures the synthetic person's elbows and knees, and the
+        first frame where it misses one would otherwise compile it."""
         self.foreground.warm_up(intrinsics)
+        self.ik.warm_up(intrinsics)
         color, depth, _ = warm_up_frame(intrinsics)
         for stamp_s in (0.0, 1.0 / 30.0):
             self.step(color, depth, intrinsics, stamp_s)

@@ -624,8 +624,9 @@ class IkStage:
         self.track_id = None
 
     def warm_up(self, intrinsics: Intrinsics) -> None:
-        """Run once on the person of `warm_up_frame` so the kernels are compiled; what it
-        learned is forgotten."""
+        """Run on the person of `warm_up_frame` so the kernels are compiled, with its depth
+        and with none (the joint-limit prior's path, which a frame whose depth cannot place an
+        elbow takes); what it learned is forgotten."""
         _, depth, mask = warm_up_frame(intrinsics)
         # shoulders, wrists, hips and ankles of the synthetic person 2.8 m away (camera frame)
         xyz = np.array([[x, y, 2.8] for x, y in ((0.2, -0.35), (0.25, 0.15), (0.1, 0.3),
@@ -637,9 +638,10 @@ class IkStage:
                 points.append(p * [sign, 1.0, 1.0])
         points = np.array(points)
         source = np.full(len(names), cj.DETECTED, np.uint8)
-        self.step(JointSet(tuple(names), project(points, intrinsics), points, source=source,
-                           confidence=np.ones(len(names), np.float32)),
-                  depth, intrinsics, mask=mask)
+        joints = JointSet(tuple(names), project(points, intrinsics), points, source=source,
+                          confidence=np.ones(len(names), np.float32))
+        self.step(joints, depth, intrinsics, mask=mask)
+        self.step(joints, None, intrinsics)
         self.reset()
 
     @staticmethod
