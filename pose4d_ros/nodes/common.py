@@ -276,13 +276,13 @@ def subscribe(node: Node, msg_type: type, topic: str, callback: Callable[[object
     return node.create_subscription(msg_type, topic, on_bytes, profile, raw=True)
 
 
-# Frames the stages that take images (foreground, detector, and the pipeline node) may hold:
-# a new track's first frames search every person scale (`ScaleConfig.warm_up_frames`, 3x the
-# work), and the machine stalls now and then (the ros2 command line's queries), bursts that a
-# queue of one turned into lost frames under load (`make test`, `pose4d demo --load busy`,
-# `pose4d bench --graph --load query`: the foreground's drops); two absorb them, and latency
-# stays bounded (at most two frames waiting)
-IMAGE_QUEUE = 2
+# Frames a stage may hold waiting (`FrameQueue`, `PairedInputs`): a new track's first frames
+# search every person scale (`ScaleConfig.warm_up_frames`, 3x the work), and the machine
+# stalls now and then (the ros2 command line's queries), bursts that a queue of one turned into
+# lost frames under load (`make test`, `pose4d demo --load busy`, `pose4d bench --graph --load
+# query`: the foreground's drops, then, with two there, the IK's and tracker's); two absorb
+# them, and latency stays bounded (at most two frames waiting)
+STAGE_QUEUE = 2
 
 
 class FrameQueue:
@@ -301,7 +301,7 @@ class FrameQueue:
     """
 
     def __init__(self, node: Node, process: Callable[[object], None],
-                 monitor: StageMonitor, size: int = 1) -> None:
+                 monitor: StageMonitor, size: int = STAGE_QUEUE) -> None:
         self._process = process
         self._monitor = monitor
         self._waiting: deque[object] = deque()
@@ -360,7 +360,7 @@ class PairedInputs:
 
     def __init__(self, node: Node, topics: list[tuple[type, str, object]],
                  process: Callable[[tuple], None], monitor: StageMonitor, *,
-                 slop_ns: int = 0, queue_size: int = 1) -> None:
+                 slop_ns: int = 0, queue_size: int = STAGE_QUEUE) -> None:
         self._sync = StampSync(len(topics), slop_ns=slop_ns)
         self._monitor = monitor
         self._queue = FrameQueue(node, process, monitor, size=queue_size)

@@ -4,7 +4,7 @@ Finds the person's parts with the trained mixture-of-parts model, searching only
 foreground's box at the scale its depth gives (times the person's own scale factor, chosen per
 track: `core.dpm.scale`), and lifts each part to 3-D with a robust depth look-up. Inputs are
 paired by stamp and processed in order; a detector slower than the camera works on the newest
-frames (at most two waiting, `common.IMAGE_QUEUE`) and drops the others (counted) instead
+frames (at most two waiting, `common.STAGE_QUEUE`) and drops the others (counted) instead
 of falling behind.
 
 Subscriptions
@@ -50,7 +50,6 @@ from pose4d_ros.core.warm_up import warm_up_frame
 from pose4d_ros.models import model_path
 from pose4d_ros.nodes import qos
 from pose4d_ros.nodes.common import (
-    IMAGE_QUEUE,
     LatestIntrinsics,
     PairedInputs,
     StageMonitor,
@@ -170,8 +169,7 @@ class DetectorNode(Node):
         self.pub = self.create_publisher(JointArray, 'pose4d/parts', qos.OUTPUT_QOS)
         self.inputs = PairedInputs(
             self, [(Image, f'pose4d/foreground/{name}', qos.SENSOR_QOS)
-                   for name in ('color', 'depth', 'mask')], self.process, self.monitor,
-            queue_size=IMAGE_QUEUE)
+                   for name in ('color', 'depth', 'mask')], self.process, self.monitor)
         self.get_logger().info(
             f'detecting {len(self.template.names)} parts with '
             f'{Path(str(p["detector.model"])).name} ({self.template.model.channels}) in '

@@ -2,7 +2,7 @@
 
 Colour, depth and camera_info are paired by stamp (exact, or nearest within
 `foreground.slop_s`), never "the latest depth", and processed in order; two frames at most
-wait to be processed (`common.IMAGE_QUEUE`), so a stage slower than the camera works on the
+wait to be processed (`common.STAGE_QUEUE`), so a stage slower than the camera works on the
 newest frames and drops the older ones (counted on /diagnostics).
 
 Subscriptions
@@ -43,7 +43,7 @@ from pose4d_ros.core.foreground import ForegroundConfig
 from pose4d_ros.core.people import people_labels
 from pose4d_ros.core.stages import ForegroundStage
 from pose4d_ros.nodes import qos
-from pose4d_ros.nodes.common import IMAGE_QUEUE, PairedInputs, StageMonitor, run
+from pose4d_ros.nodes.common import PairedInputs, StageMonitor, run
 from pose4d_ros.nodes.convert import (
     cloud_to_msg,
     color_from_msg,
@@ -138,8 +138,7 @@ class ForegroundNode(Node):
         self.pub_cloud = (self.create_publisher(PointCloud2, 'pose4d/foreground/points',
                                                 qos.OUTPUT_QOS) if self.publish_cloud else None)
         self.inputs = PairedInputs(self, CAMERA_TOPICS, self.process, self.monitor,
-                                   slop_ns=int(p['foreground.slop_s'] * 1e9),
-                                   queue_size=IMAGE_QUEUE)
+                                   slop_ns=int(p['foreground.slop_s'] * 1e9))
         self.get_logger().info(
             f'masking {self.resolve_topic_name("camera/color/image_raw")} + '
             f'{self.resolve_topic_name("camera/depth/image_raw")} -> '

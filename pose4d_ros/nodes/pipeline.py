@@ -4,7 +4,7 @@ The same stages as the `foreground`, `detector`, `tracker` and `ik` nodes (the s
 objects, the same parameters), called one after the other in one callback per frame, without
 the serialisation and transport of images between processes. Colour, depth and camera_info are
 paired by stamp and processed in order; a pipeline slower than the camera works on the
-newest frames (at most two waiting, `common.IMAGE_QUEUE`) and drops the others (counted).
+newest frames (at most two waiting, `common.STAGE_QUEUE`) and drops the others (counted).
 
 Subscriptions
     camera/color/image_raw, camera/depth/image_raw (sensor_msgs/Image),
@@ -36,7 +36,7 @@ from pose4d_ros.core.camera import cad60_intrinsics
 from pose4d_ros.core.people import people_labels
 from pose4d_ros.core.pipeline import FramePipeline
 from pose4d_ros.nodes import detector, foreground, ik, qos, tracker
-from pose4d_ros.nodes.common import IMAGE_QUEUE, PairedInputs, StageMonitor, run
+from pose4d_ros.nodes.common import PairedInputs, StageMonitor, run
 from pose4d_ros.nodes.convert import (
     color_from_msg,
     depth_from_msg,
@@ -86,8 +86,7 @@ class PipelineNode(Node):
             for name in ('mask', 'color', 'depth'):
                 self.pubs[name] = pub(Image, f'pose4d/foreground/{name}', qos.OUTPUT_QOS)
         self.inputs = PairedInputs(self, foreground.CAMERA_TOPICS, self.process, self.monitor,
-                                   slop_ns=int(p['foreground.slop_s'] * 1e9),
-                                   queue_size=IMAGE_QUEUE)
+                                   slop_ns=int(p['foreground.slop_s'] * 1e9))
         self.get_logger().info(
             f'pipeline on {self.resolve_topic_name("camera/color/image_raw")} -> '
             f'{self.resolve_topic_name("pose4d/skeleton")} (model {p["detector.model"]}, '
