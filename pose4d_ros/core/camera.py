@@ -201,8 +201,8 @@ def robust_depth(depth_m: NDArray[np.floating], uv: NDArray[np.floating], *,
     depth_m = np.asarray(depth_m)
     if depth_m.ndim != 2:
         raise ValueError(f'depth image must be 2-D, got shape {depth_m.shape}')
-    mask = _NO_MASK if mask is None else np.asarray(mask, dtype=bool)
-    if mask is not _NO_MASK and mask.shape != depth_m.shape:
+    mask = NO_MASK if mask is None else np.asarray(mask, dtype=bool)
+    if mask is not NO_MASK and mask.shape != depth_m.shape:
         raise ValueError(f'mask {mask.shape} and depth {depth_m.shape} differ in shape')
     uv = np.asarray(uv, dtype=np.float64).reshape(-1, 2)
     radii = _per_pixel(radius, len(uv), np.int64, 'radius')
@@ -215,9 +215,10 @@ def robust_depth(depth_m: NDArray[np.floating], uv: NDArray[np.floating], *,
     return _robust_depth(depth_m, mask, uv, radii, q)
 
 
-# `robust_depth` without a mask: the kernel's empty one (left writable: numba compiles a
-# read-only array as another type)
-_NO_MASK = np.zeros((0, 0), bool)
+# No person mask, as the kernels that take one (`robust_depth`'s, the refiner's, the IK's
+# depth search) read it: empty (left writable: numba compiles a read-only array as another
+# type)
+NO_MASK = np.zeros((0, 0), bool)
 
 
 def _per_pixel(value: float | NDArray, n: int, dtype: type, what: str) -> NDArray:

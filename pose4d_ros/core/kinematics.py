@@ -40,7 +40,7 @@ import numpy as np
 from numba import njit
 from numpy.typing import NDArray
 
-from pose4d_ros.core.camera import Intrinsics, project, robust_depth_at
+from pose4d_ros.core.camera import NO_MASK, Intrinsics, project, robust_depth_at
 from pose4d_ros.core.limb_lengths import DEFAULT_LIMB_LENGTHS_M, LimbLengths  # noqa: F401 (nodes.ik)
 from pose4d_ros.core.skeleton import LIMBS, PARTS_10
 
@@ -429,7 +429,7 @@ def _depth_search(depth_m: NDArray, r0: NDArray[np.float64], e0: NDArray[np.floa
     """The depth-supported middle joint and its confidence, or None if depth does not decide."""
     c = config
     found, p, confidence = _depth_search_kernel(
-        np.asarray(depth_m), np.zeros((0, 0), bool) if mask is None else np.asarray(mask, bool),
+        np.asarray(depth_m), NO_MASK if mask is None else np.asarray(mask, bool),
         r0, e0, float(upper), float(lower),
         np.array([intrinsics.fx, intrinsics.fy, intrinsics.cx, intrinsics.cy]), ref,
         np.asarray(c.length_scales, np.float64), c.n_candidates, c.refine_steps, c.bone_samples,

@@ -37,7 +37,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from pose4d_ros.core.boost import BoostedTrees, fit, predict_kernel
-from pose4d_ros.core.camera import Intrinsics
+from pose4d_ros.core.camera import NO_MASK, Intrinsics
 from pose4d_ros.core.stats import median
 
 # Window half-sizes on the body, metres, and the quantiles of their depths
@@ -57,7 +57,6 @@ N_FEATURES = len(WINDOWS_M) * len(QUANTILES) + 8 + len(_PROBES)
 # The feature that is the part's lifted depth: known exactly when the part has one
 _LIFTED = len(WINDOWS_M) * len(QUANTILES)
 _WINDOWS, _QUANTILES = np.array(WINDOWS_M), np.array(QUANTILES)
-_NO_MASK = np.zeros((0, 0), np.bool_)
 # What each part's ensembles predict: its true pixel less the detected one, in person scales
 # (du mirrored for right parts), and its true depth less the lifted one, metres
 OUTPUTS = ('du', 'dv', 'dz')
@@ -178,8 +177,8 @@ def features(names: Sequence[str], parents: Sequence[int], uv: NDArray[np.floati
     if depth.shape != (intrinsics.height, intrinsics.width):
         raise ValueError(f'depth image {depth.shape[::-1]} is not the camera\'s '
                          f'{intrinsics.width}x{intrinsics.height}')
-    mask = _NO_MASK if mask is None else np.asarray(mask, np.bool_)
-    if mask is not _NO_MASK and mask.shape != depth.shape:
+    mask = NO_MASK if mask is None else np.asarray(mask, np.bool_)
+    if mask is not NO_MASK and mask.shape != depth.shape:
         raise ValueError(f'mask {mask.shape} and depth {depth.shape} differ in shape')
     up, root = _tree_rows(tuple(parents))
     k = intrinsics
