@@ -667,11 +667,12 @@ class IkStage:
 
     def _solve(self, limbs: list[str], depth_m: NDArray[np.floating] | None,
                points: NDArray[np.float64], intrinsics: Intrinsics | None,
-               mask: NDArray[np.bool_] | None) -> IkResult:
+               mask: NDArray[np.bool_] | None,
+               lengths: Mapping[str, tuple[float, float]]) -> IkResult:
         """The middle joints of `limbs` by the chosen solver."""
         extra = {'limits': self.limits} if self.method == 'dh' else {}
         solver = infer_middle_joints_dh if self.method == 'dh' else infer_middle_joints
-        return solver(depth_m if self.use_depth else None, points, intrinsics, self.lengths(),
+        return solver(depth_m if self.use_depth else None, points, intrinsics, lengths,
                       names=SKELETON_14, mask=mask if self.use_depth else None,
                       config=self.config, limbs=limbs, **extra)
 
@@ -710,14 +711,17 @@ class IkStage:
                 np.nan, np.nan, 0.0, cj.MISSING, 0.0
         if self.learn:
             self.learner.observe_skeleton(SKELETON_14, points)
-        if len(hidden):
-            self._place_hidden_ankles(hidden, uv, xyz, conf, src, cov, points, intrinsics,
-                                      self.lengths())
         # elbows and knees measured by a 14-part detector are kept: only the others are solved
+        # (placing a hidden ankle changes no elbow or knee)
         measured = (src != cj.MISSING) & valid
         unmeasured = [limb for limb, k in _MIDDLE_ROWS if not measured[k]]
-        result = self._solve(unmeasured, depth_m, points, intrinsics, mask) if unmeasured \
-            else NOTHING_SOLVED
+        # the learned lengths read once, and only for a frame that uses them
+        lengths = self.lengths() if len(hidden) or unmeasured else None
+        if len(hidden):
+            self._place_hidden_ankles(hidden, uv, xyz, conf, src, cov, points, intrinsics,
+                                      lengths)
+        result = self._solve(unmeasured, depth_m, points, intrinsics, mask, lengths) \
+            if unmeasured else NOTHING_SOLVED
         for k, name in enumerate(result.names):
             i = SKELETON_14.index(name)
             if result.flags[k] in (IkFlag.MISSING, IkFlag.BEHIND_CAMERA) or \
