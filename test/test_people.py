@@ -42,6 +42,18 @@ def test_assign_is_one_to_one_and_gated():
     assert assign(np.zeros((0, 3)), 1.0) == []
 
 
+def test_a_pair_beyond_the_gate_takes_no_pair_within_it_away():
+    # three tracks, three detections (a frame of a three-person validation video): the
+    # second track unseen (its person hidden), the third detection a wall's edge. Summed
+    # with the pairs beyond the gate, the least total would give the third track's own
+    # detection (cost 0) to the second track (95.9) and the wall (50.8) to the third: both
+    # beyond the gate, so the third track lost its person to a new track
+    cost = np.array([[0.0, 132.9, 309.5], [83.2, 95.9, 175.8], [135.1, 0.0, 50.8]])
+    assert sorted(assign(cost, 16.0)) == [(0, 0), (2, 1)]
+    # as many pairs within the gate as can be, then the least total among them
+    assert sorted(assign(np.array([[1.0, 2.0], [3.0, 40.0]]), 16.0)) == [(0, 1), (1, 0)]
+
+
 def test_two_people_crossing_keep_their_ids():
     """Two people walk past each other at different depths (1 m apart in depth): the ids
     follow the people, not their order in the image."""

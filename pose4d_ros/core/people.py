@@ -182,16 +182,23 @@ def torso_px(joints: JointSet) -> tuple[NDArray[np.float64], float]:
 
 
 def assign(cost: NDArray[np.float64], gate: float) -> list[tuple[int, int]]:
-    """The pairs (row, column) of the least-cost one-to-one assignment whose cost is at most
-    `gate` (NaN = never). A single row and a single column are always paired when finite."""
+    """The pairs (row, column) of the least-cost one-to-one assignment among the pairs whose
+    cost is at most `gate` (NaN = never): as many such pairs as can be, the least total cost
+    among those. A pair beyond the gate never takes part: left in the sum, it could buy a
+    smaller total by taking a row's or a column's pair within the gate away (three tracks, one
+    far from everything: its cost to a detection of another track makes that track lose it).
+    A single row and a single column are always paired when finite."""
     cost = np.asarray(cost, np.float64)
     if cost.size == 0:
         return []
     if cost.shape == (1, 1):
         return [(0, 0)] if np.isfinite(cost[0, 0]) else []
-    big = 1e12
-    rows, cols = linear_sum_assignment(np.where(np.isfinite(cost), np.minimum(cost, big), big))
-    return [(int(r), int(c)) for r, c in zip(rows, cols, strict=True) if cost[r, c] <= gate]
+    with np.errstate(invalid='ignore'):
+        inside = cost <= gate
+    # every pair outside costs more than all the pairs inside together
+    big = 1.0 + np.abs(cost[inside]).sum() * 2.0
+    rows, cols = linear_sum_assignment(np.where(inside, cost, big))
+    return [(int(r), int(c)) for r, c in zip(rows, cols, strict=True) if inside[r, c]]
 
 
 _solve = _umath_linalg.solve
