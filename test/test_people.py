@@ -431,3 +431,47 @@ def test_joints_on_a_nearer_persons_body_keep_their_last_estimate():
         off.step([near, _scored(person(0.3, z=3.4), 10.0)], k * DT, INTR)
     out = off.step([near, moved], 6 * DT, INTR)
     assert (max(out, key=lambda t: torso(t)[0][2]).source == cj.DETECTED).all()
+
+
+@pytest.mark.parametrize('confirmed_first', [True, False])
+def test_a_track_just_started_does_not_take_a_confirmed_persons_detection(confirmed_first):
+    """Two people confirmed; the right one's detection jumps 1 m for a frame (out of their
+    gate: a tentative track starts there), then comes back between the two. The confirmed
+    track takes it (`confirmed_first`), the tentative one ends, and no third id is given; in
+    one assignment the nearer tentative track took it and went on as a new id while the
+    right person's track went on unseen, predicted where nobody was."""
+    tr = tracker(confirmed_first=confirmed_first)
+    for k in range(6):
+        out = tr.step([_scored(person(-0.6), 8.0), _scored(person(0.6), 8.0)], k * DT, INTR)
+    right = next(i for i, x in ids_by_x(out).items() if x > 0)
+    tr.step([_scored(person(-0.6), 8.0), _scored(person(1.6), 8.0)], 6 * DT, INTR)
+    assert len(tr.tracks) == 3  # the jump started a tentative track
+    for k in range(7, 12):
+        out = tr.step([_scored(person(-0.6), 8.0), _scored(person(1.25), 8.0)], k * DT, INTR)
+    ids = ids_by_x(out)
+    if confirmed_first:
+        assert sorted(ids) == [1, 2] and ids[right] == pytest.approx(1.25, abs=0.05)
+        assert len(tr.tracks) == 2
+    else:
+        assert ids[3] == pytest.approx(1.25, abs=0.1)
+        assert ids[right] == pytest.approx(0.6, abs=0.05)  # unseen, where nobody is
+
+
+@pytest.mark.parametrize('held_continues', [True, False])
+def test_a_held_person_coming_out_partly_seen_is_taken_back(held_continues):
+    """The far person is held behind the near one for 10 frames, then comes out partly
+    seen: a detection scoring under `birth_score` where they were. Their held track takes
+    it (`held_continues`); otherwise it is left (nobody's) and the track stays held."""
+    tr = tracker(held_continues=held_continues)
+    for k in range(10):
+        out = tr.step([_scored(person(0.0, z=2.2), 8.0), _scored(person(0.3, z=3.4), 8.0)],
+                      k * DT, INTR)
+    far = max(out, key=lambda t: torso(t)[0][2]).track_id
+    for k in range(10, 20):
+        tr.step([_scored(person(0.0, z=2.2), 8.0)], k * DT, INTR)
+    assert next(t for t in tr.tracks if t.id == far).held
+    out = tr.step([_scored(person(0.0, z=2.2), 8.0), _scored(person(0.35, z=3.4), 2.0)],
+                  20 * DT, INTR)
+    track = next(t for t in out if t.track_id == far)
+    assert (track.source == cj.DETECTED).any() == held_continues
+    assert len(out) == 2
