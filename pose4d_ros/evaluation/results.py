@@ -77,6 +77,7 @@ SETS: dict[str, DataSet] = {s.name: s for s in (
     DataSet('valid30', 'validation', _synth(97, 's01-s06', 1, 45, 1)),
     DataSet('valid30_people2', 'validation', _synth(98, 's01-s06', 1, 45, 1, '--people', '2')),
     DataSet('valid60_people2', 'validation', _synth(201, 's01-s06', 1, 60, 1, '--people', '2')),
+    DataSet('valid60_people3', 'validation', _synth(203, 's01-s06', 1, 60, 1, '--people', '3')),
     *(DataSet(f'valid60_people2_alone{k}', 'validation',
               _synth(201, 's01-s06', 1, 60, 1, '--people', '2', '--alone', str(k)))
       for k in (1, 2)),
@@ -141,11 +142,17 @@ SWEEPS: dict[str, dict[str, tuple[str, ...]]] = {
     # ForegroundConfig.floor_max_below (0: no rule, the floor before)
     'floor_below': {'0.25': (), **{str(b): (f'foreground.floor_max_below={b}',)
                                    for b in (0, 0.1, 0.5)}},
+    # the several-person association's rules (TrackingConfig.confirmed_first, held_continues)
+    'tracking_rules': {'both': (), 'one_assignment': ('tracking.confirmed_first=false',),
+                       'held_by_birth_score': ('tracking.held_continues=false',),
+                       'neither': ('tracking.confirmed_first=false',
+                                   'tracking.held_continues=false')},
 }
 
 
 SWEEP_SETS = {'cut_height': ('valid30_near',), 'person_scale': ('valid30', 'valid30_msr'),
-              'floor_below': ('valid30', 'valid30_msr', 'valid30_near')}
+              'floor_below': ('valid30', 'valid30_msr', 'valid30_near'),
+              'tracking_rules': ('valid60_people2', 'valid60_people3')}
 # the shipped settings' run on a set, made anyway (the margin sweep's, valid30_msr's own)
 SHIPPED_RUNS = {'valid30': f'margin_{DEFAULT_MARGIN}.json', 'valid30_msr': 'valid30_msr.json'}
 
@@ -227,10 +234,10 @@ JOBS: tuple[Job, ...] = (
             '--peer', 'mediapipe', '--fit-peer-depth', str(RESULTS / 'peer_depth.json')]],
         needs_peer=True),
     Job('validation', 'the search margin, the cut height, the limb rule, the person scale, the '
-        'floor and the several-person tracker, swept on validation renders; the MSR Action3D '
-        'validation set',
+        "floor, the several-person tracker and its association's rules, swept on validation "
+        'renders; the MSR Action3D validation set',
         ('valid30', 'valid30_near', 'valid60_people2', 'valid60_people2_alone1',
-         'valid60_people2_alone2', 'valid30_msr'),
+         'valid60_people2_alone2', 'valid60_people3', 'valid30_msr'),
         _validation),
     Job('test', 'held-out test (s07-s08, 400 frames 0.1 s apart): rgbd_14 and rgb_10',
         ('test',), lambda c: [_eval(c, str(DATA / 'test'), RESULTS / 'test.json')]),
@@ -426,7 +433,9 @@ def summarize_validation() -> dict:
                 'groups': {g: _pooled([r['pck'].get(g) for r in rows], frames)
                            for g in GROUPS7},
                 'sets': {d: {'average7': r['pck']['average7'],
-                             'within_10cm': r.get('within_10cm', {}).get('average')}
+                             'within_10cm': r.get('within_10cm', {}).get('average'),
+                             **({'tracking': {k: r['tracking'].get(k) for k in TRACKING_KEYS}}
+                                if 'tracking' in r else {})}
                          for d, r in zip(sweep_sets(sweep), rows, strict=True)}}
         shipped = next(iter(values))
         out['sweeps'][sweep] = {'set': ' + '.join(sweep_sets(sweep)), 'shipped': shipped,
@@ -446,6 +455,8 @@ def summarize_validation() -> dict:
 
 
 GROUPS7 = ('head', 'shoulder', 'elbow', 'wrist', 'hip', 'knee', 'ankle')
+# a sweep on several-person sets: each set's tracking figures beside its average7
+TRACKING_KEYS = ('mota', 'idf1', 'id_switches_per_1000', 'false_per_1000')
 
 
 def _pooled(values: list[float | None], frames: list[int]) -> float | None:

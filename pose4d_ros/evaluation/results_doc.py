@@ -229,7 +229,10 @@ SWEEP_TITLES = {
     'limb_rule': "The limb rule's form (`SlqeConfig.limb_parts`, `limb_rejected_frames`; "
                  'arms or arms and legs, at the second or the first rejected frame)',
     'person_scale': "The person scale (`ScaleConfig.factors`, `warm_up_frames`)",
-    'floor_below': 'What may lie below the floor (`ForegroundConfig.floor_max_below`)'}
+    'floor_below': 'What may lie below the floor (`ForegroundConfig.floor_max_below`)',
+    'tracking_rules': "The several-person association's rules (`TrackingConfig."
+                      'confirmed_first`: the confirmed tracks assigned first; `held_continues`: '
+                      'a held track takes any detection in its gate)'}
 
 
 def sweeps_section(v: dict) -> list[str]:
@@ -253,7 +256,28 @@ def sweeps_section(v: dict) -> list[str]:
                 + ''.join(f" {fmt(r['sets'][d]['average7'])} |" for d in sets if pooled)
                 for k, r in values.items()]
         out += ['', f"Chosen on validation: {sweep['chosen']} ({rule(v)}).", '']
+        out += _sweep_tracking(values, sets)
     return out
+
+
+def _sweep_tracking(values: dict, sets: list[str]) -> list[str]:
+    """A sweep's tracking figures on its several-person sets (none: no lines)."""
+    sets = [d for d in sets if 'tracking' in next(iter(values.values()))['sets'][d]]
+    if not sets:
+        return []
+    keys = list(next(iter(values.values()))['sets'][sets[0]]['tracking'])
+    out = ['Tracking on each set (' + ', '.join(f'`{k}`' for k in keys) + '):', '',
+           '| value | ' + ' | '.join(f'`{d}`' for d in sets) + ' |',
+           '|---|' + '---|' * len(sets)]
+    out += [f'| {k} | ' + ' | '.join(' / '.join(_fmt_tracking(n, x) for n, x in
+                                               r['sets'][d]['tracking'].items())
+                                    for d in sets) + ' |' for k, r in values.items()]
+    return out + ['']
+
+
+def _fmt_tracking(name: str, v: float | None) -> str:
+    """MOTA and IDF1 (fractions) to 3 places, counts per 1000 to 1."""
+    return '-' if v is None else f'{v:.3f}' if name in ('mota', 'idf1') else f'{v:.1f}'
 
 
 def people_section(people: dict) -> list[str]:
