@@ -24,6 +24,8 @@ from pose4d_ros.evaluation.tracking_metrics import (
     assign_frame,
     match_people,
     score_people,
+    seen_share,
+    seen_table,
     summarize,
     summarize_sequences,
     torso_distances,
@@ -414,3 +416,36 @@ def test_score_people_starts_a_sequence_at_each_video() -> None:
         assert_allclose(two[key], one_video[key], rtol=1e-12, err_msg=key)
     with pytest.raises(ValueError, match='3 videos for 4 frames'):
         score_people(truths, preds, SKELETON_14, videos=['a'] * 3)
+
+
+def test_seen_share_counts_the_joints_the_depth_image_shows() -> None:
+    """A person 3 m away, the depth image 3.05 m everywhere but a nearer person (2 m) over the
+    columns of their left side: the joints there are not seen."""
+    t = truth((100.0, 200.0), 1)
+    t = t.with_(xyz=np.column_stack([np.zeros((len(t.names), 2)), np.full(len(t.names), 3.0)]))
+    depth = np.full((480, 640), 3.05, np.float32)
+    assert seen_share(t, depth) == 1.0
+    depth[:, 111:] = 2.0  # left shoulder (120), elbow (130), wrist and hand (135), hip (112),
+    left = [n for n in t.names if LAYOUT[n][0] + 100 >= 111]  # knee, ankle and foot
+    assert seen_share(t, depth) == pytest.approx(1 - len(left) / len(t.names))
+    depth[:] = np.nan  # no reading is not seen
+    assert seen_share(t, depth) == 0.0
+    assert np.isnan(seen_share(t, None))
+    assert np.isnan(seen_share(t.with_(xyz=np.full((len(t.names), 3), np.nan)), depth))
+    # joints outside the image are not counted
+    assert np.isnan(seen_share(t, depth[:50, :50]))
+
+
+def test_seen_table_splits_the_person_frames_by_their_share_seen() -> None:
+    truths, preds = score_people_fixture()
+    out = score_people(truths, preds, SKELETON_14)
+    found, labels = out['matched']
+    # 7 person-frames: the missed one (index 4) half seen, the others whole
+    shares = [1.0, 1.0, 1.0, 1.0, 0.4, 0.9, 0.6]
+    table = seen_table(found, labels, shares, SKELETON_14)
+    assert_allclose([table['share_80'], table['share_50_80'], table['share_under_50']],
+                    [5 / 7, 1 / 7, 1 / 7])
+    assert_allclose([table['average7_80'], table['average7_50_80'], table['average7_under_50']],
+                    [100.0, 100.0, 0.0])
+    table = seen_table(found, labels, [1.0] * 7, SKELETON_14)
+    assert table['share_under_50'] == 0.0 and np.isnan(table['average7_under_50'])

@@ -42,7 +42,7 @@ from pose4d_ros.core.skeleton import SKELETON_14
 from pose4d_ros.core.slqe import SlqeConfig
 from pose4d_ros.core.stages import DetectorStage, ForegroundStage, TrackerStage
 from pose4d_ros.datasets.frame import Frame
-from pose4d_ros.evaluation.tracking_metrics import score_people
+from pose4d_ros.evaluation.tracking_metrics import score_people, seen_share, seen_table
 from pose4d_ros.peer import MediaPipePeer
 
 
@@ -208,9 +208,16 @@ def people_scores(row: Row, frames: Sequence[Frame], names: tuple[str, ...]) -> 
     """`tracking_metrics.score_people` of a row (its several-person skeletons, or its one
     prediction a frame) over the frames, each video a sequence of its own."""
     preds = row.people if row.people else [(p,) for p in row.preds]
-    return score_people([frame_people(f) for f in frames], preds, names,
-                        image_sizes=[(f.color.shape[1], f.color.shape[0]) for f in frames],
-                        videos=sequence_labels(frames))
+    sizes = [(f.color.shape[1], f.color.shape[0]) for f in frames]
+    out = score_people([frame_people(f) for f in frames], preds, names, image_sizes=sizes,
+                       videos=sequence_labels(frames))
+    # the same person-frames by how much of each person is seen (`seen_table`)
+    (matched, truths), index = out['matched'], out['frames']
+    out['table']['seen'] = seen_table(
+        matched, truths, [seen_share(t, frames[k].depth_m) for t, k in zip(truths, index,
+                                                                            strict=True)],
+        names, image_sizes=[sizes[k] for k in index])
+    return out
 
 
 def sequence_labels(frames: Sequence[Frame]) -> list[int]:

@@ -8,6 +8,7 @@ import numpy as np
 from pose4d_ros.core.convnet import ConvNet, is_convnet, load_convnet
 from pose4d_ros.core.dpm.model import PartModel, load_model
 from pose4d_ros.core.skeleton import JOINT_GROUPS
+from pose4d_ros.evaluation.tracking_metrics import SEEN_BINS
 from pose4d_ros.models import model_path
 
 TABLE_METRICS = (('pck', 'PCK@0.1 (%)'), ('pck@0.2', 'PCK@0.2 (%)'), ('apk', 'APK (%)'),
@@ -42,12 +43,29 @@ def format_table(rows: dict[str, dict[str, dict[str, float]]], frames: int) -> s
             lines.append(f'{name:<{width}}' + ''.join(
                 f'{t[k] * (100 if k in ("idf1", "mota") else 1):>10.1f}'
                 if k in t and np.isfinite(t[k]) else f'{"-":>10}' for k in keys))
+    if any('seen' in row for row in rows.values()):
+        bins = [label for label, *_ in SEEN_BINS]
+        lines += ['', 'PCK@0.1 average7 by how much of the person the depth shows (share of the '
+                  'person-frames)', ' ' * width + ''.join(f'{SEEN_HEADS[b]:>18}' for b in bins)]
+        for name, row in rows.items():
+            seen = row.get('seen')
+            if seen:
+                lines.append(f'{name:<{width}}' + ''.join(
+                    f"{_num(seen[f'average7_{b}'])} ({_num(100 * seen[f'share_{b}'])} %)"
+                    .rjust(18) for b in bins))
     if any('cpu_ms' in row for row in rows.values()):
         lines += ['', 'CPU per frame (ms)', ' ' * width + f'{"p50":>10}{"p95":>10}']
         lines += [f'{name:<{width}}' + ''.join(
             f'{row["cpu_ms"][k]:>10.1f}' if row['cpu_ms'][k] is not None else f'{"-":>10}'
             for k in ('p50', 'p95')) for name, row in rows.items() if 'cpu_ms' in row]
     return '\n'.join(lines)
+
+
+SEEN_HEADS = {'80': '>= 80 % seen', '50_80': '50-80 % seen', 'under_50': '< 50 % seen'}
+
+
+def _num(v: float | None) -> str:
+    return '-' if v is None or not np.isfinite(v) else f'{v:.1f}'
 
 
 def clean_row(table: dict[str, dict[str, float]]) -> dict[str, dict[str, float | None]]:

@@ -54,6 +54,7 @@ is not a dependency: the tests hold its numbers.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Hashable, Mapping, Sequence
 from dataclasses import dataclass
 
@@ -426,6 +427,52 @@ def _fragments(matched: Sequence[bool]) -> int:
         return 0
     span = m[hits[0]:hits[-1] + 1]
     return int(np.count_nonzero(span[:-1] & ~span[1:]))
+
+
+# A truth joint is seen when the depth image at its pixel is within this of its depth, metres
+# (the joint lies inside the body, a few centimetres behind the surface the camera sees; a
+# nearer person in front of it reads far nearer)
+SEEN_TOLERANCE_M = 0.3
+# The bins of `seen_table`: person-frames by the share of their joints seen, lowest bound first
+SEEN_BINS: tuple[tuple[str, float, float], ...] = (
+    ('80', 0.8, math.inf), ('50_80', 0.5, 0.8), ('under_50', -math.inf, 0.5))
+
+
+def seen_share(truth: JointSet, depth_m: NDArray[np.floating] | None) -> float:
+    """The share of a truth's labelled joints inside the image that the depth image shows
+    (`SEEN_TOLERANCE_M`): what of a person a nearer one leaves in view. NaN without depth,
+    3-D truth or a joint inside the image."""
+    if depth_m is None:
+        return math.nan
+    h, w = depth_m.shape
+    ok = _located(truth, labelled=True) & np.isfinite(truth.xyz[:, 2])
+    uv = np.rint(truth.uv[ok]).astype(np.int64) if ok.any() else np.zeros((0, 2), np.int64)
+    inside = (uv[:, 0] >= 0) & (uv[:, 0] < w) & (uv[:, 1] >= 0) & (uv[:, 1] < h)
+    if not inside.any():
+        return math.nan
+    reading = depth_m[uv[inside, 1], uv[inside, 0]]
+    with np.errstate(invalid='ignore'):
+        seen = np.abs(reading - truth.xyz[ok][inside, 2]) <= SEEN_TOLERANCE_M
+    return float(seen.mean())
+
+
+def seen_table(preds: Sequence[JointSet | None], truths: Sequence[JointSet],
+               shares: Sequence[float], names: tuple[str, ...], *,
+               image_sizes: Sequence[tuple[int, int]] | None = None) -> dict[str, float]:
+    """PCK@0.1 average7 of the person-frames of each `SEEN_BINS` bin of `seen_share`
+    (`average7_<bin>`), and each bin's share of the person-frames (`share_<bin>`): how much
+    of a several-person table is lost where a person is hidden, and how much where they are
+    seen. Person-frames without a share (no depth) are in no bin."""
+    shares = np.asarray(shares, np.float64)
+    out: dict[str, float] = {}
+    for label, lo, hi in SEEN_BINS:
+        idx = np.flatnonzero((shares >= lo) & (shares < hi))
+        out[f'share_{label}'] = len(idx) / len(shares) if len(shares) else math.nan
+        table = score_joint_sets([preds[i] for i in idx], [truths[i] for i in idx], names,
+                                 image_sizes=None if image_sizes is None
+                                 else [image_sizes[i] for i in idx]) if len(idx) else None
+        out[f'average7_{label}'] = table['pck']['average7'] if table else math.nan
+    return out
 
 
 def score_people(frames_truths: Sequence[Sequence[JointSet]],
