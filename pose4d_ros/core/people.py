@@ -105,8 +105,9 @@ class TrackingConfig:
         tracking.max_held_s=S`; average7 / MOTA / IDF1 / false skeletons per 1000 frames):
         `valid60_people2` 87.57 / 0.951 / 0.959 / 8.3 unlimited, 87.42 / 0.939 / 0.947 / 0 at
         0.65 s; a three-person set of an earlier stop (seed not recorded) 87.12 / 0.954 /
-        0.977 / 9.7 and 86.92 / 0.950 / 0.972 / 0; the alone twins unchanged. (0.65 s was shipped for a while for its false skeletons;
-        on the held-out sets it removed none and cost average7 0.3-1.2: docs/NOTES.md.)
+        0.977 / 9.7 and 86.92 / 0.950 / 0.972 / 0; the alone twins unchanged. (0.65 s was
+        shipped for a while for its false skeletons; on the held-out sets it removed none and
+        cost average7 0.3-1.2: docs/NOTES.md.)
 
     confirmed_first : the confirmed tracks take their detections first, the tentative ones
         share what is left. In one assignment, a track started the frame before beside a
