@@ -461,15 +461,23 @@ def test_a_track_just_started_does_not_take_a_confirmed_persons_detection(confir
 def test_a_held_person_coming_out_partly_seen_is_taken_back(held_continues):
     """The far person is held behind the near one for 10 frames, then comes out partly
     seen: a detection scoring under `birth_score` where they were. Their held track takes
-    it (`held_continues`); otherwise it is left (nobody's) and the track stays held."""
+    it (`held_continues`); otherwise it is left (nobody's) and the track stays held. A
+    low-scoring region away from the near person is never theirs."""
     tr = tracker(held_continues=held_continues)
     for k in range(10):
         out = tr.step([_scored(person(0.0, z=2.2), 8.0), _scored(person(0.3, z=3.4), 8.0)],
                       k * DT, INTR)
     far = max(out, key=lambda t: torso(t)[0][2]).track_id
-    for k in range(10, 20):
+    for k in range(10, 19):
         tr.step([_scored(person(0.0, z=2.2), 8.0)], k * DT, INTR)
     assert next(t for t in tr.tracks if t.id == far).held
+    # a low-scoring region far from the near person (a wall's edge), in the gate that 0.6 s
+    # unseen has grown: not theirs, they stay held
+    out = tr.step([_scored(person(0.0, z=2.2), 8.0), _scored(person(1.4, z=3.6), 2.0)],
+                  19 * DT, INTR)
+    assert all(tr.tracks[i].held for i, t in enumerate(tr.tracks) if t.id == far)
+    assert tr._cost([_scored(person(1.4, z=3.6), 2.0)], [torso(person(1.4, z=3.6))],
+                    19 * DT)[[i for i, t in enumerate(tr.tracks) if t.id == far][0], 0] < 16
     out = tr.step([_scored(person(0.0, z=2.2), 8.0), _scored(person(0.35, z=3.4), 2.0)],
                   20 * DT, INTR)
     track = next(t for t in out if t.track_id == far)

@@ -78,6 +78,7 @@ SETS: dict[str, DataSet] = {s.name: s for s in (
     DataSet('valid30_people2', 'validation', _synth(98, 's01-s06', 1, 45, 1, '--people', '2')),
     DataSet('valid60_people2', 'validation', _synth(201, 's01-s06', 1, 60, 1, '--people', '2')),
     DataSet('valid60_people3', 'validation', _synth(203, 's01-s06', 1, 60, 1, '--people', '3')),
+    DataSet('valid30_people2b', 'validation', _synth(99, 's01-s06', 2, 45, 1, '--people', '2')),
     *(DataSet(f'valid60_people2_alone{k}', 'validation',
               _synth(201, 's01-s06', 1, 60, 1, '--people', '2', '--alone', str(k)))
       for k in (1, 2)),
@@ -152,7 +153,7 @@ SWEEPS: dict[str, dict[str, tuple[str, ...]]] = {
 
 SWEEP_SETS = {'cut_height': ('valid30_near',), 'person_scale': ('valid30', 'valid30_msr'),
               'floor_below': ('valid30', 'valid30_msr', 'valid30_near'),
-              'tracking_rules': ('valid60_people2', 'valid60_people3')}
+              'tracking_rules': ('valid60_people2', 'valid60_people3', 'valid30_people2b')}
 # the shipped settings' run on a set, made anyway (the margin sweep's, valid30_msr's own)
 SHIPPED_RUNS = {'valid30': f'margin_{DEFAULT_MARGIN}.json', 'valid30_msr': 'valid30_msr.json'}
 
@@ -237,7 +238,7 @@ JOBS: tuple[Job, ...] = (
         "floor, the several-person tracker and its association's rules, swept on validation "
         'renders; the MSR Action3D validation set',
         ('valid30', 'valid30_near', 'valid60_people2', 'valid60_people2_alone1',
-         'valid60_people2_alone2', 'valid60_people3', 'valid30_msr'),
+         'valid60_people2_alone2', 'valid60_people3', 'valid30_people2b', 'valid30_msr'),
         _validation),
     Job('test', 'held-out test (s07-s08, 400 frames 0.1 s apart): rgbd_14 and rgb_10',
         ('test',), lambda c: [_eval(c, str(DATA / 'test'), RESULTS / 'test.json')]),
