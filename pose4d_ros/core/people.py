@@ -498,14 +498,16 @@ class PeopleTracker:
         detections left: a track just started beside a confirmed one never takes its person's
         detection from it (the confirmed one would go on unseen, predicted where nobody is)."""
         gate = self.config.gate_chi2
-        if not self.config.confirmed_first:
+        tentative = [i for i, t in enumerate(self.tracks) if not t.id]
+        if not (self.config.confirmed_first and tentative):
             return assign(cost, gate)
         rows = [i for i, t in enumerate(self.tracks) if t.id]
         pairs = [(rows[r], c) for r, c in assign(cost[rows], gate)]
-        left = [c for c in range(cost.shape[1]) if c not in {c for _, c in pairs}]
-        rows = [i for i, t in enumerate(self.tracks) if not t.id]
-        if rows and left:
-            pairs += [(rows[r], left[c]) for r, c in assign(cost[np.ix_(rows, left)], gate)]
+        taken = {c for _, c in pairs}
+        left = [c for c in range(cost.shape[1]) if c not in taken]
+        if left:
+            pairs += [(tentative[r], left[c])
+                      for r, c in assign(cost[np.ix_(tentative, left)], gate)]
         return pairs
 
     def _trusted(self, detections: Sequence[JointSet], matched: dict[int, int]) -> set[int]:
@@ -569,7 +571,7 @@ class PeopleTracker:
         confirmed track (`_in_box`), farther by over `torso_std_m` in 3-D: where a person
         hidden behind them comes out (a held track's gate, grown with the time unseen, also
         reaches the room's clutter metres away)."""
-        if not self.config.held_continues:
+        if not (self.config.held_continues and any(t.held for t in self.tracks)):
             return set()
         fronts = [(k, detections[k], points[k][0]) for k, i in matched.items()
                   if self.tracks[i].id and _finite(points[k][0])]
