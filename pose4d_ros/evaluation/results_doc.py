@@ -244,7 +244,8 @@ SWEEP_TITLES = {
     'floor_below': 'What may lie below the floor (`ForegroundConfig.floor_max_below`)',
     'tracking_rules': "The several-person association's rules (`TrackingConfig."
                       'confirmed_first`: the confirmed tracks assigned first; `held_continues`: '
-                      'a held track takes any detection in its gate)'}
+                      'a held track takes a low-scoring detection that comes out from behind '
+                      'the nearer person)'}
 
 
 def sweeps_section(v: dict) -> list[str]:
