@@ -1,5 +1,12 @@
 """`pose4d demo` end to end: the sample bags (one person, then two) through the node graph,
-scored (slow)."""
+scored (slow).
+
+The bags play at half speed (15 Hz): what is checked here is that the graph loses no frame it
+has the CPU for (the first one included, every node warmed up before it subscribes) and that
+live equals offline. Whether a machine keeps up at 30 Hz is a measurement of that machine
+(`pose4d bench --graph`, `make demo` at 1x), never a unit test's pass or fail: on a 2-core
+machine whose cores are slow or shared, the six processes of the graph need more CPU a frame
+than 30 Hz leaves, and the stages then drop frames by design (`nodes.common.FrameQueue`)."""
 
 from __future__ import annotations
 
@@ -18,7 +25,8 @@ pytestmark = pytest.mark.slow
 def test_demo_runs_the_graph_and_scores_it(tmp_path):
     if 'rgbd_14' not in shipped_models():
         pytest.fail('the default model rgbd_14 is not shipped in pose4d_ros/models')
-    run = subprocess.run([str(executable('pose4d')), 'demo', '--out', str(tmp_path)],
+    run = subprocess.run([str(executable('pose4d')), 'demo', '--out', str(tmp_path),
+                          '--rate', '0.5'],
                          capture_output=True, text=True, timeout=900)
     assert run.returncode == 0, run.stdout[-3000:] + run.stderr[-3000:]
     results = json.loads((tmp_path / 'results.json').read_text())
