@@ -214,6 +214,47 @@ def test_joints_to_cdr_is_the_serialised_message(frame_id, n):
         assert_array_equal(a.position_covariance, b.position_covariance)
 
 
+@pytest.mark.parametrize('frame_id', ['', 'c', 'camera_color_optical_frame'])
+def test_tf_to_cdr_is_the_serialised_message(frame_id):
+    """Every person's located joints on /tf: the bytes decode to one identity transform per
+    joint that is neither MISSING nor non-finite, named `<prefix>/<track>/<joint>`, and have
+    the serialised message's length (names of several lengths: every alignment)."""
+    from builtin_interfaces.msg import Time
+    from geometry_msgs.msg import Quaternion, Transform, TransformStamped, Vector3
+    from rclpy.serialization import deserialize_message, serialize_message
+    from std_msgs.msg import Header
+    from tf2_msgs.msg import TFMessage
+
+    from pose4d_ros.core.joints import DETECTED, INFERRED, MISSING, TRACKED, JointSet
+    from pose4d_ros.core.skeleton import SKELETON_14
+    from pose4d_ros.nodes.convert import tf_to_cdr
+
+    rng = np.random.default_rng(7)
+    people = []
+    for track in (3, 12):
+        xyz = rng.normal(size=(14, 3))
+        xyz[2] = np.nan
+        source = np.full(14, (DETECTED, TRACKED, INFERRED)[track % 3], np.uint8)
+        source[5] = MISSING
+        people.append(JointSet(SKELETON_14, rng.normal(size=(14, 2)), xyz, source=source,
+                               track_id=track))
+    header = Header(frame_id=frame_id, stamp=Time(sec=1234567, nanosec=890))
+    want = TFMessage(transforms=[
+        TransformStamped(header=header, child_frame_id=f'pose4d/{p.track_id}/{name}',
+                         transform=Transform(translation=Vector3(x=x, y=y, z=z),
+                                             rotation=Quaternion(w=1.0)))
+        for p in people
+        for name, (x, y, z), s in zip(p.names, p.xyz.tolist(), p.source, strict=True)
+        if s != MISSING and np.isfinite([x, y, z]).all()])
+    assert len(want.transforms) == 2 * (14 - 2)
+    data = tf_to_cdr(people, header, 'pose4d')
+    assert len(data) == len(serialize_message(want))
+    assert deserialize_message(data, TFMessage) == want
+    # nobody located: nothing to send
+    assert tf_to_cdr([JointSet.missing(SKELETON_14)], header, 'pose4d') is None
+    assert tf_to_cdr([], header, 'pose4d') is None
+
+
 @pytest.mark.parametrize('people', [0, 1, 3])
 def test_skeletons_to_cdr_is_the_serialised_message(people):
     """Several people's bytes (names of several lengths, so every alignment is exercised)

@@ -8,7 +8,7 @@ the bag readers and re-exported here; this module adds what needs the rclpy mess
 - `core.camera.Intrinsics` -> `sensor_msgs/CameraInfo`;
 - `core.joints.JointSet` -> `pose4d_msgs/JointArray` (a message, or its serialised CDR bytes
   for `Publisher.publish`: `joints_to_cdr`; several people's `SkeletonArray`:
-  `skeletons_to_cdr`), and -> `tf2_msgs/TFMessage`;
+  `skeletons_to_cdr`), and -> `tf2_msgs/TFMessage`'s bytes (`tf_to_cdr`);
 - integer nanoseconds -> `builtin_interfaces/Time`.
 """
 
@@ -21,12 +21,11 @@ import sys
 
 import numpy as np
 from builtin_interfaces.msg import Duration, Time
-from geometry_msgs.msg import Point, Quaternion, Transform, TransformStamped, Vector3
+from geometry_msgs.msg import Point
 from numpy.typing import NDArray
 from pose4d_msgs.msg import Joint, JointArray, SkeletonArray
 from sensor_msgs.msg import CameraInfo, Image, PointCloud2, PointField
 from std_msgs.msg import ColorRGBA, Header
-from tf2_msgs.msg import TFMessage
 from visualization_msgs.msg import Marker, MarkerArray
 
 from pose4d_ros.core.camera import Intrinsics
@@ -48,7 +47,7 @@ from pose4d_ros.datasets.messages import (
 
 __all__ = ['array_to_image', 'cloud_to_msg', 'color_from_msg', 'depth_from_msg',
            'image_to_array', 'image_to_cdr', 'intrinsics_from_msg', 'intrinsics_to_msg',
-           'joint_frame', 'joints_from_msg', 'joints_to_cdr', 'joints_to_msg', 'joints_to_tf',
+           'joint_frame', 'joints_from_msg', 'joints_to_cdr', 'joints_to_msg', 'tf_to_cdr',
            'message_type', 'ns_to_stamp', 'skeleton_markers', 'skeletons_to_cdr',
            'skeletons_to_msg', 'stamp_to_ns']
 
@@ -180,20 +179,36 @@ def joint_frame(prefix: str, track_id: int, name: str) -> str:
     return f'{prefix}/{track_id}/{name}' if prefix else f'{track_id}/{name}'
 
 
-def joints_to_tf(joints: JointSet, header: Header, prefix: str) -> TFMessage:
-    """One transform per joint with a known 3-D position (not MISSING, finite), from the
-    image's frame (`header.frame_id`) to `joint_frame(prefix, track_id, name)`, stamped with
-    `header.stamp`; the joint's position is the translation, the rotation is the identity."""
-    located = (joints.source != MISSING) & np.isfinite(joints.xyz).all(axis=1)
-    out = []
-    for i in np.flatnonzero(located):
-        x, y, z = (float(c) for c in joints.xyz[i])
-        out.append(TransformStamped(
-            header=header,
-            child_frame_id=joint_frame(prefix, int(joints.track_id), joints.names[i]),
-            transform=Transform(translation=Vector3(x=x, y=y, z=z),
-                                rotation=Quaternion(w=1.0))))
-    return TFMessage(transforms=out)
+_TRANSFORM = struct.Struct('<7d')  # translation x, y, z, rotation x, y, z, w
+
+
+def tf_to_cdr(people: list[JointSet], header: Header, prefix: str) -> bytes | None:
+    """Every person's joints on /tf: a `tf2_msgs/TFMessage` serialised (little-endian CDR, as
+    `rclpy.serialization.serialize_message` gives it), built without the message classes;
+    None when no joint is located. One transform per joint with a known 3-D position (not
+    MISSING, finite), from the image's frame (`header.frame_id`) to
+    `joint_frame(prefix, track_id, name)`, stamped with `header.stamp`; the joint's position is
+    the translation, the rotation is the identity. Building the ~30 `TransformStamped` objects
+    of two people and serialising them cost the IK node more CPU than the IK itself."""
+    out = bytearray()
+    out += CDR_U32.pack(0)  # the count, written once known
+    count = 0
+    stamp = CDR_TIME.pack(int(header.stamp.sec), int(header.stamp.nanosec))
+    for joints in people:
+        located = (joints.source != MISSING) & np.isfinite(joints.xyz).all(axis=1)
+        xyz = joints.xyz.tolist()
+        for i in np.flatnonzero(located).tolist():
+            out += bytes(-len(out) % 4)
+            out += stamp
+            _cdr_string(out, header.frame_id)
+            _cdr_string(out, joint_frame(prefix, int(joints.track_id), joints.names[i]))
+            out += bytes(-len(out) % 8)
+            out += _TRANSFORM.pack(*xyz[i], 0.0, 0.0, 0.0, 1.0)
+            count += 1
+    if not count:
+        return None
+    out[:4] = CDR_U32.pack(count)
+    return CDR_LE + bytes(out)
 
 
 def message_type(name: str) -> type:

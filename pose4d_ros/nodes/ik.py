@@ -55,11 +55,11 @@ from pose4d_ros.nodes.common import LatestIntrinsics, PeopleInputs, StageMonitor
 from pose4d_ros.nodes.convert import (
     depth_from_msg,
     joints_to_cdr,
-    joints_to_tf,
     people_markers,
     skeleton_markers,
     skeletons_to_cdr,
     stamp_to_ns,
+    tf_to_cdr,
 )
 from pose4d_ros.nodes.params import NodeParams, Param
 
@@ -147,9 +147,8 @@ class SkeletonOutputs:
                 else people_markers(people, self.bones, header,
                                     lifetime_s=self.marker_lifetime_s))
         if self.publish_tf and self.tf.get_subscription_count():
-            frames = TFMessage(transforms=[t for joints in people for t in joints_to_tf(
-                joints, header, self.tf_prefix).transforms])
-            if frames.transforms:
+            frames = tf_to_cdr(people, header, self.tf_prefix)
+            if frames is not None:
                 self.tf.publish(frames)
 
 
