@@ -86,8 +86,11 @@ def test_replay_paces_by_recorded_stamps(tmp_path):
         assert recorder.stop() == 0, recorder.output()
     stamps = np.array([m.timestamp_ns for m in bag.read_messages(out)]) * 1e-9
     assert len(stamps) == 30
-    # at rate 2 the 29 intervals of 1/30 s take 29/60 s; receive times follow within jitter
-    assert stamps[-1] - stamps[0] == pytest.approx(29 / 60, abs=0.05)
+    # at rate 2 the 29 intervals of 1/30 s take 29/60 s (rate 1: 0.97 s, as fast as possible:
+    # a few ms); the receive times follow within jitter, the first or the last of them moved
+    # by tens of ms when the machine is busy (measured in CI: 0.426 s), so the pacing is
+    # checked on the median interval
+    assert stamps[-1] - stamps[0] == pytest.approx(29 / 60, abs=0.1)
     assert np.median(np.diff(stamps)) == pytest.approx(1 / 60, abs=0.004)
 
 
