@@ -244,8 +244,8 @@ SWEEP_TITLES = {
     'floor_below': 'What may lie below the floor (`ForegroundConfig.floor_max_below`)',
     'tracking_rules': "The several-person association's rules (`TrackingConfig."
                       'confirmed_first`: the confirmed tracks assigned first; `held_continues`: '
-                      'a held track takes a low-scoring detection that comes out from behind '
-                      'the nearer person)'}
+                      'a held track takes a detection only where it comes out from behind '
+                      'the nearer person, whatever its score)'}
 
 
 def sweeps_section(v: dict) -> list[str]:
