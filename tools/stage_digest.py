@@ -53,11 +53,11 @@ def main() -> int:
     model = load_model(model_path(args.model or default_models('cad60')[0]))
     total = hashlib.sha256()
     for spec in args.sources:
-        source, frames, *people = spec.split(':') + ['']
+        source, frames, people = (spec.split(':') + ['', ''])[:3]
         frames = load_frames([source], max_frames=int(frames) if frames else None,
                              labelled=False)
         pipeline = FramePipeline(DetectorStage(model),
-                                 people=TrackingConfig() if people[0] == 'people' else None)
+                                 people=TrackingConfig() if people == 'people' else None)
         h = hashlib.sha256()
         for f in frames:
             r = pipeline.step(f.color, f.depth_m, f.intrinsics, f.stamp_ns * 1e-9)

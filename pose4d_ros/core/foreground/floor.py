@@ -10,6 +10,7 @@ import functools
 import math
 
 import numpy as np
+from numba import njit
 from numpy.linalg import _umath_linalg
 from numpy.typing import NDArray
 
@@ -109,14 +110,7 @@ def fit_floor(depth_m: NDArray[np.floating], intrinsics: Intrinsics, *,
     if not _any(plausible):
         return None
     normal, d = normal[plausible], d[plausible]
-    signed = pts @ normal.T + d[None, :]
-    counts = _sum(np.abs(signed) < tol[:, None], axis=0, dtype=np.intp)  # count_nonzero's
-    if config.floor_max_below > 0:
-        # a floor has nothing below it: a table top or a seat (a horizontal plane above the
-        # floor, often with more points on it in the lower image than the floor shows) has
-        # the floor and the legs below it
-        below = _sum(signed < -np.maximum(tol, FLOOR_BELOW_M)[:, None], axis=0, dtype=np.intp)
-        counts = np.where(below > config.floor_max_below * counts, 0, counts)
+    counts = _support(pts @ normal.T, d, tol, config.floor_max_below)
     best = int(counts.argmax())
     if counts[best] < config.floor_min_inliers:
         return None
@@ -140,6 +134,35 @@ def fit_floor(depth_m: NDArray[np.floating], intrinsics: Intrinsics, *,
         plane = np.empty(4)
         plane[:3], plane[3] = n, -float(n @ c)
     return plane
+
+
+@njit(cache=True)
+def _support(products: NDArray[np.float64], d: NDArray[np.float64], tol: NDArray[np.float64],
+             max_below: float) -> NDArray[np.intp]:
+    """Each plane's inliers: the points within `tol` of it, where `products` (N points x M
+    planes) are the points' dot products with the planes' normals and `d` the planes' offsets.
+    A floor has nothing below it: a table top or a seat (a horizontal plane above the floor,
+    often with more points on it in the lower image than the floor shows) has the floor and
+    the legs below it, so a plane with more than `max_below` (> 0) times its inliers below it
+    (by over the tolerance and `FLOOR_BELOW_M`) counts none. One pass over the products,
+    where the array expressions it replaces made five N x M arrays a frame."""
+    n, m = products.shape
+    counts = np.zeros(m, np.intp)
+    below = np.zeros(m, np.intp)
+    for i in range(n):
+        t = tol[i]
+        under = -max(t, FLOOR_BELOW_M)
+        for j in range(m):
+            s = products[i, j] + d[j]
+            if abs(s) < t:
+                counts[j] += 1
+            if s < under:
+                below[j] += 1
+    if max_below > 0:
+        for j in range(m):
+            if below[j] > max_below * counts[j]:
+                counts[j] = 0
+    return counts
 
 
 def _cross(a: NDArray[np.float64], b: NDArray[np.float64]) -> NDArray[np.float64]:
