@@ -23,7 +23,7 @@ from numpy.typing import NDArray
 NEG = -1.0e10
 
 
-@nb.njit(cache=True)
+@nb.njit(cache=True, inline='always')
 def dt1d(src: NDArray[np.float32], a: float, b: float, shift: int, n_out: int,
          out: NDArray[np.float32], arg: NDArray[np.int32], v: NDArray[np.int32],
          z: NDArray[np.float64]) -> None:
@@ -31,6 +31,7 @@ def dt1d(src: NDArray[np.float32], a: float, b: float, shift: int, n_out: int,
 
     `v` (n int32) and `z` (n + 1 float64) are scratch buffers; `a` must be > 0.
     Felzenszwalb & Huttenlocher's lower envelope of parabolas, minimising f = -src.
+    Inlined into `dt2d` by numba (called for every row and column of every map).
     """
     n = src.shape[0]
     # in the envelope's form: min_q f(q) + a (t - q)^2 + bb (t - q), t = p + shift, bb = -b
