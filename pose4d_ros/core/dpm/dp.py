@@ -210,17 +210,17 @@ def _child_value(src: NDArray[np.float32], springs: NDArray[np.float32],
     (pr, pc): ``src[c, t] - spring + bias[c, pt, t]`` (`src` = filter responses, or subtree
     scores to include the part's children), and the type that gives it."""
     k_n, ny, nx = src.shape[1], src.shape[2], src.shape[3]
-    for r in range(ny):
-        for q in range(nx):
-            best = -np.inf
-            bt = 0
-            for t in range(k_n):
+    out[:] = -np.inf
+    arg[:] = 0
+    # type by type over whole maps (the same comparisons in the same order per cell as a loop
+    # over the types per cell, in contiguous inner loops)
+    for t in range(k_n):
+        for r in range(ny):
+            for q in range(nx):
                 v = _spring_local(src, springs, anchors, bias, c, t, r, q, pt, pr, pc)
-                if v > best:
-                    best = v
-                    bt = t
-            out[r, q] = best
-            arg[r, q] = bt
+                if v > out[r, q]:
+                    out[r, q] = v
+                    arg[r, q] = t
 
 
 @nb.njit(cache=True)
