@@ -22,7 +22,7 @@ from pose4d_ros.core.dpm.dp import (
     score_level,
     tree_dp,
 )
-from pose4d_ros.core.dpm.dt import dt1d, dt2d
+from pose4d_ros.core.dpm.dt import dt2d
 from pose4d_ros.core.dpm.infer import arm_limbs
 from pose4d_ros.core.dpm.samples import TrainConfig
 from pose4d_ros.core.dpm.solver import Examples, dcd, margins, rebuild_w
@@ -33,26 +33,43 @@ from pose4d_ros.core.skeleton import PARTS_10, PARTS_14, PARTS_22
 
 # --------------------------------------------------------------------------- distance transforms
 
-def brute_dt1d(src, a, b, shift, n_out):
-    q = np.arange(len(src))[None, :]
-    d = q - np.arange(n_out)[:, None] - shift
-    val = src[None, :].astype(np.float64) - a * d * d - b * d
-    return val.max(1), val
+def exhaustive_pass(src, a, b, shift):
+    """The 1-D transform along axis 0 over every cell, in `dt._pass`'s float64 arithmetic:
+    (values as float32, first best q)."""
+    n = src.shape[0]
+    d = (np.arange(n)[:, None] + shift) - np.arange(n)[None, :]  # [p, q]
+    cost = a * d * d + (-b) * d
+    val = src.astype(np.float64)[None, :, :] - cost[:, :, None]  # [p, q, j]
+    return val.max(axis=1).astype(np.float32), val.argmax(axis=1).astype(np.int32)
 
 
-@pytest.mark.parametrize('shift', [-7, -1, 0, 2, 9])
-def test_dt1d_equals_brute_force(shift: int) -> None:
-    rng = np.random.default_rng(0)
-    for _ in range(50):
-        n = int(rng.integers(1, 25))
-        src = (rng.normal(size=n) * 3).astype(np.float32)
-        a, b = float(rng.uniform(0.01, 2.0)), float(rng.normal())
-        out = np.empty(n, np.float32)
-        arg = np.empty(n, np.int32)
-        dt1d(src, a, b, shift, n, out, arg, np.empty(n, np.int32), np.empty(n + 1))
-        best, val = brute_dt1d(src, a, b, shift, n)
-        assert_allclose(out, best, rtol=1e-5, atol=1e-4)
-        assert_allclose(val[np.arange(n), arg], best, rtol=1e-5, atol=1e-4)  # argmax is a max
+@pytest.mark.parametrize('spread', [0.1, 3.0, 1e6])
+def test_dt2d_is_the_exhaustive_maximum_exactly(spread: float) -> None:
+    """The candidate windows leave out no cell that could win: the same values and argmaxes
+    (ties to the first) as a maximum over every cell, bit for bit, from maps whose range is
+    far below the springs' costs to far above them; and on a flat map, where all tie."""
+    rng = np.random.default_rng(1)
+    maps = [(rng.normal(size=(int(rng.integers(1, 30)), int(rng.integers(1, 30)))) * spread)
+            .astype(np.float32) for _ in range(30)]
+    maps.append(np.full((6, 5), 2.5, np.float32))
+    for s in maps:
+        ny, nx = s.shape
+        wx, wx2, wy, wy2 = (np.float32(v) for v in (rng.normal(), rng.uniform(0.01, 2),
+                                                     rng.normal(), rng.uniform(0.01, 2)))
+        ax, ay = (int(v) for v in rng.integers(-4, 5, 2))
+        if (s == s.flat[0]).all():  # cost 0.5 d^2 - 0.5 d: d = 0 and d = 1 tie exactly
+            wx = wx2 = wy = wy2 = np.float32(0.5)
+        out = np.empty((ny, nx), np.float32)
+        ix = np.empty((ny, nx), np.int32)
+        iy = np.empty((ny, nx), np.int32)
+        tmp = np.empty((ny, nx), np.float32)
+        dt2d(s, wx, wx2, wy, wy2, ax, ay, out, ix, iy, tmp)
+        tmp_t, ix_t = exhaustive_pass(s.T, np.float64(wx2), np.float64(wx), ax)
+        np.testing.assert_array_equal(tmp, tmp_t.T)
+        np.testing.assert_array_equal(ix, ix_t.T)
+        out_e, iy_e = exhaustive_pass(tmp, np.float64(wy2), np.float64(wy), ay)
+        np.testing.assert_array_equal(out, out_e)
+        np.testing.assert_array_equal(iy, iy_e)
 
 
 def test_dt2d_equals_brute_force() -> None:

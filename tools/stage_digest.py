@@ -9,7 +9,9 @@ Each argument is SOURCE[:FRAMES[:people]] (a CAD-60 set or bag; `people`: the se
 pipeline, `FramePipeline(people=...)`). Per frame it hashes the bytes of the foreground (mask,
 box, depth, floor plane, its blanked colour and depth), the detected parts, the tracked parts,
 the skeleton and every person's skeleton, and prints one SHA-256 per source and one over all.
-Run from the checkout (`PYTHONPATH=.`) to digest the code in the working tree.
+Run from the checkout (`PYTHONPATH=.`) to digest the code in the working tree, after
+`find pose4d_ros -name '*.nb[ic]' -delete`: numba's cache of a kernel is renewed when its
+own file changes, not when a kernel it calls from another file does.
 """
 
 from __future__ import annotations

@@ -8,9 +8,18 @@ parent position, under the spring of Yang & Ramanan (PAMI 2013, eq. 1 and sectio
     d_x = x' - (x + ax),  d_y = y' - (y + ay),
 
 with (ax, ay) the child type's anchor (rest offset from the parent, cells) and wx2, wy2 > 0.
-The quadratic cost is separable, so the 2-D transform is two 1-D lower-envelope passes (along x
-for every child row, then along y for every parent column), O(n) each, keeping the argmax for
-backtracking.
+The quadratic cost is separable, so the 2-D transform is two 1-D passes (along x for every
+child row, then along y for every parent column), keeping the argmax for backtracking.
+
+Each 1-D output is the maximum over its candidates only: a cell whose spring cost exceeds the
+cheapest cell's by more than the map's range of scores cannot win (its score is at most the
+map's maximum, the cheapest cell's at least its minimum). The part model's springs are stiff
+and its maps small, so that is a few cells; each pass runs over whole rows of the map at once
+(one candidate, every row or column), in the same float64 arithmetic as Felzenszwalb and
+Huttenlocher's lower envelope of parabolas, which it replaced: the same values and argmaxes
+(the stage digests of the demo bag, valid30_near, valid60_people2 and rgb_10's depth-free
+search are unchanged), the tree DP 2.09 -> 1.51 ms a level on the demo bag. Ties go to the
+first candidate.
 """
 
 from __future__ import annotations
@@ -19,49 +28,82 @@ import numba as nb
 import numpy as np
 from numpy.typing import NDArray
 
-# A finite "minus infinity": keeps the envelope arithmetic free of inf - inf.
+# A finite "minus infinity" for score maps (`core.dpm.mining`): keeps the arithmetic free of
+# inf - inf.
 NEG = -1.0e10
 
 
-@nb.njit(cache=True, inline='always')
-def dt1d(src: NDArray[np.float32], a: float, b: float, shift: int, n_out: int,
-         out: NDArray[np.float32], arg: NDArray[np.int32], v: NDArray[np.int32],
-         z: NDArray[np.float64]) -> None:
-    """out[p] = max_q src[q] - a (q - p - shift)^2 - b (q - p - shift), arg[p] = the best q.
-
-    `v` (n int32) and `z` (n + 1 float64) are scratch buffers; `a` must be > 0.
-    Felzenszwalb & Huttenlocher's lower envelope of parabolas, minimising f = -src.
-    Inlined into `dt2d` by numba (called for every row and column of every map).
-    """
-    n = src.shape[0]
-    # in the envelope's form: min_q f(q) + a (t - q)^2 + bb (t - q), t = p + shift, bb = -b
-    bb = -b
-    k = 0
-    v[0] = 0
-    z[0] = -np.inf
-    z[1] = np.inf
-    for q in range(1, n):
-        fq = -np.float64(src[q])
-        r = v[k]
-        s = ((fq + np.float64(src[r])) - bb * (q - r) + a * (q * q - r * r)) / (2.0 * a * (q - r))
-        while s <= z[k]:  # z[0] = -inf ends the loop
-            k -= 1
-            r = v[k]
-            s = ((fq + np.float64(src[r])) - bb * (q - r) + a * (q * q - r * r)) / (
-                2.0 * a * (q - r))
-        k += 1
-        v[k] = q
-        z[k] = s
-        z[k + 1] = np.inf
-    k = 0
-    for p in range(n_out):
+@nb.njit(cache=True)
+def _candidates(n: int, a: float, bb: float, shift: int, span: float,
+                lo: NDArray[np.int64], hi: NDArray[np.int64]) -> None:
+    """For each output p of a 1-D pass over n cells, the cells q in lo[p]..hi[p] whose cost
+    a d^2 + bb d (d = p + shift - q) is within `span` of the cheapest cell's (a > 0: they are
+    contiguous)."""
+    for p in range(n):
         t = p + shift
-        while z[k + 1] < t:
-            k += 1
-        q = v[k]
+        cheapest = np.inf
+        for q in range(n):
+            d = t - q
+            cheapest = min(cheapest, a * d * d + bb * d)
+        limit = cheapest + span
+        first = 0
+        while first < n - 1:
+            d = t - first
+            if a * d * d + bb * d <= limit:
+                break
+            first += 1
+        last = n - 1
+        while last > first:
+            d = t - last
+            if a * d * d + bb * d <= limit:
+                break
+            last -= 1
+        lo[p] = first
+        hi[p] = last
+
+
+@nb.njit(cache=True)
+def _span(src: NDArray) -> float:
+    """The range of the map's scores, widened a little for the rounding of one subtraction."""
+    top = -np.inf
+    bottom = np.inf
+    for v in src.ravel():
+        top = max(top, np.float64(v))
+        bottom = min(bottom, np.float64(v))
+    return (top - bottom) * (1.0 + 1e-9) + 1e-9
+
+
+@nb.njit(cache=True)
+def _pass(src: NDArray, a: float, b: float, shift: int, out: NDArray[np.float32],
+          arg: NDArray[np.int32]) -> None:
+    """out[p, j] = max_q src[q, j] - a (q - p - shift)^2 - b (q - p - shift), arg[p, j] = the
+    first best q: the transform along the first axis, for every j at once."""
+    n, m = src.shape
+    bb = -b  # the cost of d = p + shift - q: a d^2 + bb d
+    lo = np.empty(n, np.int64)
+    hi = np.empty(n, np.int64)
+    _candidates(n, a, bb, shift, _span(src), lo, hi)
+    best = np.empty(m, np.float64)
+    which = np.empty(m, np.int32)
+    for p in range(n):
+        t = p + shift
+        q = lo[p]
         d = t - q
-        out[p] = np.float32(np.float64(src[q]) - (a * d * d + bb * d))
-        arg[p] = q
+        cost = a * d * d + bb * d
+        for j in range(m):
+            best[j] = np.float64(src[q, j]) - cost
+            which[j] = q
+        for q in range(lo[p] + 1, hi[p] + 1):
+            d = t - q
+            cost = a * d * d + bb * d
+            for j in range(m):  # selects, not branches: the loop vectorises
+                v = np.float64(src[q, j]) - cost
+                better = v > best[j]
+                best[j] = v if better else best[j]
+                which[j] = np.int32(q) if better else which[j]
+        for j in range(m):
+            out[p, j] = np.float32(best[j])
+            arg[p, j] = which[j]
 
 
 @nb.njit(cache=True)
@@ -80,19 +122,10 @@ def dt2d(score: NDArray[np.float32], wx: float, wx2: float, wy: float, wy2: floa
     iy : (Ny, Nx) int32, written: best child row for (parent row, parent column).
     tmp : (Ny, Nx) float32 scratch.
     """
+    # along x: the transposed map's rows are the columns, each pass over all rows at once
     ny, nx = score.shape
-    n = max(ny, nx)
-    v = np.empty(n, np.int32)
-    z = np.empty(n + 1, np.float64)
-    col_in = np.empty(ny, np.float32)
-    col_out = np.empty(ny, np.float32)
-    col_arg = np.empty(ny, np.int32)
-    for y in range(ny):
-        dt1d(score[y], wx2, wx, ax, nx, tmp[y], ix[y], v, z)
-    for x in range(nx):
-        for y in range(ny):
-            col_in[y] = tmp[y, x]
-        dt1d(col_in, wy2, wy, ay, ny, col_out, col_arg, v, z)
-        for y in range(ny):
-            out[y, x] = col_out[y]
-            iy[y, x] = col_arg[y]
+    along_x = np.empty((nx, ny))
+    along_x[:] = score.T
+    _pass(along_x, np.float64(wx2), np.float64(wx), ax, tmp.T, ix.T)
+    # along y, over all columns at once
+    _pass(tmp, np.float64(wy2), np.float64(wy), ay, out, iy)
