@@ -48,3 +48,23 @@ def test_a_node_serves_on_the_chosen_executor_or_says_why_not(choice, code):
     assert proc.returncode == code, out
     assert ('POSE4D_EXECUTOR' in out) == (code != 0), out
     assert 'tracking /pose4d/parts' in out or code != 0, out
+
+
+def test_diagnostics_due_as_the_context_shuts_down_are_dropped_quietly():
+    # Ctrl-C shuts the context down while the diagnostics timer may fire once more: that last
+    # publish has no clock or publisher left, and must not end the node with a FATAL traceback
+    import rclpy
+
+    from pose4d_ros.nodes.common import StageMonitor
+
+    context = rclpy.Context()
+    rclpy.init(context=context)
+    node = rclpy.create_node('pose4d_monitor_probe', context=context)
+    try:
+        monitor = StageMonitor(node, 'probe')
+        monitor.publish()
+        context.shutdown()
+        monitor.publish()
+    finally:
+        node.destroy_node()
+        rclpy.try_shutdown(context=context)

@@ -243,8 +243,14 @@ class StageMonitor:
             level=level, name=f'pose4d: {self.stage}', message=message,
             hardware_id=self._node.get_fully_qualified_name(),
             values=[KeyValue(key=k, value=str(v)) for k, v in values.items()])
-        self._pub.publish(DiagnosticArray(
-            header=Header(stamp=self._node.get_clock().now().to_msg()), status=[status]))
+        try:
+            self._pub.publish(DiagnosticArray(
+                header=Header(stamp=self._node.get_clock().now().to_msg()), status=[status]))
+        except _rclpy.RCLError:
+            # Ctrl-C shuts the context down while the timer may still fire once: no clock
+            # and no publisher any more, and nothing left to report to
+            if self._node.context.ok():
+                raise
 
 
 def subscribe(node: Node, msg_type: type, topic: str, callback: Callable[[object], None],
