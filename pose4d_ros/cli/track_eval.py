@@ -16,6 +16,7 @@ import math
 import sys
 import time
 from pathlib import Path
+from typing import TextIO
 
 from pose4d_ros import __version__
 from pose4d_ros.core.files import write_json
@@ -78,7 +79,9 @@ def _jsonable(value: object) -> object:
     return str(value)
 
 
-def _print_tracking(title: str, res: dict, out=sys.stdout) -> None:
+def _print_tracking(title: str, res: dict, out: TextIO | None = None) -> None:
+    # out None: print's own default, the sys.stdout of the moment (a default of sys.stdout
+    # would be the one of the import: closed by now when that was a test's capture)
     groups = [g for g in next(iter(res.values())) if g not in ('average', 'coverage')]
     print(f'\n{title}', file=out)
     print(f"  {'method':<17}" + ''.join(f'{g:>9}' for g in groups) +
@@ -90,7 +93,7 @@ def _print_tracking(title: str, res: dict, out=sys.stdout) -> None:
               f"{table['average']:9.2f}{table['coverage']:9.3f}{100 * red:8.1f}%", file=out)
 
 
-def _print_ik(title: str, rows: dict, out=sys.stdout) -> None:
+def _print_ik(title: str, rows: dict, out: TextIO | None = None) -> None:
     print(f'\n{title}', file=out)
     print(f"  {'variant':<34}{'elbow':>8}{'knee':>8}{'average':>9}{'joints':>8}  flags",
           file=out)

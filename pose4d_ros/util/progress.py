@@ -41,14 +41,14 @@ class LineProgress:
     """Progress as plain lines, at most one every `period_s` seconds, and one at the end."""
 
     def __init__(self, iterable: Iterable | None, desc: str, total: int | None, *,
-                 unit: str = 'frame', disable: bool = False, file: TextIO = sys.stderr,
+                 unit: str = 'frame', disable: bool = False, file: TextIO | None = None,
                  period_s: float = LOG_PERIOD_S) -> None:
         self.iterable = iterable
         self.desc = desc
         self.total = total
         self.unit = unit
         self.disable = disable
-        self.file = file
+        self.file = file or sys.stderr  # the stream of the moment, not of the import
         self.period_s = period_s
         self.n = 0
         self._start = self._last = time.monotonic()
