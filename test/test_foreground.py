@@ -23,6 +23,7 @@ from pose4d_ros.core.foreground import (
     fit_floor,
     floor_height,
     segment,
+    segment_people,
 )
 
 K = cad60_intrinsics()
@@ -239,6 +240,44 @@ def test_previous_result_keeps_the_same_person() -> None:
     assert iou(r1.mask, b) > 0.85
 
 
+def crouched_person(x: float = 0.0, z: float = 3.0
+                    ) -> list[tuple[float, float, float, float, float, float]]:
+    """A person of boxes crouching to pick something up: knees bent, back and head bent
+    forward towards the camera, arms hanging; 0.7 m tall, under a standing person's 0.8 m."""
+    foot = CAM_HEIGHT
+    return [
+        (x - 0.18, x - 0.04, foot - 0.45, foot, z + 0.02, z + 0.2),        # bent legs
+        (x + 0.04, x + 0.18, foot - 0.45, foot, z + 0.02, z + 0.2),
+        (x - 0.2, x + 0.2, foot - 0.7, foot - 0.45, z - 0.35, z + 0.2),     # back
+        (x - 0.3, x - 0.2, foot - 0.65, foot - 0.3, z - 0.3, z - 0.15),     # arms
+        (x + 0.2, x + 0.3, foot - 0.65, foot - 0.3, z - 0.3, z - 0.15),
+        (x - 0.1, x + 0.1, foot - 0.62, foot - 0.4, z - 0.55, z - 0.35),    # head
+    ]
+
+
+def test_a_person_followed_from_the_previous_frame_may_crouch() -> None:
+    # alone, 0.7 m tall with its top 0.7 m above the floor, it is too small for a person (a
+    # table's size); as the person of the previous frame bending over, it is kept, on both
+    # paths, but not when the previous box's top was far above its own (someone's legs seen
+    # below a nearer person do not start where their head was)
+    depth, masks, _ = render_boxes(crouched_person())
+    truth = union(masks)
+    rows, cols = np.nonzero(truth)
+    x0, y0, x1, y1 = int(cols.min()), int(rows.min()), int(cols.max()) + 1, int(rows.max()) + 1
+    assert not segment(depth, K).found
+    assert segment_people(depth, K) == ([], 0)
+    prev = ForegroundResult(mask=truth, box=(x0, y0, x1, y1), depth_m=3.0, found=True)
+    r = segment(depth, K, previous=prev)
+    assert r.found and iou(r.mask, truth) > 0.8
+    people, found = segment_people(depth, K, previous=[prev])
+    assert found == 1 and iou(people[0].mask, truth) > 0.8
+    taller = dataclasses.replace(prev, box=(x0, y0 - (y1 - y0) // 3, x1, y1))
+    assert not segment(depth, K, previous=taller).found
+    assert segment_people(depth, K, previous=[taller]) == ([], 0)
+    never = dataclasses.replace(ForegroundConfig(), person_min_bent_top_m=math.inf)
+    assert not segment(depth, K, config=never, previous=prev).found
+
+
 def test_result_is_deterministic_and_input_untouched() -> None:
     depth, _, _ = render_boxes(box_person())
     before = depth.copy()
@@ -346,6 +385,7 @@ def test_apply_mask_checks_shapes() -> None:
     ('occluder_gap_m', -0.1),
     ('close_px', 40),
     ('stability_weight', -1.0),
+    ('person_min_bent_top_m', -0.5),
     ('max_candidates', 0),
 ])
 def test_config_rejects_bad_values_by_name(field: str, value: float) -> None:

@@ -148,12 +148,18 @@ SWEEPS: dict[str, dict[str, tuple[str, ...]]] = {
                        'held_by_birth_score': ('tracking.held_continues=false',),
                        'neither': ('tracking.confirmed_first=false',
                                    'tracking.held_continues=false')},
+    # a person of the previous frame bending (ForegroundConfig.person_min_bent_top_m; 'off':
+    # the usual rules for everyone, the foreground before): chosen on validation
+    'bent_top': {'0.5': (), **{str(t): (f'foreground.person_min_bent_top_m={t}',)
+                               for t in (0.4, 0.7)},
+                 'off': ('foreground.person_min_bent_top_m=inf',)},
 }
 
 
 SWEEP_SETS = {'cut_height': ('valid30_near',), 'person_scale': ('valid30', 'valid30_msr'),
               'floor_below': ('valid30', 'valid30_msr', 'valid30_near'),
-              'tracking_rules': ('valid60_people2', 'valid60_people3', 'valid30_people2b')}
+              'tracking_rules': ('valid60_people2', 'valid60_people3', 'valid30_people2b'),
+              'bent_top': ('valid30_msr', 'valid60_people2')}
 # the shipped settings' run on a set, made anyway (the margin sweep's, valid30_msr's own)
 SHIPPED_RUNS = {'valid30': f'margin_{DEFAULT_MARGIN}.json', 'valid30_msr': 'valid30_msr.json'}
 

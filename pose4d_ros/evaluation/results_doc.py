@@ -245,7 +245,9 @@ SWEEP_TITLES = {
     'tracking_rules': "The several-person association's rules (`TrackingConfig."
                       'confirmed_first`: the confirmed tracks assigned first; `held_continues`: '
                       'a held track takes a detection only where it comes out from behind '
-                      'the nearer person, whatever its score)'}
+                      'the nearer person, whatever its score)',
+    'bent_top': 'A person of the previous frame bending or crouching '
+                '(`ForegroundConfig.person_min_bent_top_m`, m; off: the usual rules only)'}
 
 
 def sweeps_section(v: dict) -> list[str]:

@@ -43,7 +43,12 @@ Steps of `segment` (one depth frame, float32 metres, NaN = no reading):
    is cut by the image's bottom edge and shorter than a whole person may be: when no part
    passes the rules, parts cut by that edge get smaller lower bounds on height and surface
    and no rule on their bottom rows (`person_min_cut_height_m`); the best few such regions
-   are examined besides the best few others, never in their place.
+   are examined besides the best few others, never in their place. A person of the previous
+   frame who bends or crouches (a pick-up, a bow) shrinks under a whole person's bounds, to a
+   table's size: a part that overlaps their previous box (`FOLLOW_OVERLAP`) with its top near
+   that box's top (`FOLLOW_TOP`: one bends over several frames) passes with a cut person's
+   lower bounds and its top at least `person_min_bent_top_m` above the floor, when no part
+   passing the usual rules overlaps that box (`bent_rules`).
 5. Completion. No-reading pixels that a small closing of the mask adds (Kinect loses the
    readings in a ragged band along depth edges) join the mask; optionally, holes of no-reading
    pixels are filled.

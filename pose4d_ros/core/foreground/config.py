@@ -105,6 +105,7 @@ class PersonConfig:
     merge_slack: float = 2.0
     person_min_top_m: float = 0.9
     person_max_top_m: float = 2.5
+    person_min_bent_top_m: float = 0.5
     person_max_bottom_m: float = 1.0
     person_max_extent_m: float = 1.0
     edge_rows: int = 3
@@ -136,7 +137,8 @@ class PersonConfig:
             raise ValueError(f'occluder_gap_m must be >= 0, got {self.occluder_gap_m}')
         if not 0.0 < self.person_max_fill <= 1.0:
             raise ValueError(f'person_max_fill must be in (0, 1], got {self.person_max_fill}')
-        _not_negative(self, 'stability_weight', 'previous_bonus', 'border_penalty')
+        _not_negative(self, 'stability_weight', 'previous_bonus', 'border_penalty',
+                      'person_min_bent_top_m')
 
     @property
     def min_cut_area_m2(self) -> float:
@@ -252,6 +254,11 @@ class ForegroundConfig(MaskConfig, FloorConfig, PersonConfig, RegionConfig):
     max_candidates : regions (best first) whose pixels are examined.
     person_min_top_m, person_max_top_m : height above the floor of a person part's top rows
         (head, or hands raised), metres; only with a floor.
+    person_min_bent_top_m : a part whose box overlaps a box of the previous frame's people by
+        more than 0.3 (intersection over union) may be that person bending or crouching (a
+        pick-up, a bow): it passes with a cut person's height and surface
+        (`person_min_cut_height_m`) and its top rows at least this high above the floor
+        (only with a floor), metres; inf = the usual rules for everyone.
     person_max_bottom_m : largest height above the floor of its bottom rows (feet, or the top
         of an occluder hiding them), metres; only with a floor.
     person_max_extent_m : largest depth extent of a person part (5th to 95th percentile of

@@ -7,6 +7,7 @@ best `part_score` wins."""
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -16,6 +17,14 @@ from numpy.typing import NDArray
 from pose4d_ros.core.camera import Intrinsics
 from pose4d_ros.core.foreground.config import ForegroundConfig, PersonConfig
 from pose4d_ros.core.foreground.regions import StableRegions
+
+# Intersection over union with a box of the previous frame's people above which a part may be
+# one of them (`part_score`'s bonus, `bent_rules`)
+FOLLOW_OVERLAP = 0.3
+# How far (a share of that box's height) the top row of a person bending may be from the top
+# of their box in the previous frame (`bent_rules`): one bends over several frames, while a
+# piece of someone's legs seen below a nearer person does not start where their head was
+FOLLOW_TOP = 0.1
 
 
 @dataclass(frozen=True)
@@ -51,14 +60,16 @@ class Part:
     extent_m: float
 
 
-def person_sized(regions: StableRegions, intrinsics: Intrinsics, config: ForegroundConfig
-                 ) -> NDArray[np.int64]:
+def person_sized(regions: StableRegions, intrinsics: Intrinsics, config: ForegroundConfig,
+                 boxes: Sequence[tuple[int, int, int, int]] = ()) -> NDArray[np.int64]:
     """Stage 1 of the person rules, on the tree's statistics (box, mean depth): the stable
     regions worth tracing, best first (none: no region of person size).
 
     A region may still hold an occluder or a piece of furniture besides the person, so only
     the person's lower size bounds apply, and the upper ones with `merge_slack`. At most
-    `max_candidates` regions that may hold a whole person, then as many cut by the bottom edge.
+    `max_candidates` regions that may hold a whole person (or a person of the previous frame,
+    `boxes`, bending: a cut person's lower bounds, `bent_rules`), then as many cut by the
+    bottom edge.
     """
     r, st = regions, regions.step
     cand = r.stable
@@ -71,8 +82,11 @@ def person_sized(regions: StableRegions, intrinsics: Intrinsics, config: Foregro
     # lower bounds are smaller; such regions come after every other (see `segment`)
     whole_size = ((height_m >= config.person_min_height_m)
                   & (area_m2 >= config.person_min_area_m2))
-    near = ((r.y1[cand] == r.shape[0]) & (height_m >= config.person_min_cut_height_m)
-            & (area_m2 >= config.min_cut_area_m2))
+    cut_size = (height_m >= config.person_min_cut_height_m) & (area_m2 >= config.min_cut_area_m2)
+    near = (r.y1[cand] == r.shape[0]) & cut_size
+    if boxes and math.isfinite(config.person_min_bent_top_m):
+        whole_size |= cut_size & _follows(boxes, r.x0[cand] * st, r.y0[cand] * st,
+                                          r.x1[cand] * st, r.y1[cand] * st)
     ok = ((whole_size | near) & (width_m >= config.person_min_width_m)
           & (height_m <= slack * config.person_max_height_m)
           & (width_m <= slack * config.person_max_width_m)
@@ -95,14 +109,42 @@ def person_sized(regions: StableRegions, intrinsics: Intrinsics, config: Foregro
                            for near in (False, True)])
 
 
+def _follows(boxes: Sequence[tuple[int, int, int, int]], x0: NDArray, y0: NDArray,
+             x1: NDArray, y1: NDArray) -> NDArray[np.bool_]:
+    """Which of the boxes (x0, y0, x1, y1; arrays) may be a person of `boxes` bending: one
+    overlapping it by more than `FOLLOW_OVERLAP` (intersection over union), its top row within
+    `FOLLOW_TOP` of that box's height of its top."""
+    out = np.zeros(len(x0), bool)
+    area = (x1 - x0) * (y1 - y0)
+    for a0, b0, a1, b1 in boxes:
+        inter = (np.maximum(np.minimum(x1, a1) - np.maximum(x0, a0), 0)
+                 * np.maximum(np.minimum(y1, b1) - np.maximum(y0, b0), 0))
+        out |= ((inter > FOLLOW_OVERLAP * (area + (a1 - a0) * (b1 - b0) - inter))
+                & (np.abs(y0 - b0) <= FOLLOW_TOP * (b1 - b0)))
+    return out
+
+
+def _follows_one(box: tuple[int, int, int, int],
+                 boxes: Sequence[tuple[int, int, int, int]]) -> bool:
+    """`_follows` for one box (plain arithmetic: a few calls per region and frame)."""
+    for b in boxes:
+        d = box[1] - b[1]
+        if (_overlap(b, box) > FOLLOW_OVERLAP
+                and -FOLLOW_TOP * (b[3] - b[1]) <= d <= FOLLOW_TOP * (b[3] - b[1])):
+            return True
+    return False
+
+
 def depth_parts(g: NDArray[np.uint8], regions: StableRegions, order: NDArray[np.int64],
                 above: NDArray[np.float32] | None, intrinsics: Intrinsics,
-                config: ForegroundConfig, *, occluded: bool = False) -> list[Part]:
+                config: ForegroundConfig, *, occluded: bool = False,
+                boxes: Sequence[tuple[int, int, int, int]] = ()) -> list[Part]:
     """Stage 2, on the full-resolution pixels of the regions `order` picked: each split at
     empty depth gaps (an occluder in front, furniture behind), and a part deeper than
     `person_max_extent_m` at Otsu's threshold too; every part is a candidate. `occluded`: the
     parts may be people partly hidden by a nearer one (`occluded_rules`), whose top and bottom
-    heights are measured from the smaller sizes of a cut person on.
+    heights are measured from the smaller sizes of a cut person on, as are all when `boxes`
+    (the previous frame's people, who may bend: `bent_rules`) are given.
 
     Each region is traced and its parts measured by one kernel call (`_region_parts`): per
     region, a handful of Python-level calls instead of some seventy small numpy ones."""
@@ -113,6 +155,9 @@ def depth_parts(g: NDArray[np.uint8], regions: StableRegions, order: NDArray[np.
     extent_levels = config.person_max_extent_m / mpl
     st, ws = regions.step, regions.shape[1]
     heights = _NO_HEIGHTS if above is None else above
+    # with people in the previous frame, any part may be one of them bending (`bent_rules`
+    # judges that), and its heights are measured from a cut person's sizes on
+    small = occluded or bool(boxes)
     for i in order.tolist():
         sy, sx = divmod(int(regions.seed[i]), ws)
         crop, bx, rows = _region_parts(g, heights, above is not None, int(regions.level[i]),
@@ -123,7 +168,7 @@ def depth_parts(g: NDArray[np.uint8], regions: StableRegions, order: NDArray[np.
             pt = _describe(crop, g, box, int(a), int(b), int(n), int(med),
                            (int(r0), int(r1), int(c0), int(c1)), extent, top, bottom,
                            bool(whole), float(regions.variation[i]), intrinsics, (w, h),
-                           config, mpl, occluded)
+                           config, mpl, small)
             if pt is not None:
                 parts.append(pt)
     return parts
@@ -243,6 +288,20 @@ def occluded_rules(part: Part, config: PersonConfig) -> bool:
                 and not c.person_min_top_m <= part.top_m <= c.person_max_top_m)
 
 
+def bent_rules(part: Part, config: PersonConfig,
+               boxes: Sequence[tuple[int, int, int, int]]) -> bool:
+    """Whether a part may be a person of the previous frame bending or crouching (`_follows`
+    one of `boxes`): a cut person's height and surface (`person_min_cut_height_m`), the other
+    sizes as a whole person's, a floor, its top rows at least `person_min_bent_top_m` above it
+    and its bottom rows on it."""
+    c = config
+    return (math.isfinite(part.top_m) and c.person_min_bent_top_m <= part.top_m
+            <= c.person_max_top_m and not part.bottom_m > c.person_max_bottom_m
+            and size_rules(part.height_m, part.width_m, part.area_m2, part.fill,
+                           part.extent_m, True, c)
+            and _follows_one(part.box, boxes))
+
+
 def part_score(part: Part, config: PersonConfig,
                prev_box: tuple[int, int, int, int] | None = None) -> float:
     """``log(area) - stability_weight * variation - border_penalty * touches_side``
@@ -255,7 +314,7 @@ def part_score(part: Part, config: PersonConfig,
     """
     score = (math.log(part.n) - config.stability_weight * part.variation
              - config.border_penalty * part.side)
-    if prev_box is not None and _overlap(prev_box, part.box) > 0.3:
+    if prev_box is not None and _overlap(prev_box, part.box) > FOLLOW_OVERLAP:
         score += config.previous_bonus
     return score
 

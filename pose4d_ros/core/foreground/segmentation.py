@@ -24,8 +24,10 @@ from pose4d_ros.core.foreground.config import (
 from pose4d_ros.core.foreground.floor import fit_floor, floor_height
 from pose4d_ros.core.foreground.mask import complete, upsample_mask
 from pose4d_ros.core.foreground.person import (
+    FOLLOW_OVERLAP,
     Part,
     _overlap,
+    bent_rules,
     depth_parts,
     occluded_rules,
     part_score,
@@ -90,8 +92,11 @@ def segment(depth_m: NDArray[np.floating], intrinsics: Intrinsics, *,
     if not parts:
         return not_found((h, w), reason, floor)
     prev_box = previous.box if previous is not None and previous.found else None
+    boxes = [] if prev_box is None else [prev_box]
     scores = [part_score(pt, config, prev_box) for pt in parts]
     ok = [k for k, pt in enumerate(parts) if person_rules(pt, config)]
+    if _unfollowed(boxes, [parts[k] for k in ok]):  # the person of the previous frame bending?
+        ok += [k for k, pt in enumerate(parts) if bent_rules(pt, config, boxes)]
     if not ok:  # a person too near to be seen whole, only when no whole one is in view
         ok = [k for k, pt in enumerate(parts) if person_rules(pt, config, near=True)]
     if not ok:
@@ -161,12 +166,17 @@ def segment_people(depth_m: NDArray[np.floating], intrinsics: Intrinsics, *,
         return [], 0
     floor, above, drop = _floor(depth, intrinsics, config,
                                 previous[0] if len(previous) else None)
-    parts, _ = _parts(depth, intrinsics, config, above, drop)
-    ok = [pt for pt in parts if person_rules(pt, config)]
-    if not ok:
-        ok = [pt for pt in parts if person_rules(pt, config, near=True)]
     boxes = [p.box for p in previous if p.found and p.box is not None]
-    picked = _distinct_people(ok, depth.shape, config, boxes, [])
+    parts, _ = _parts(depth, intrinsics, config, above, drop, boxes=boxes)
+    picked = _distinct_people([pt for pt in parts if person_rules(pt, config)], depth.shape,
+                              config, boxes, [])
+    left = _unfollowed(boxes, [pt for pt, _ in picked])
+    if left:  # people of the previous frame not found by the usual rules, bending?
+        picked += _distinct_people([pt for pt in parts if bent_rules(pt, config, left)],
+                                   depth.shape, config, boxes, picked)
+    if not picked:
+        picked = _distinct_people([pt for pt in parts if person_rules(pt, config, near=True)],
+                                  depth.shape, config, boxes, [])
     first = len(picked)
     if config.second_look and picked and first < max_people and (
             not previous or any(p.behind for p in previous)
@@ -202,6 +212,20 @@ def _distinct_people(parts: list[Part], shape: tuple[int, ...], config: Foregrou
             continue
         out.append((pt, mask))
     return out
+
+
+def _unfollowed(boxes: list[tuple[int, int, int, int]], parts: list[Part]
+                ) -> list[tuple[int, int, int, int]]:
+    """The boxes (the previous frame's people) that none of `parts` overlaps by more than
+    `FOLLOW_OVERLAP`: people who may be bending, and may pass `bent_rules`."""
+    left = []
+    for b in boxes:
+        for pt in parts:
+            if _overlap(b, pt.box) > FOLLOW_OVERLAP:
+                break
+        else:
+            left.append(b)
+    return left
 
 
 def _gone_beside(previous: list[ForegroundResult] | tuple[ForegroundResult, ...],
@@ -331,20 +355,24 @@ def _examine(depth: NDArray[np.float32], intrinsics: Intrinsics, config: Foregro
     Returns the floor plane (or None), the parts, and the reason when there are none.
     """
     floor, above, drop = _floor(depth, intrinsics, config, previous)
-    return (floor, *_parts(depth, intrinsics, config, above, drop))
+    boxes = [previous.box] if previous is not None and previous.found else []
+    return (floor, *_parts(depth, intrinsics, config, above, drop, boxes=boxes))
 
 
 def _parts(depth: NDArray[np.float32], intrinsics: Intrinsics, config: ForegroundConfig,
            above: NDArray[np.float32] | None, drop: NDArray[np.bool_] | None, *,
-           occluded: bool = False) -> tuple[list[Part], str]:
+           occluded: bool = False, boxes: list[tuple[int, int, int, int]] | None = None
+           ) -> tuple[list[Part], str]:
     """The stable regions of `depth` without the pixels `drop` and their depth parts
-    (`depth_parts`, `occluded` passed on), and the reason when there are none."""
+    (`depth_parts`, `occluded` passed on; `boxes`: the previous frame's people, who may
+    bend, `bent_rules`), and the reason when there are none."""
     g = depth_to_levels(depth, config=config, drop=drop)
     regions = stable_regions(g, config)
     if regions.stable.size == 0:
         return [], REASON_NO_REGION
-    order = person_sized(regions, intrinsics, config)
+    boxes = boxes or []
+    order = person_sized(regions, intrinsics, config, boxes)
     if order.size == 0:
         return [], REASON_NO_PERSON
-    return depth_parts(g, regions, order, above, intrinsics, config,
-                       occluded=occluded), REASON_NO_PERSON
+    return depth_parts(g, regions, order, above, intrinsics, config, occluded=occluded,
+                       boxes=boxes), REASON_NO_PERSON
