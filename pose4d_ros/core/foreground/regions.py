@@ -33,9 +33,10 @@ def depth_to_levels(depth_m: NDArray[np.floating], *,
     (H, W) uint8: ``255 - round(254 (z - near) / (far - near))`` for z in [near, far], else 0.
     """
     scale = np.float32(254.0 / (config.depth_far_m - config.depth_near_m))
-    with np.errstate(invalid='ignore'):
-        g = np.float32(255.5) - (depth_m - np.float32(config.depth_near_m)) * scale
-        valid = (g >= 1.0) & (g < 256.0)
+    # no np.errstate here or below (five Python-level calls each, a frame): NaN compares
+    # False without a warning (numpy 2), and no operation here makes a NaN of numbers
+    g = np.float32(255.5) - (depth_m - np.float32(config.depth_near_m)) * scale
+    valid = (g >= 1.0) & (g < 256.0)
     if drop is not None:
         valid &= ~drop
     return np.where(valid, g, 0).astype(np.uint8)
@@ -239,7 +240,6 @@ def stable_regions(g: NDArray[np.uint8], config: RegionConfig) -> StableRegions:
     var = variation(level, size, parent, config.mser_delta,
                     max(config.mser_min_area_px // (st * st), 1))
     area_px = size.astype(np.float64) * (st * st)
-    with np.errstate(invalid='ignore'):
-        stable = (var <= config.mser_max_variation) & (area_px <= config.max_region_area_px)
+    stable = (var <= config.mser_max_variation) & (area_px <= config.max_region_area_px)
     return StableRegions((gs.shape[0], gs.shape[1]), st, level, size, x0, y0, x1, y1, gsum, seed,
                          var, area_px, np.flatnonzero(stable))

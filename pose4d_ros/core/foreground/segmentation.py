@@ -342,8 +342,7 @@ def _floor(depth: NDArray[np.float32], intrinsics: Intrinsics, config: Foregroun
     if floor is None:
         return None, None, None
     above = floor_height(depth, intrinsics, floor)
-    with np.errstate(invalid='ignore'):
-        drop = above < config.floor_tolerance_m
+    drop = above < config.floor_tolerance_m  # NaN (no reading) compares False, unwarned
     return floor, above, drop
 
 
