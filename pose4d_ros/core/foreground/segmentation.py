@@ -4,6 +4,7 @@ at the working resolution."""
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from dataclasses import replace
 
 import cv2
@@ -88,11 +89,11 @@ def segment(depth_m: NDArray[np.floating], intrinsics: Intrinsics, *,
     if not valid.any():
         return not_found((h, w), REASON_NO_DEPTH)
 
-    floor, parts, reason = _examine(depth, intrinsics, config, previous)
-    if not parts:
-        return not_found((h, w), reason, floor)
     prev_box = previous.box if previous is not None and previous.found else None
     boxes = [] if prev_box is None else [prev_box]
+    floor, parts, reason = _examine(depth, intrinsics, config, previous, boxes)
+    if not parts:
+        return not_found((h, w), reason, floor)
     scores = [part_score(pt, config, prev_box) for pt in parts]
     ok = [k for k, pt in enumerate(parts) if person_rules(pt, config)]
     if _unfollowed(boxes, [parts[k] for k in ok]):  # the person of the previous frame bending?
@@ -347,20 +348,20 @@ def _floor(depth: NDArray[np.float32], intrinsics: Intrinsics, config: Foregroun
 
 
 def _examine(depth: NDArray[np.float32], intrinsics: Intrinsics, config: ForegroundConfig,
-             previous: ForegroundResult | None
+             previous: ForegroundResult | None, boxes: Sequence[tuple[int, int, int, int]]
              ) -> tuple[NDArray[np.float64] | None, list[Part], str]:
-    """Floor, stable regions and their depth parts (the candidates `segment` chooses from).
+    """Floor, stable regions and their depth parts (the candidates `segment` chooses from;
+    `boxes`: the previous person's, `_parts`).
 
     Returns the floor plane (or None), the parts, and the reason when there are none.
     """
     floor, above, drop = _floor(depth, intrinsics, config, previous)
-    boxes = [previous.box] if previous is not None and previous.found else []
     return (floor, *_parts(depth, intrinsics, config, above, drop, boxes=boxes))
 
 
 def _parts(depth: NDArray[np.float32], intrinsics: Intrinsics, config: ForegroundConfig,
            above: NDArray[np.float32] | None, drop: NDArray[np.bool_] | None, *,
-           occluded: bool = False, boxes: list[tuple[int, int, int, int]] | None = None
+           occluded: bool = False, boxes: Sequence[tuple[int, int, int, int]] = ()
            ) -> tuple[list[Part], str]:
     """The stable regions of `depth` without the pixels `drop` and their depth parts
     (`depth_parts`, `occluded` passed on; `boxes`: the previous frame's people, who may
@@ -369,7 +370,6 @@ def _parts(depth: NDArray[np.float32], intrinsics: Intrinsics, config: Foregroun
     regions = stable_regions(g, config)
     if regions.stable.size == 0:
         return [], REASON_NO_REGION
-    boxes = boxes or []
     order = person_sized(regions, intrinsics, config, boxes)
     if order.size == 0:
         return [], REASON_NO_PERSON
