@@ -304,6 +304,30 @@ def test_a_person_hidden_behind_a_nearer_one_keeps_their_last_pose():
     assert torso(back)[0][0] == pytest.approx(0.8, abs=0.03)
 
 
+def test_a_person_hidden_behind_another_longer_than_max_unseen_s_keeps_their_id():
+    """Behind the near person for 1.5 s (45 frames): longer than `max_unseen_s` (1 s), which
+    ends a track unseen in the open, within `max_hidden_s` (2 s): they come back with their
+    id, and no new one is born."""
+    tr = tracker()
+    for k in range(10):
+        out = tr.step([person(0.0, z=2.2), person(-0.2 + 0.03 * k, z=3.4)], k * DT, INTR)
+    far = max(out, key=lambda t: torso(t)[0][2]).track_id
+    for k in range(10, 55):
+        assert far in [t.track_id for t in tr.step([person(0.0, z=2.2)], k * DT, INTR)]
+    out = tr.step([person(0.0, z=2.2), person(0.8, z=3.4)], 55 * DT, INTR)
+    assert sorted(t.track_id for t in out) == sorted([far, 3 - far])
+    assert tr.born == [] and tr.ended == []
+    # and past `max_hidden_s` the track ends
+    tr2 = tracker(max_hidden_s=1.0)
+    for k in range(10):
+        tr2.step([person(0.0, z=2.2), person(-0.2 + 0.03 * k, z=3.4)], k * DT, INTR)
+    ended = []
+    for k in range(10, 55):
+        tr2.step([person(0.0, z=2.2)], k * DT, INTR)
+        ended += tr2.ended
+    assert ended == [far]
+
+
 def test_a_pose_held_longer_than_max_held_s_is_kept_but_not_published():
     """Hidden 25 frames: the far person's last pose is published for `max_held_s` (0.31 s
     here: the first 10 held frames), then not, and they come back with their id."""

@@ -153,13 +153,17 @@ SWEEPS: dict[str, dict[str, tuple[str, ...]]] = {
     'bent_top': {'0.5': (), **{str(t): (f'foreground.person_min_bent_top_m={t}',)
                                for t in (0.4, 0.7)},
                  'off': ('foreground.person_min_bent_top_m=inf',)},
+    # how long a person held behind a nearer one keeps their track unseen
+    # (TrackingConfig.max_hidden_s; '1': max_unseen_s, the tracker before)
+    'hidden': {'2': (), **{str(s): (f'tracking.max_hidden_s={s}',) for s in (1, 1.5, 3)}},
 }
 
 
 SWEEP_SETS = {'cut_height': ('valid30_near',), 'person_scale': ('valid30', 'valid30_msr'),
               'floor_below': ('valid30', 'valid30_msr', 'valid30_near'),
               'tracking_rules': ('valid60_people2', 'valid60_people3', 'valid30_people2b'),
-              'bent_top': ('valid30_msr', 'valid60_people2')}
+              'bent_top': ('valid30_msr', 'valid60_people2'),
+              'hidden': ('valid60_people2', 'valid60_people3', 'valid30_people2b')}
 # the shipped settings' run on a set, made anyway (the margin sweep's, valid30_msr's own)
 SHIPPED_RUNS = {'valid30': f'margin_{DEFAULT_MARGIN}.json', 'valid30_msr': 'valid30_msr.json'}
 

@@ -247,7 +247,9 @@ SWEEP_TITLES = {
                       'a held track takes a detection only where it comes out from behind '
                       'the nearer person, whatever its score)',
     'bent_top': 'A person of the previous frame bending or crouching '
-                '(`ForegroundConfig.person_min_bent_top_m`, m; off: the usual rules only)'}
+                '(`ForegroundConfig.person_min_bent_top_m`, m; off: the usual rules only)',
+    'hidden': 'How long a person held behind a nearer one keeps their track unseen '
+              '(`TrackingConfig.max_hidden_s`, s; 1: `max_unseen_s`, the tracker before)'}
 
 
 def sweeps_section(v: dict) -> list[str]:

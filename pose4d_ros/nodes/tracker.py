@@ -20,7 +20,7 @@ Publications (with the input header)
 Parameters (config/tracker.yaml)
     tracker.kind, tracker.coupling, tracker.process_noise, tracker.measurement_noise_px,
     tracker.gate_chi2, tracker.max_missed_frames, tracker.max_dt_s, tracker.depth_std_m,
-    tracker.confirm_frames, tracker.max_unseen_s, tracker.max_held_s
+    tracker.confirm_frames, tracker.max_unseen_s, tracker.max_hidden_s, tracker.max_held_s
 """
 
 from __future__ import annotations
@@ -69,6 +69,9 @@ PARAMS = (
     Param('tracker.max_unseen_s', TrackingConfig.max_unseen_s, 'A person unseen this long '
           'ends their track (till then it is predicted), seconds.', range=(0.01, 60.0),
           live=True),
+    Param('tracker.max_hidden_s', TrackingConfig.max_hidden_s, 'A person hidden behind a '
+          'nearer one ends their track after this long unseen, seconds.', range=(0.01, 60.0),
+          live=True),
     Param('tracker.max_held_s', 0.0, 'A person hidden behind another is published at their '
           'last pose this long at most, seconds (then kept unpublished till seen again or '
           'ended); 0: till then.', range=(0.0, 60.0), live=True),
@@ -104,6 +107,7 @@ def people_config(p: dict[str, Any]) -> TrackingConfig:
                           quiet_frames=p.get('detector.quiet_frames', TrackingConfig.quiet_frames),
                           confirm_frames=p['tracker.confirm_frames'],
                           max_unseen_s=p['tracker.max_unseen_s'],
+                          max_hidden_s=p['tracker.max_hidden_s'],
                           max_held_s=p['tracker.max_held_s'] or math.inf)
 
 
