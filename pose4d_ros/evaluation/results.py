@@ -155,7 +155,7 @@ SWEEPS: dict[str, dict[str, tuple[str, ...]]] = {
                  'off': ('foreground.person_min_bent_top_m=inf',)},
     # how long a person held behind a nearer one keeps their track unseen
     # (TrackingConfig.max_hidden_s; '1': max_unseen_s, the tracker before)
-    'hidden': {'2': (), **{str(s): (f'tracking.max_hidden_s={s}',) for s in (1, 1.5, 3)}},
+    'hidden': {'2': (), **{str(s): (f'tracking.max_hidden_s={s}',) for s in (1, 3)}},
 }
 
 
