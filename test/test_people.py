@@ -308,10 +308,14 @@ def test_a_person_hidden_behind_another_longer_than_max_unseen_s_keeps_their_id(
     """Behind the near person for 1.5 s (45 frames): longer than `max_unseen_s` (1 s), which
     ends a track unseen in the open, within `max_hidden_s` (2 s): they come back with their
     id, and no new one is born."""
+    def far_walks_behind(tr: PeopleTracker) -> int:
+        """Ten frames of two people, the far one walking towards the near one: its id."""
+        for k in range(10):
+            out = tr.step([person(0.0, z=2.2), person(-0.2 + 0.03 * k, z=3.4)], k * DT, INTR)
+        return max(out, key=lambda t: torso(t)[0][2]).track_id
+
     tr = tracker()
-    for k in range(10):
-        out = tr.step([person(0.0, z=2.2), person(-0.2 + 0.03 * k, z=3.4)], k * DT, INTR)
-    far = max(out, key=lambda t: torso(t)[0][2]).track_id
+    far = far_walks_behind(tr)
     for k in range(10, 55):
         assert far in [t.track_id for t in tr.step([person(0.0, z=2.2)], k * DT, INTR)]
     out = tr.step([person(0.0, z=2.2), person(0.8, z=3.4)], 55 * DT, INTR)
@@ -319,8 +323,7 @@ def test_a_person_hidden_behind_another_longer_than_max_unseen_s_keeps_their_id(
     assert tr.born == [] and tr.ended == []
     # and past `max_hidden_s` the track ends
     tr2 = tracker(max_hidden_s=1.0)
-    for k in range(10):
-        tr2.step([person(0.0, z=2.2), person(-0.2 + 0.03 * k, z=3.4)], k * DT, INTR)
+    assert far_walks_behind(tr2) == far
     ended = []
     for k in range(10, 55):
         tr2.step([person(0.0, z=2.2)], k * DT, INTR)

@@ -110,7 +110,7 @@ class TrackingConfig:
         scores over it, or moves.
     max_held_s : a person hidden behind another is published at their last pose (held, every
         joint TRACKED) for at most this long, then their track is kept unpublished until they
-        are seen again (same id) or it ends (`max_unseen_s`); inf (the default): held until
+        are seen again (same id) or it ends (`max_hidden_s`); inf (the default): held until
         then. A pose held long is often where nobody is (the person moves on behind the
         other), but not limiting it was chosen on validation by the criterion of the settings
         above, mean MOTA (`pose4d eval DIR --model rgbd_14 --max-people 4 --config
