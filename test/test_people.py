@@ -219,6 +219,38 @@ def test_work_is_bounded_by_max_people():
     assert len(detector.slots) == 4
 
 
+def test_a_persons_detector_state_lives_as_long_as_their_track():
+    """A person gone from the foreground (hidden behind a nearer one) comes back to their own
+    detector state (person scale, arm prior) within `max_hidden_s`, as their track does; gone
+    longer, they get a new one."""
+    from pose4d_ros.core.foreground import ForegroundResult
+    from pose4d_ros.core.people import PeopleDetector
+
+    made = []
+
+    class Stage:
+        def __init__(self):
+            made.append(self)
+
+        def step(self, color, depth, intrinsics, *, mask, stamp_s, blanked):
+            return JointSet.missing(PARTS_10.names).with_(score=12.0)
+
+    color = np.zeros((INTR.height, INTR.width, 3), np.uint8)
+    depth = np.full((INTR.height, INTR.width), 3.0, np.float32)
+    mask = np.zeros(depth.shape, bool)
+    mask[50:200, 100:140] = True
+    person = ForegroundResult(mask=mask, box=(100, 50, 140, 200), depth_m=3.0, found=True)
+    cfg = TrackingConfig(max_unseen_s=1.0, max_hidden_s=2.0)
+    detector = PeopleDetector(Stage, cfg)
+    detector.step(color, depth, INTR, [person], stamp_s=0.0)
+    detector.step(color, depth, INTR, [], stamp_s=1.5)
+    detector.step(color, depth, INTR, [person], stamp_s=1.5 + DT)
+    assert len(made) == 1
+    detector.step(color, depth, INTR, [], stamp_s=4.0)
+    detector.step(color, depth, INTR, [person], stamp_s=4.0 + DT)
+    assert len(made) == 2
+
+
 def test_a_still_region_that_scored_low_keeps_its_detection_a_few_frames():
     """`quiet_frames`: a region scoring under the birth score that has not moved is searched
     every (quiet_frames + 1)-th frame; a person (scoring over it), or a region that moves by

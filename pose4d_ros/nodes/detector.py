@@ -13,8 +13,9 @@ Subscriptions
     pose4d/foreground/mask (sensor_msgs/Image, mono8 labels, one value > 127 per person)
     camera/color/camera_info (sensor_msgs/CameraInfo; the latest)
 One search per person of the mask (its labels, `core.people.people_from_labels`), each
-person with their own detector state (`core.people.PeopleDetector`), at most
-`detector.max_people` a frame.
+person with their own detector state (`core.people.PeopleDetector`; kept while a person is
+out of the mask as long as the tracker's defaults keep their track, `TrackingConfig.max_hidden_s`),
+at most `detector.max_people` a frame.
 
 Publications (input header)
     pose4d/parts/people (pose4d_msgs/SkeletonArray: every person's parts, DETECTED or MISSING,
