@@ -48,6 +48,39 @@ def test_left_and_right_as_utkinect(tmp_path: Path) -> None:
     assert (optical[:, J['left_shoulder'], 0] > optical[:, J['right_shoulder'], 0]).all()
 
 
+def _swapped(sdk: np.ndarray, frames, pairs) -> np.ndarray:
+    out = sdk.copy()
+    for left, right in pairs:
+        out[frames, J[left]], out[frames, J[right]] = sdk[frames, J[right]], sdk[frames, J[left]]
+    return out
+
+
+def test_swapped_leg_labels_are_put_back(tmp_path: Path) -> None:
+    """Whole legs swapped (knees, ankles, feet on the wrong side of the hips) and shins swapped
+    (ankles and feet crossed, knees apart), as the recording's tracker left some files: read
+    back as recorded with repair=False, put back by default; legs merely close together or
+    crossed by less than the thresholds stay as they are."""
+    sdk = write_msr(tmp_path, 'a05_s02_e01', frames=12)
+    bad = _swapped(sdk, [2, 3, 4], msr.LEG_PAIRS)
+    bad = _swapped(bad, [6, 7], msr.LEG_PAIRS[1:])
+    # frame 9: feet a little crossed (a quarter of a hip width), not a swap
+    hips = sdk[9, J['left_hip']] - sdk[9, J['right_hip']]
+    for name in ('ankle', 'foot'):   # each moved 0.625 hip widths across: 1 -> -0.25
+        bad[9, J[f'left_{name}']] -= 0.625 * hips
+        bad[9, J[f'right_{name}']] += 0.625 * hips
+    assert msr._across(bad, msr.LEG_PAIRS[1])[9] == pytest.approx(-0.25)
+    path = tmp_path / 'a05_s02_e01_skeleton3D.txt'
+    lines = [f'{x:.6f} {y:.6f} {z:.6f} 1.000000'
+             for f in range(len(bad)) for x, y, z in (bad[f, J[n]] for n in msr.MSR_JOINTS)]
+    path.write_text('\n'.join(lines) + '\n')
+    assert_allclose(msr.read_sequence(path, repair=False).joints, bad, atol=1e-6)
+    seq = msr.read_sequence(path)
+    assert_allclose(np.delete(seq.joints, 9, axis=0), np.delete(sdk, 9, axis=0), atol=1e-6)
+    assert_allclose(seq.joints[9], bad[9], atol=1e-6)
+    _, _, legs, shins = msr.repair_legs(bad, np.ones(bad.shape[:2]))
+    assert np.flatnonzero(legs).tolist() == [2, 3, 4] and np.flatnonzero(shins).tolist() == [6, 7]
+
+
 @pytest.mark.parametrize('content, message', [
     ('1 2 3\n' * 20, 'expected 4 fields'),
     ('1 2 3 x\n' * 20, 'non-numeric'),

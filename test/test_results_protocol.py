@@ -4,6 +4,8 @@ validation sets only, reported tables from test sets only (nothing is run here).
 from __future__ import annotations
 
 import re
+import shlex
+from pathlib import Path
 
 import pytest
 
@@ -90,3 +92,27 @@ def test_config_overrides_are_typed_and_checked() -> None:
             overrides.parse([bad])
     with pytest.raises(ValueError, match='limb_rejected_frames'):
         overrides.apply(SlqeConfig(), overrides.parse(['slqe.limb_rejected_frames=-1']), 'slqe')
+
+
+def test_a_set_is_made_again_when_its_motion_is_read_differently(tmp_path, monkeypatch):
+    """An MSR Action3D set rendered before the reader put swapped legs back (its stamp holds
+    the command alone) is made again; one made by today's reader is reused, as is a UTKinect
+    set made by the same command."""
+    made = []
+
+    def fake_run(cmd):
+        out = cmd[cmd.index('--out') + 1]
+        made.append(out)
+        Path(out).mkdir()
+        return 0.0
+
+    monkeypatch.setattr(r, 'DATA', tmp_path)
+    monkeypatch.setattr(r, '_run', fake_run)
+    for name in ('valid30_msr', 'valid30'):
+        (tmp_path / name).mkdir()
+        cmd = r.SETS[name].command()
+        (tmp_path / name / r.STAMP).write_text(shlex.join(cmd) + '\n')
+    assert r.make_set(r.SETS['valid30_msr']) == 'made'
+    assert r.make_set(r.SETS['valid30']) == 'reused'
+    assert r.make_set(r.SETS['valid30_msr']) == 'reused'
+    assert made == [str(tmp_path / 'valid30_msr')]

@@ -14,6 +14,17 @@ vector crossed with the hips-to-neck vector points away from the camera in 98 % 
 as it does in 99.8 % of UTKinect's s01_e01; the rest are bends, where that vector lies flat).
 Frames with a joint at exactly (0, 0, 0), a non-finite value or z <= 0 are dropped; gaps are
 bridged by the interpolation, and `pieces` splits a sequence at gaps too long to bridge.
+
+The tracker that recorded the files swapped the legs' labels in some of them (`repair_legs`, on
+by default in `read_sequence`): along the hips' left-to-right axis, s02's knees and feet lie on
+the other side in 93 % of the frames of its actions 1-12 (the whole legs swapped), and s03's
+ankles and feet are crossed by over half a hip width, knees apart, in 28 % of the frames of its
+actions 1-12 (both kinds in 7 % each of its actions 13-20). A body posed on those joints has its
+thighs or shins crossed in an X while punching or waving: a pose the recording's people did not
+make, and the ground truth of a render that shows it. Each other subject and action group has
+such frames in at most 3.8 % (s01's actions 13-20; s07 and s08: 0.1 % of actions 1-12, 0.8 and
+1.4 % of 13-20). Counts per subject and action group:
+`python -c "from pose4d_ros.datasets.msraction3d import leg_swap_table; leg_swap_table(DIR)"`.
 """
 
 from __future__ import annotations
@@ -95,8 +106,9 @@ def parse_name(path: str | Path) -> tuple[str, int, int, int]:
     return match.group(1), int(match.group(2)), int(match.group(3)), int(match.group(4))
 
 
-def read_sequence(path: str | Path) -> Sequence:
-    """Read one `aAA_sSS_eEE_skeleton3D.txt` file.
+def read_sequence(path: str | Path, *, repair: bool = True) -> Sequence:
+    """Read one `aAA_sSS_eEE_skeleton3D.txt` file, its swapped legs put back (`repair_legs`;
+    `repair=False`: the joints as recorded).
 
     An empty file gives a sequence of no frames (the dataset has some: callers skip them).
     Raises `ValueError` naming the file (and line) for a bad name, a line without 4 numbers,
@@ -112,7 +124,79 @@ def read_sequence(path: str | Path) -> Sequence:
     good = (np.isfinite(data).all(axis=(1, 2)) & ~np.all(xyz == 0.0, axis=2).any(axis=1)
             & (xyz[..., 2] > 0).all(axis=1))
     frames = np.flatnonzero(good).astype(np.int64)
-    return Sequence(name, frames, xyz[good].copy(), data[good, :, 3].copy())
+    joints, conf = xyz[good].copy(), data[good, :, 3].copy()
+    if repair:
+        joints, conf = repair_legs(joints, conf)[:2]
+    return Sequence(name, frames, joints, conf)
+
+
+# Left and right joints of a leg below the hip, and how far across (hip widths, along the hips'
+# left-to-right axis) a pair must lie on the wrong side to be taken for swapped labels
+LEG_PAIRS = (('left_knee', 'right_knee'), ('left_ankle', 'right_ankle'),
+             ('left_foot', 'right_foot'))
+SWAPPED_LEGS = 0.3    # knees and feet both crossed this far: the whole legs swapped
+SWAPPED_SHINS = 0.5   # ankles crossed this far, knees not: the shins' ends swapped
+
+
+def _across(joints: NDArray[np.float64], pair: tuple[str, str]) -> NDArray[np.float64]:
+    """(F,) left minus right joint of `pair` along the hips' left-to-right axis, in hip widths
+    (negative: crossed)."""
+    lh, rh = (UTKINECT_JOINTS.index(n) for n in ('left_hip', 'right_hip'))
+    axis = joints[:, lh] - joints[:, rh]
+    width2 = np.maximum(np.einsum('ij,ij->i', axis, axis), 1e-12)
+    left, right = (UTKINECT_JOINTS.index(n) for n in pair)
+    return np.einsum('ij,ij->i', joints[:, left] - joints[:, right], axis) / width2
+
+
+def _swap(joints: NDArray, frames: NDArray[np.bool_], pairs: tuple[tuple[str, str], ...]) -> None:
+    for left, right in pairs:
+        i, j = UTKINECT_JOINTS.index(left), UTKINECT_JOINTS.index(right)
+        joints[frames, i], joints[frames, j] = joints[frames, j].copy(), joints[frames, i].copy()
+
+
+def repair_legs(joints: NDArray[np.float64], confidence: NDArray[np.float64]
+                ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.bool_],
+                           NDArray[np.bool_]]:
+    """Put back leg labels the recording's tracker swapped, frame by frame.
+
+    A frame whose knees and feet both lie over `SWAPPED_LEGS` hip widths on the wrong side of
+    each other (along the hips' left-to-right axis) has its knees, ankles and feet swapped;
+    then a frame whose ankles are crossed by over `SWAPPED_SHINS` hip widths while its knees
+    are not has its ankles and feet swapped. Their confidences follow.
+
+    Returns
+    -------
+    joints, confidence : repaired copies.
+    legs, shins : (F,) bool, the frames of each repair.
+    """
+    joints, confidence = joints.copy(), confidence.copy()
+    legs = ((_across(joints, LEG_PAIRS[0]) < -SWAPPED_LEGS)
+            & (_across(joints, LEG_PAIRS[2]) < -SWAPPED_LEGS))
+    for a in (joints, confidence[..., None]):
+        _swap(a, legs, LEG_PAIRS)
+    shins = ((_across(joints, LEG_PAIRS[1]) < -SWAPPED_SHINS)
+             & (_across(joints, LEG_PAIRS[0]) > 0))
+    for a in (joints, confidence[..., None]):
+        _swap(a, shins, LEG_PAIRS[1:])
+    return joints, confidence, legs, shins
+
+
+def leg_swap_table(directory: str | Path) -> dict[str, tuple[int, int, int]]:
+    """Per subject and action group ('s02 a01-12'): frames, frames of swapped legs and of
+    swapped shins (`repair_legs`) over a directory's files; printed as a table."""
+    table: dict[str, list[int]] = {}
+    for path in list_sequences(directory):
+        seq = read_sequence(path, repair=False)
+        _, legs, shins = repair_legs(seq.joints, seq.confidence)[1:]
+        key = f's{seq.subject:02d} a{"01-12" if seq.action <= 12 else "13-20"}'
+        row = table.setdefault(key, [0, 0, 0])
+        row[0] += len(legs)
+        row[1] += int(legs.sum())
+        row[2] += int(shins.sum())
+    for key, (n, legs, shins) in sorted(table.items()):
+        print(f'{key}  {n:5d} frames  legs swapped {100 * legs / max(n, 1):5.1f} %  '
+              f'shins swapped {100 * shins / max(n, 1):5.1f} %')
+    return {k: tuple(v) for k, v in table.items()}
 
 
 def list_sequences(directory: str | Path) -> list[Path]:

@@ -313,18 +313,25 @@ def _run(cmd: Sequence[str]) -> float:
     return time.monotonic() - t0
 
 
+# What a set's renders depend on beyond its command (its stamp's comment): a set made before
+# a change of its motion's reading is made again
+MOTION_REVISION = {'msraction3d': '  # legs repaired (datasets.msraction3d.repair_legs)'}
+
+
 def make_set(ds: DataSet, utkinect: str = UTKINECT, msraction3d: str = MSRACTION3D) -> str:
-    """Make `ds` unless a set made by the same command is there; what was done."""
+    """Make `ds` unless a set made by the same command (and motion revision) is there; what
+    was done."""
     cmd = ds.command(utkinect, msraction3d)
+    made_by = shlex.join(cmd) + MOTION_REVISION.get(ds.motion, '')
     out = DATA / ds.name
     stamp = out / STAMP
-    if stamp.exists() and stamp.read_text().strip() == shlex.join(cmd):
+    if stamp.exists() and stamp.read_text().strip() == made_by:
         return 'reused'
     if out.exists():
         import shutil
         shutil.rmtree(out)
     _run(cmd)
-    stamp.write_text(shlex.join(cmd) + '\n')
+    stamp.write_text(made_by + '\n')
     return 'made'
 
 
