@@ -45,7 +45,7 @@ def test_demo_runs_the_graph_and_scores_it(tmp_path):
     scores = {'pck', 'pck@0.2', 'apk', 'error_px', 'error_mm', 'within_10cm'}
     assert set(results['graph']) == scores
     for table in results['offline'].values():
-        assert set(table) == scores | {'cpu_ms'}
+        assert set(table) == scores | {'cpu_ms', 'search_cells'}
     assert set(results['offline']) == {'rgbd', 'rgbd_t', 'rgbd_kf', 'rgbd_kf_ik'}
     assert {'elbow', 'knee'} <= set(results['graph']['pck'])  # IK completes them
     overlay = cv2.imread(str(tmp_path / 'overlay.png'))

@@ -70,8 +70,11 @@ def test_eval_writes_the_table_json(tiny_set: Path, tmp_path: Path, capsys) -> N
     assert list(table['rows']) == ['rgbd', 'rgbd_t', 'rgbd_kf', 'rgbd_kf_ik', 'rgb']
     for name, row in table['rows'].items():
         metrics = METRICS if name == 'rgb' else METRICS_3D
-        assert list(row) == metrics + ['cpu_ms']
+        assert list(row) == metrics + ['cpu_ms', 'search_cells']
         assert 0 < row['cpu_ms']['p50'] <= row['cpu_ms']['p95']
+        # the part model's search work a frame, counted (the same on any machine)
+        work = row['search_cells']
+        assert 0 < work['mean'] <= work['max'] and work['p95'] <= work['max']
         groups = GROUPS_14 if name.endswith('_ik') else GROUPS_10
         for metric in metrics:
             assert list(row[metric]) == groups + (['average7'] if metric.startswith('pck')
@@ -246,8 +249,9 @@ def test_eval_and_bench_with_the_peer_score_it_on_the_same_frames(tiny_set: Path
     table = json.loads(out.read_text())
     assert table['frames'] == 8 and table['peer'] == 'fake 1.0'
     assert list(table['rows']) == ['rgbd', 'rgbd_t', 'rgbd_kf', 'rgbd_kf_ik', 'mediapipe']
-    for row in table['rows'].values():
-        assert list(row) == METRICS_3D + ['cpu_ms']
+    for name, row in table['rows'].items():
+        searched = [] if name == 'mediapipe' else ['search_cells']
+        assert list(row) == METRICS_3D + ['cpu_ms'] + searched
         assert 0 <= row['cpu_ms']['p50'] <= row['cpu_ms']['p95']
     assert list(table['rows']['mediapipe']['pck']) == GROUPS_14 + ['average7']
     assert 'mediapipe' in capsys.readouterr().out

@@ -116,3 +116,21 @@ def test_a_set_is_made_again_when_its_motion_is_read_differently(tmp_path, monke
     assert r.make_set(r.SETS['valid30']) == 'reused'
     assert r.make_set(r.SETS['valid30_msr']) == 'reused'
     assert made == [str(tmp_path / 'valid30_msr')]
+
+
+def test_a_better_value_is_not_chosen_when_it_costs_more_cpu_or_search_work():
+    """`choose_label`: the best value beyond the tie, unless it costs over MAX_CPU_INCREASE
+    more per frame in CPU time or in the search's work (the counted filter positions, which
+    no run's noise moves: a value searching 8 % more passes a CPU p50 that happened to come
+    in low, and is still refused)."""
+    scores = {'shipped': 90.0, 'better': 90.5, 'slightly': 90.05}
+    assert r.choose_label(scores, 'shipped') == 'better'
+    assert r.choose_label(scores, 'shipped', {'shipped': 10.0, 'better': 10.4}) == 'better'
+    assert r.choose_label(scores, 'shipped', {'shipped': 10.0, 'better': 10.6}) == 'shipped'
+    assert r.choose_label(scores, 'shipped', {'shipped': 10.0, 'better': 9.8},
+                          {'shipped': 500.0, 'better': 540.0}) == 'shipped'
+    assert r.choose_label(scores, 'shipped', {'shipped': 10.0, 'better': 9.8},
+                          {'shipped': 500.0, 'better': 520.0}) == 'better'
+    # a run without the count (an older table) is judged by its CPU time alone
+    assert r.choose_label(scores, 'shipped', None, {'shipped': None, 'better': 540.0}) == \
+        'better'

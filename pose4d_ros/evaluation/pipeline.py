@@ -17,7 +17,9 @@ forgets the previous frame, and only the detector's row is given. `peer_rows` ru
 Each row records its CPU time per frame (`cpu_ms`: p50, p95 of this process's CPU time,
 `time.process_time`): the detector's rows the foreground and the detector, `_kf` also the
 tracker, `_kf_ik` all four stages; the peer's is the CPU time of its worker process plus the
-3-D look-up here.
+3-D look-up here. The part model's rows also record the search's work per frame
+(`search_cells`: mean, p95 and max of the filter positions scored, `core.dpm.infer.SearchWork`),
+which no machine's speed or load changes.
 """
 
 from __future__ import annotations
@@ -30,7 +32,7 @@ import numpy as np
 
 from pose4d_ros.core import joints as cj
 from pose4d_ros.core.convnet import PHOTO_SCALES, ConvNet
-from pose4d_ros.core.dpm.infer import SearchConfig
+from pose4d_ros.core.dpm.infer import SearchConfig, SearchWork
 from pose4d_ros.core.dpm.model import PartModel
 from pose4d_ros.core.dpm.scale import ScaleConfig
 from pose4d_ros.core.foreground import ForegroundConfig
@@ -66,15 +68,18 @@ class Row:
     preds: list[JointSet] = field(default_factory=list)
     cpu_ms: list[float] = field(default_factory=list)
     people: list[tuple[JointSet, ...]] = field(default_factory=list)
+    cells: list[int] = field(default_factory=list)
 
     def add(self, pred: JointSet, cpu_s: float,
-            people: tuple[JointSet, ...] | None = None) -> None:
+            people: tuple[JointSet, ...] | None = None, cells: int | None = None) -> None:
         """One frame: the prediction (the primary person's) and, from a several-person
-        pipeline, every person's skeleton."""
+        pipeline, every person's skeleton; `cells`: the part model's search work."""
         self.preds.append(pred)
         self.cpu_ms.append(cpu_s * 1e3)
         if people is not None:
             self.people.append(people)
+        if cells is not None:
+            self.cells.append(cells)
 
     @property
     def no_pose(self) -> int:
@@ -132,11 +137,13 @@ def _pass(frames: Iterable[Frame], model: PartModel, suffixes: tuple[str, ...],
             raise ValueError(f'{f.key}: no depth image for the rgbd model')
         if reset:
             pipeline.reset()
+        cells = SearchWork.cells
         out = pipeline.step(f.color, f.depth_m if depth else None, f.intrinsics,
                             f.stamp_ns * 1e-9)
+        cells = SearchWork.cells - cells
         for s, pred in zip(suffixes, (out.parts, out.tracked, out.skeleton), strict=False):
             rows[s].add(pred, sum(out.cpu_s[stage] for stage in ROW_STAGES[s]),
-                        out.people if people is not None and s == '_kf_ik' else None)
+                        out.people if people is not None and s == '_kf_ik' else None, cells)
     return rows
 
 
@@ -195,6 +202,11 @@ def score_rows(rows: dict[str, Row], frames: Sequence[Frame]
             tables[name] = score_groups(names=names, **row_arrays(name, row, frames)[1])
         if row.cpu_ms:
             tables[name]['cpu_ms'] = ms_stats(row.cpu_ms)
+        if row.cells:
+            cells = np.asarray(row.cells, np.float64)
+            tables[name]['search_cells'] = {'mean': round(float(cells.mean()), 1),
+                                            'p95': float(np.percentile(cells, 95)),
+                                            'max': int(cells.max())}
     return tables
 
 

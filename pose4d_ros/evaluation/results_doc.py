@@ -208,10 +208,12 @@ def validation_section(results: Path, jobs: dict) -> list[str]:
     out = ['## Settings chosen on validation', '',
            f"Search margin (`SearchConfig.margin`) on `{v['set_margin']}` "
            '(`rgbd_kf_ik`):', '',
-           '| margin | average7 | within 10 cm | `rgbd_t` average7 | CPU ms p50 |',
-           '|---|---|---|---|---|']
+           '| margin | average7 | within 10 cm | `rgbd_t` average7 | CPU ms p50 | '
+           'search cells a frame |',
+           '|---|---|---|---|---|---|']
     out += [f"| {k} | {fmt(r['average7'])} | {fmt(r['within_10cm'])} | "
-            f"{fmt(r['rgbd_t_average7'])} | {fmt(r.get('cpu_ms'))} |"
+            f"{fmt(r['rgbd_t_average7'])} | {fmt(r.get('cpu_ms'))} | "
+            f"{fmt(r.get('search_cells'))} |"
             for k, r in v['margin'].items()]
     out += ['', f"Chosen on validation: {v['margin_chosen']} ({rule(v)}).", '']
     out += people_section(v.get('people') or {})
@@ -233,7 +235,8 @@ def rule(v: dict) -> str:
     """How a value is chosen over the shipped one (`results.choose_label`)."""
     return (f"another value only when it beats the shipped one by more than {v.get('tie', 0.1)} "
             f"points of average7 and costs at most {100 * v.get('max_cpu_increase', 0.05):.0f} % "
-            'more CPU per frame')
+            'more per frame, in CPU time (p50) and in the search\'s work (filter positions '
+            'scored)')
 
 
 SWEEP_TITLES = {
@@ -264,12 +267,13 @@ def sweeps_section(v: dict) -> list[str]:
         pooled = ' (frames pooled)' if len(sets) > 1 else ''
         out += [f"{SWEEP_TITLES.get(name, name)} on `{sweep['set']}` (`rgbd_kf_ik`, PCK@0.1"
                 f'{pooled}):', '', '| value | ' + ' | '.join(groups)
-                + ' | average7 | within 10 cm |'
+                + ' | average7 | within 10 cm | CPU ms p50 | search cells a frame |'
                 + ''.join(f' `{d}` average7 |' for d in sets if pooled),
-                '|---|' + '---|' * (len(groups) + 2 + (len(sets) if pooled else 0))]
+                '|---|' + '---|' * (len(groups) + 4 + (len(sets) if pooled else 0))]
         out += [f"| {k}{' (shipped)' if k == sweep['shipped'] else ''} | "
                 + ' | '.join(fmt(x) for x in r['groups'].values())
-                + f" | {fmt(r['average7'])} | {fmt(r['within_10cm'])} |"
+                + f" | {fmt(r['average7'])} | {fmt(r['within_10cm'])} | {fmt(r.get('cpu_ms'))} |"
+                + f" {fmt(r.get('search_cells'))} |"
                 + ''.join(f" {fmt(r['sets'][d]['average7'])} |" for d in sets if pooled)
                 for k, r in values.items()]
         out += ['', f"Chosen on validation: {sweep['chosen']} ({rule(v)}).", '']

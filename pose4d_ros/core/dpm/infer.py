@@ -179,6 +179,15 @@ def arm_limbs(names: tuple[str, ...], parents: tuple[int, ...] | NDArray
     return tuple(limbs)
 
 
+class SearchWork:
+    """The filter positions (cells of the levels searched) scored by every `Detector` of this
+    process: the search's work, which its GEMM and tree DP grow with, counted the same on any
+    machine and under any load. `pose4d eval` records it per frame (`search_cells`), and the
+    validation sweeps' CPU rule reads it beside the CPU time (`evaluation.results`)."""
+
+    cells: int = 0
+
+
 class Detector:
     """A part model ready to run (its arrays prepared once), with its search settings.
 
@@ -357,6 +366,7 @@ class Detector:
             res = score_level(level, self.model, self._arrays)
             if res is None:
                 continue
+            SearchWork.cells += res.root.shape[1] * res.root.shape[2]
             roots = best_roots(res, per_level, threshold, min_dist=2)
             cands.extend(self._poses(res, roots, flags, prior))
         canonical = self.model.canonical_scale_px
