@@ -162,9 +162,12 @@ def test_train_then_eval_and_bench(tiny_set: Path, tmp_path: Path, capsys) -> No
     assert list(calls) == ['foreground', 'detector', 'tracker', 'ik', 'total']
     assert min(calls.values()) > 0
     assert calls['total'] == pytest.approx(sum(list(calls.values())[:4]), abs=0.3)
+    # and the search's work, counted in that pass
+    assert timings['stages']['detector']['search_cells_per_frame'] > 0
     assert timings['people'] == 'one' and 'people_ms' not in timings
     text = capsys.readouterr().out
     assert 'cores' in text and 'BLAS' in text and 'calls' in text
+    assert 'filter positions scored a frame' in text
     # several people: CPU per stage by the number of people tracked in the frame
     assert pose4d_main(['bench', str(tiny_set), '--json', str(bench), '--model', str(model),
                         '--frames', '4', '--warmup', '2', '--people', 'several',

@@ -17,7 +17,10 @@ through a fresh pipeline with a `cProfile` profiler per stage (`FramePipeline.pr
 the timed pass is not disturbed; its total call count over the frames after `--warmup`, per
 frame. Interpreter-bound work (many small numpy calls, Python loops) slows down most on a
 slower core, so the count tells how a stage will fare there (the timings do not: they are this
-machine's). It is deterministic: the same frames give the same count on any machine.
+machine's). It is deterministic: the same frames give the same count on any machine. So is the
+detector's compiled work counted in that pass (`stages.detector.search_cells_per_frame`: the
+filter positions scored a frame, `core.dpm.infer.SearchWork`; the filter GEMM and the tree DP
+grow with it).
 
 Several people (`--people several`, the default for a source with several people's ground
 truth): the stages of `core.people` (`FramePipeline(people=...)`), and `people_ms`: each
@@ -133,8 +136,8 @@ def run(args: argparse.Namespace) -> int:
         timed = time_stages(new_pipeline(), frames, args.warmup, use_depth=use_depth,
                             several=several, after_warmup=lambda: threads.update(
                                 set_blas_threads(args.blas_threads)))
-        calls = count_calls(new_pipeline(), frames, args.warmup, use_depth) if args.calls \
-            else None
+        calls, cells = count_calls(new_pipeline(), frames, args.warmup, use_depth) \
+            if args.calls else (None, None)
         if peer is not None:
             peer_cpu, peer_wall = time_peer(peer, frames, args.warmup)
     finally:
@@ -151,6 +154,7 @@ def run(args: argparse.Namespace) -> int:
     out: dict = {**timed, 'people': 'several' if several else 'one'}
     if calls is not None:
         out['stages'] = {k: {'calls_per_frame': v} for k, v in calls.items()}
+        out['stages']['detector']['search_cells_per_frame'] = cells
     lines = {k: (out['stages_ms'][k], out['wall_ms'][k]) for k in out['stages_ms']}
     if peer is not None:
         out['peer'] = peer.description
@@ -171,6 +175,8 @@ def run(args: argparse.Namespace) -> int:
             print(f'{n:<6} {g["frames"]:>6} ' + ' '.join(
                 f'{g[k]["p50"]:10.2f}' if g[k]['p50'] is not None else f'{"-":>10}'
                 for k in (*STAGES, 'total')))
+    if cells is not None:
+        print(f'detector search: {cells:.1f} filter positions scored a frame (counted)')
     if peer is not None:
         print(f"ours / {peer.name} (CPU p50): {out['ratio_to_peer']:.3f} ({out['peer']})")
     if args.graph:

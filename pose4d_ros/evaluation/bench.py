@@ -10,6 +10,7 @@ import pstats
 import time
 from collections.abc import Callable, Sequence
 
+from pose4d_ros.core.dpm.infer import SearchWork
 from pose4d_ros.core.pipeline import STAGES, FramePipeline
 from pose4d_ros.datasets.frame import Frame
 from pose4d_ros.evaluation.pipeline import ms_stats
@@ -57,19 +58,24 @@ def time_stages(pipeline: FramePipeline, frames: Sequence[Frame], warmup: int, *
 
 
 def count_calls(pipeline: FramePipeline, frames: Sequence[Frame], warmup: int,
-                use_depth: bool) -> dict[str, float]:
+                use_depth: bool) -> tuple[dict[str, float], float]:
     """Python-level calls per frame of each stage and of all of them (`total`): cProfile's
-    total call count over the frames after `warmup`, one profiler per stage."""
+    total call count over the frames after `warmup`, one profiler per stage; and the part
+    model's search work per frame over the same frames (filter positions scored,
+    `core.dpm.infer.SearchWork`). Both are counts: the same on any machine."""
     profilers = {name: cProfile.Profile() for name in STAGES}
     start = min(warmup, len(frames) - 1)
+    cells = 0
     for i, f in enumerate(progress(frames, 'calls')):
         pipeline.profilers = profilers if i >= start else None
+        before = SearchWork.cells
         _step(pipeline, f, use_depth)
+        cells += (SearchWork.cells - before) * (i >= start)
     n = len(frames) - start
     calls = {name: round(pstats.Stats(p).total_calls / n, 1) if p.getstats() else 0.0
              for name, p in profilers.items()}
     calls['total'] = round(sum(calls.values()), 1)
-    return calls
+    return calls, round(cells / n, 1)
 
 
 def time_peer(peer: MediaPipePeer, frames: Sequence[Frame], warmup: int

@@ -190,6 +190,10 @@ def bench_section(results: Path, jobs: dict) -> list[str]:
                        f"{fmt(bench['peer_ms']['p95'])} | "
                        f"{fmt(bench.get('peer_wall_ms', {}).get('p50'))} | |")
             out += ['', f"Ratio ours / MediaPipe (CPU p50): {bench['ratio_to_peer']:.3f}."]
+        cells = calls.get('detector', {}).get('search_cells_per_frame')
+        if cells is not None:
+            out += ['', f'The detector scored {fmt(cells)} filter positions a frame (counted, '
+                        'the same on any machine).']
         out.append('')
     if load(results, 'bench'):
         out += [*commands(jobs.get('bench'))]
