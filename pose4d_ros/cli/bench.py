@@ -27,8 +27,10 @@ truth): the stages of `core.people` (`FramePipeline(people=...)`), and `people_m
 stage's CPU ms (p50, p95) over the frames with 1, 2, 3, ... confirmed people tracked
 (`len(FrameResult.people)`), with their count (`frames`).
 
-With `--peer mediapipe` (`make peer`), MediaPipe Pose then runs on the same frames in the same
-run (its own warm-up first), as a user tracking a video would run it (video mode, one video):
+With `--peer mediapipe` (`make peer`), MediaPipe Pose runs on the same frames in the same run,
+each frame right after our stages took it (a slow moment of the host weighs on both sides
+alike; its warm-up on the same frames as ours), as a user tracking a video would run it (video
+mode, one video):
 `peer_ms` is its worker process's CPU time per frame (every thread of it) plus the 3-D look-up
 (`pose4d_ros.peer`), `peer_wall_ms` the wall time of a frame's round trip to the worker, and
 `ratio_to_peer` = `stages_ms.total.p50 / peer_ms.p50`. CPU time makes the ratio a ratio of
@@ -110,7 +112,7 @@ def run(args: argparse.Namespace) -> int:
     from pose4d_ros.core.people import TrackingConfig
     from pose4d_ros.core.pipeline import STAGES, FramePipeline
     from pose4d_ros.core.stages import DetectorStage
-    from pose4d_ros.evaluation.bench import count_calls, time_peer, time_stages
+    from pose4d_ros.evaluation.bench import count_calls, time_stages
 
     threads = set_blas_threads(args.blas_threads)
     kind = source_kind(args.source)
@@ -135,11 +137,10 @@ def run(args: argparse.Namespace) -> int:
 
         timed = time_stages(new_pipeline(), frames, args.warmup, use_depth=use_depth,
                             several=several, after_warmup=lambda: threads.update(
-                                set_blas_threads(args.blas_threads)))
+                                set_blas_threads(args.blas_threads)), peer=peer)
+        peer_cpu, peer_wall = timed.pop('peer_cpu', None), timed.pop('peer_wall', None)
         calls, cells = count_calls(new_pipeline(), frames, args.warmup, use_depth) \
             if args.calls else (None, None)
-        if peer is not None:
-            peer_cpu, peer_wall = time_peer(peer, frames, args.warmup)
     finally:
         if peer is not None:
             peer.close()

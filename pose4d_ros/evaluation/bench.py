@@ -1,7 +1,7 @@
 """The measurements behind `pose4d bench` (the verb parses, calls these and prints): CPU and wall
-time per stage over frames (`time_stages`), Python-level calls per stage (`count_calls`), the
-peer's cost on the same frames (`time_peer`). The verb's docstring says what each figure
-means."""
+time per stage over frames (`time_stages`, with the peer's cost on the same frames taken frame
+by frame between them), Python-level calls per stage (`count_calls`). The verb's docstring says
+what each figure means."""
 
 from __future__ import annotations
 
@@ -25,17 +25,29 @@ def _step(pipeline: FramePipeline, f: Frame, use_depth: bool):
 
 def time_stages(pipeline: FramePipeline, frames: Sequence[Frame], warmup: int, *,
                 use_depth: bool, several: bool,
-                after_warmup: Callable[[], None] = lambda: None) -> dict:
+                after_warmup: Callable[[], None] = lambda: None,
+                peer: MediaPipePeer | None = None) -> dict:
     """Each stage's CPU and wall ms per frame (and their `total`: one frame through all four)
     over the frames after `warmup` (`after_warmup` is called when the warm-up is over): the
     verb's `stages_ms` and `wall_ms`, and with `several` `people_ms` (CPU ms by the number of
-    people tracked in the frame, with the count of such frames)."""
+    people tracked in the frame, with the count of such frames). With `peer`, the peer takes
+    each frame right after the stages (the frames one video): `peer_cpu` and `peer_wall`, its
+    CPU and wall ms per frame over the same frames. Interleaved frame by frame, a slow moment
+    of the host weighs on both sides of the ratio alike."""
     ms = {clock: {k: [] for k in (*STAGES, 'total')} for clock in ('cpu', 'wall')}
     by_people: dict[int, dict[str, list[float]]] = {}  # people tracked -> stage -> CPU ms
+    peer_cpu: list[float] = []
+    peer_wall: list[float] = []
     for i, f in enumerate(progress(frames, 'bench')):
         if i == min(warmup, len(frames) - 1):
             after_warmup()
         out = _step(pipeline, f, use_depth)
+        if peer is not None:
+            start = time.perf_counter()
+            peer.step(f.color, f.depth_m, f.intrinsics, new_video=i == 0)
+            if i >= warmup:
+                peer_wall.append((time.perf_counter() - start) * 1e3)
+                peer_cpu.append(peer.last_cpu_s * 1e3)
         if i < warmup:
             continue
         for clock, times in (('cpu', out.cpu_s), ('wall', out.wall_s)):
@@ -54,6 +66,8 @@ def time_stages(pipeline: FramePipeline, frames: Sequence[Frame], warmup: int, *
         result['people_ms'] = {str(n): {'frames': len(g['total']),
                                         **{k: ms_stats(v) for k, v in g.items()}}
                                for n, g in sorted(by_people.items())}
+    if peer is not None:
+        result['peer_cpu'], result['peer_wall'] = peer_cpu, peer_wall
     return result
 
 
@@ -76,17 +90,4 @@ def count_calls(pipeline: FramePipeline, frames: Sequence[Frame], warmup: int,
              for name, p in profilers.items()}
     calls['total'] = round(sum(calls.values()), 1)
     return calls, round(cells / n, 1)
-
-
-def time_peer(peer: MediaPipePeer, frames: Sequence[Frame], warmup: int
-              ) -> tuple[list[float], list[float]]:
-    """The peer's CPU and wall ms per frame after `warmup` frames, the frames one video."""
-    cpu, wall = [], []
-    for i, f in enumerate(progress(frames, peer.name)):
-        start = time.perf_counter()
-        peer.step(f.color, f.depth_m, f.intrinsics, new_video=i == 0)
-        if i >= warmup:
-            wall.append((time.perf_counter() - start) * 1e3)
-            cpu.append(peer.last_cpu_s * 1e3)
-    return cpu, wall
 
