@@ -69,12 +69,14 @@ def write_utkinect(directory: Path, frames: int = 90) -> None:
 
 
 def write_msr(directory: Path, name: str, frames: int = 30, *, zero: tuple[int, ...] = (),
-              start: int = 0) -> np.ndarray:
-    """An `aAA_sSS_eEE_skeleton3D.txt` of `synthetic_take` at 15 fps (every other 30 fps frame);
-    frames in `zero` hold zeros. Returns the (frames, 20, 3) Kinect-space joints, UTKinect
-    order."""
+              start: int = 0, joints: np.ndarray | None = None) -> np.ndarray:
+    """An `aAA_sSS_eEE_skeleton3D.txt` of `synthetic_take` at 15 fps (every other 30 fps frame),
+    or of `joints` ((frames, 20, 3) Kinect space, UTKinect order) when given; frames in `zero`
+    hold zeros. Returns the (frames, 20, 3) Kinect-space joints, UTKinect order."""
     directory.mkdir(parents=True, exist_ok=True)
-    sdk = synthetic_take(2 * (frames + start))[2 * start::2] * [-1.0, -1.0, 1.0]
+    sdk = synthetic_take(2 * (frames + start))[2 * start::2] * [-1.0, -1.0, 1.0] \
+        if joints is None else np.asarray(joints, np.float64)
+    frames = len(sdk)
     lines = []
     for f in range(frames):
         for name_j in MSR_JOINTS:

@@ -69,10 +69,8 @@ def test_swapped_leg_labels_are_put_back(tmp_path: Path) -> None:
         bad[9, J[f'left_{name}']] -= 0.625 * hips
         bad[9, J[f'right_{name}']] += 0.625 * hips
     assert msr._across(bad, msr.LEG_PAIRS[1])[9] == pytest.approx(-0.25)
+    write_msr(tmp_path, 'a05_s02_e01', joints=bad)
     path = tmp_path / 'a05_s02_e01_skeleton3D.txt'
-    lines = [f'{x:.6f} {y:.6f} {z:.6f} 1.000000'
-             for f in range(len(bad)) for x, y, z in (bad[f, J[n]] for n in msr.MSR_JOINTS)]
-    path.write_text('\n'.join(lines) + '\n')
     assert_allclose(msr.read_sequence(path, repair=False).joints, bad, atol=1e-6)
     seq = msr.read_sequence(path)
     assert_allclose(np.delete(seq.joints, 9, axis=0), np.delete(sdk, 9, axis=0), atol=1e-6)

@@ -84,7 +84,8 @@ def count_calls(pipeline: FramePipeline, frames: Sequence[Frame], warmup: int,
         pipeline.profilers = profilers if i >= start else None
         before = SearchWork.cells
         _step(pipeline, f, use_depth)
-        cells += (SearchWork.cells - before) * (i >= start)
+        if i >= start:
+            cells += SearchWork.cells - before
     n = len(frames) - start
     calls = {name: round(pstats.Stats(p).total_calls / n, 1) if p.getstats() else 0.0
              for name, p in profilers.items()}
