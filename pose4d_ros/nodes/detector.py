@@ -110,9 +110,9 @@ PARAMS = (
           'most (the best regions of the mask first); more in view are counted on /diagnostics '
           '(people_over_limit).', range=(1, 16), live=True),
     Param('detector.quiet_frames', TrackingConfig.quiet_frames, 'A region that scored under '
-          "the tracker's birth score and has not moved (box within 1 px, depth within 2 cm) "
-          'keeps its last detection this many frames before it is searched again; 0 = every '
-          'region searched every frame.', range=(0, 30), live=True),
+          "the tracker's birth score and has not moved (90 % of its pixels the same, depth "
+          'within 5 cm) keeps its last detection this many frames before it is searched '
+          'again; 0 = every region searched every frame.', range=(0, 30), live=True),
     Param('detector.arm_prior', _S.arm_prior, "Weight of the previous frame's elbows and "
           'wrists (at most 0.25 s old) when each arm is chosen among the few best the part model '
           'allows, per squared person scale of distance; 0 = the part model alone.',
