@@ -3,6 +3,8 @@ association on synthetic detections, and the whole core on rendered two-person f
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 import pytest
 from helpers import BODY, INTR, standing_pose
@@ -249,6 +251,14 @@ def test_a_persons_detector_state_lives_as_long_as_their_track():
     detector.step(color, depth, INTR, [], stamp_s=4.0)
     detector.step(color, depth, INTR, [person], stamp_s=4.0 + DT)
     assert len(made) == 2
+    # the detector node's own lifetime (`detector.keep_unseen_s`) for a tracker set otherwise
+    detector = PeopleDetector(Stage, replace(cfg, detector_keep_s=5.0))
+    detector.step(color, depth, INTR, [person], stamp_s=0.0)
+    detector.step(color, depth, INTR, [], stamp_s=4.5)
+    detector.step(color, depth, INTR, [person], stamp_s=4.5 + DT)
+    assert len(made) == 3
+    with pytest.raises(ValueError, match='detector_keep_s'):
+        TrackingConfig(detector_keep_s=-1.0)
 
 
 def test_a_still_region_that_scored_low_keeps_its_detection_a_few_frames():

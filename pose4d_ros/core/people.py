@@ -121,6 +121,11 @@ class TrackingConfig:
         shipped for a while for its false skeletons; on the held-out sets it removed none and
         cost average7 0.3-1.2: docs/NOTES.md.)
 
+    detector_keep_s : how long a person's detector state (`PeopleDetector`: their person scale,
+        the arm prior) is kept unseen, seconds; 0 (the default): as long as their track can
+        be, the longer of `max_unseen_s` and `max_hidden_s`. The detector node, which does not
+        read the tracker's parameters, sets it (`detector.keep_unseen_s`) to follow a tracker
+        whose lifetimes were changed.
     confirmed_first : the confirmed tracks take their detections first, the tentative ones
         share what is left. In one assignment, a track started the frame before beside a
         confirmed one (a detection that jumped out of the confirmed track's gate for a frame)
@@ -176,6 +181,7 @@ class TrackingConfig:
     quiet_frames: int = 4
     max_held_s: float = math.inf
     max_hidden_s: float = 2.0
+    detector_keep_s: float = 0.0
     confirmed_first: bool = True
     held_continues: bool = True
 
@@ -188,6 +194,8 @@ class TrackingConfig:
                      'occluded_width_m', 'max_held_s', 'max_hidden_s'):
             if not getattr(self, name) > 0:
                 raise ValueError(f'{name} must be > 0, got {getattr(self, name)}')
+        if not self.detector_keep_s >= 0:
+            raise ValueError(f'detector_keep_s must be >= 0, got {self.detector_keep_s}')
         if math.isnan(self.trust_score):
             raise ValueError('trust_score must be a number (inf: only the best region), got nan')
 
@@ -301,7 +309,8 @@ class PeopleDetector:
     ----------
     make : a new `core.pipeline.DetectorStage` (sharing the model) for a new person.
     config : `TrackingConfig` (max_people, max_speed_mps, torso_std_m; a person's state is
-        kept unseen as long as a track can be, the longer of max_unseen_s and max_hidden_s: a
+        kept unseen as long as a track can be, the longer of max_unseen_s and max_hidden_s,
+        or `detector_keep_s`: a
         person held behind a nearer one comes back to their person scale and arm prior, not to
         a new track's three-scale warm-up). Chosen on validation (`pose4d eval data/synth/<set>
         --model rgbd_14 --no-single-frame`, `rgbd_kf_ik` average7, max_unseen_s before):
@@ -348,7 +357,7 @@ class PeopleDetector:
                                         stamp_s=stamp_s, blanked=True)
             slot.depth_m, slot.mask, slot.kept = person.depth_m, person.mask, 0
             out.append(slot.last)
-        keep_s = max(cfg.max_unseen_s, cfg.max_hidden_s)
+        keep_s = cfg.detector_keep_s or max(cfg.max_unseen_s, cfg.max_hidden_s)
         self.slots = [s for s in self.slots if stamp_s - s.seen_s <= keep_s]
         return out
 

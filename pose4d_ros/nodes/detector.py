@@ -14,8 +14,9 @@ Subscriptions
     camera/color/camera_info (sensor_msgs/CameraInfo; the latest)
 One search per person of the mask (its labels, `core.people.people_from_labels`), each
 person with their own detector state (`core.people.PeopleDetector`; kept while a person is
-out of the mask as long as the tracker's defaults keep their track, `TrackingConfig.max_hidden_s`),
-at most `detector.max_people` a frame.
+out of the mask as long as the tracker's defaults keep their track, or `detector.keep_unseen_s`
+for a tracker whose `tracker.max_unseen_s` / `tracker.max_hidden_s` were changed), at most
+`detector.max_people` a frame.
 
 Publications (input header)
     pose4d/parts/people (pose4d_msgs/SkeletonArray: every person's parts, DETECTED or MISSING,
@@ -25,7 +26,7 @@ Publications (input header)
 Parameters (config/detector.yaml)
     detector.model, detector.n_levels, detector.margin, detector.person_scales,
     detector.scale_warm_up_frames, detector.scale_probe_every, detector.min_confidence,
-    detector.max_people, detector.quiet_frames
+    detector.max_people, detector.quiet_frames, detector.keep_unseen_s
     (a part's depth look-up is the model's: `core.lifting.lift_parts`)
 """
 
@@ -113,6 +114,13 @@ PARAMS = (
           "the tracker's birth score and has not moved (90 % of its pixels the same, depth "
           'within 5 cm) keeps its last detection this many frames before it is searched '
           'again; 0 = every region searched every frame.', range=(0, 30), live=True),
+    Param('detector.keep_unseen_s', TrackingConfig.detector_keep_s, "How long a person's "
+          'detector state (their person scale, the arm prior) is kept while they are unseen, '
+          'seconds: a person back within it is searched as before, later as a new track (three '
+          'person scales). 0 = as long as the tracker keeps a track by default (the longer of '
+          'tracker.max_unseen_s and tracker.max_hidden_s; in the pipeline node, of their '
+          'values); set it to match when those are changed on the tracker node.',
+          range=(0.0, 60.0), live=True),
     Param('detector.arm_prior', _S.arm_prior, "Weight of the previous frame's elbows and "
           'wrists (at most 0.25 s old) when each arm is chosen among the few best the part model '
           'allows, per squared person scale of distance; 0 = the part model alone.',
@@ -143,7 +151,8 @@ def detector_stage(p: dict[str, Any]) -> DetectorStage:
 
 def people_config(p: dict[str, Any]) -> TrackingConfig:
     return TrackingConfig(max_people=p['detector.max_people'],
-                          quiet_frames=p['detector.quiet_frames'])
+                          quiet_frames=p['detector.quiet_frames'],
+                          detector_keep_s=p['detector.keep_unseen_s'])
 
 
 class DetectorNode(Node):

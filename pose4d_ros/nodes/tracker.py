@@ -102,9 +102,12 @@ def tracker_stage(p: dict[str, Any]) -> TrackerStage:
 
 def people_config(p: dict[str, Any]) -> TrackingConfig:
     """How people are told apart (`core.people.TrackingConfig`) from the parameters (the
-    pipeline node's include detector.max_people and detector.quiet_frames)."""
+    pipeline node's include detector.max_people, detector.quiet_frames and
+    detector.keep_unseen_s)."""
     return TrackingConfig(max_people=p.get('detector.max_people', TrackingConfig.max_people),
                           quiet_frames=p.get('detector.quiet_frames', TrackingConfig.quiet_frames),
+                          detector_keep_s=p.get('detector.keep_unseen_s',
+                                                TrackingConfig.detector_keep_s),
                           confirm_frames=p['tracker.confirm_frames'],
                           max_unseen_s=p['tracker.max_unseen_s'],
                           max_hidden_s=p['tracker.max_hidden_s'],
