@@ -134,3 +134,21 @@ def test_a_better_value_is_not_chosen_when_it_costs_more_cpu_or_search_work():
     # a run without the count (an older table) is judged by its CPU time alone
     assert r.choose_label(scores, 'shipped', None, {'shipped': None, 'better': 540.0}) == \
         'better'
+
+
+def test_a_value_as_accurate_and_cheaper_is_chosen_for_its_headroom():
+    """`choose_label`: with no value better beyond the tie, the one searching least among
+    those at least as accurate as the shipped one and searching MIN_SEARCH_SAVING less; a
+    cheaper value that scores lower, or saves less, is not chosen, and a better one beyond
+    the tie that costs no more still wins."""
+    cells = {'shipped': 320.0, 'two': 290.0, 'one': 227.0, 'wider': 400.0, 'same': 310.0}
+    scores = {'shipped': 94.72, 'two': 94.78, 'one': 94.57, 'wider': 94.74, 'same': 94.8}
+    assert r.choose_label(scores, 'shipped', None, cells) == 'two'
+    # its CPU p50 is not read for a saving (the host's swing moves it by more)
+    assert r.choose_label(scores, 'shipped', {'shipped': 12.3, 'two': 13.8}, cells) == 'two'
+    assert r.choose_label({**scores, 'two': 94.70}, 'shipped', None, cells) == 'shipped'
+    assert r.choose_label(scores, 'shipped', None, {**cells, 'two': 310.0}) == 'shipped'
+    # a better one that searches over MAX_CPU_INCREASE more is refused, the saving stands
+    assert r.choose_label({**scores, 'wider': 95.0}, 'shipped', None, cells) == 'two'
+    assert r.choose_label({**scores, 'same': 95.0}, 'shipped', None, cells) == 'same'
+    assert r.choose_label(scores, 'shipped') == 'shipped'
