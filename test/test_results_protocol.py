@@ -152,3 +152,26 @@ def test_a_value_as_accurate_and_cheaper_is_chosen_for_its_headroom():
     assert r.choose_label({**scores, 'wider': 95.0}, 'shipped', None, cells) == 'two'
     assert r.choose_label({**scores, 'same': 95.0}, 'shipped', None, cells) == 'same'
     assert r.choose_label(scores, 'shipped') == 'shipped'
+
+
+def test_a_bench_set_is_made_with_its_bag(tmp_path, monkeypatch):
+    """A set that is also a bag (`bench300`, replayed by `bench_graph300`) is written as one
+    by `pose4d cad60-to-bag` after its render, an older bag removed first."""
+    ran = []
+
+    def fake_run(cmd):
+        ran.append(cmd[:2])
+        out = cmd[cmd.index('--out') + 1] if '--out' in cmd else cmd[-1]
+        Path(out).mkdir()
+        return 0.0
+
+    monkeypatch.setattr(r, 'DATA', tmp_path)
+    monkeypatch.setattr(r, '_run', fake_run)
+    (tmp_path / 'bench300_bag').mkdir()
+    (tmp_path / 'bench300_bag' / 'stale.mcap').write_bytes(b'')
+    assert r.make_set(r.SETS['bench300']) == 'made'
+    assert ran == [['pose4d', 'synth'], ['pose4d', 'cad60-to-bag']]
+    assert not (tmp_path / 'bench300_bag' / 'stale.mcap').exists()
+    assert r.make_set(r.SETS['bench300']) == 'reused'
+    job = next(j for j in r.JOBS if j.name == 'bench_graph300')
+    assert str(tmp_path / 'bench300_bag') in job.commands(r.Context('u', 'l', False))[0]

@@ -197,11 +197,14 @@ def bench_section(results: Path, jobs: dict) -> list[str]:
         out.append('')
     if load(results, 'bench'):
         out += [*commands(jobs.get('bench'))]
-    graph = load(results, 'bench_graph')
-    if graph and 'graph' in graph:
-        out += ['## The node graph (demo bag)', '', '```',
-                json.dumps(graph['graph'], indent=1), '```', '',
-                *commands(jobs.get('bench_graph'))]
+    for name, title in (('bench_graph', 'The node graph (demo bag)'),
+                        ('bench_graph300', 'The node graph and the pipeline node, 300 frames '
+                                           'at 30 fps (1x), the ros2 command line querying '
+                                           'the nodes')):
+        graph = load(results, name)
+        if graph and 'graph' in graph:
+            out += [f'## {title}', '', '```', json.dumps(graph['graph'], indent=1), '```', '',
+                    *commands(jobs.get(name))]
     return out
 
 
