@@ -240,17 +240,23 @@ def validation_section(results: Path, jobs: dict) -> list[str]:
 
 def rule(v: dict) -> str:
     """How a value is chosen over the shipped one (`results.choose_label`)."""
-    return (f"another value only when it beats the shipped one by more than {v.get('tie', 0.1)} "
-            f"points of average7 and costs at most {100 * v.get('max_cpu_increase', 0.05):.0f} % "
-            'more per frame, in CPU time (p50) and in the search\'s work (filter positions '
-            'scored)')
+    out = (f"another value only when it beats the shipped one by more than {v.get('tie', 0.1)} "
+           f"points of average7 and costs at most {100 * v.get('max_cpu_increase', 0.05):.0f} % "
+           'more per frame, in CPU time (p50) and in the search\'s work (filter positions '
+           'scored)')
+    if 'min_search_saving' in v:
+        out += (f"; or, none being better, the value searching least of those scoring at least "
+                f"the shipped one's and searching at least {100 * v['min_search_saving']:.0f} % "
+                'less')
+    return out
 
 
 SWEEP_TITLES = {
     'cut_height': 'Cut height (`ForegroundConfig.person_min_cut_height_m`, m)',
     'limb_rule': "The limb rule's form (`SlqeConfig.limb_parts`, `limb_rejected_frames`; "
                  'arms or arms and legs, at the second or the first rejected frame)',
-    'person_scale': "The person scale (`ScaleConfig.factors`, `warm_up_frames`)",
+    'person_scale': "The person scale (`ScaleConfig.factors`, `warm_up_frames`, "
+                    '`probe_every`)',
     'floor_below': 'What may lie below the floor (`ForegroundConfig.floor_max_below`)',
     'tracking_rules': "The several-person association's rules (`TrackingConfig."
                       'confirmed_first`: the confirmed tracks assigned first; `held_continues`: '
