@@ -141,15 +141,15 @@ SWEEPS: dict[str, dict[str, tuple[str, ...]]] = {
                   'limbs_first': (f'slqe.limb_parts={_LIMBS}', 'slqe.limb_rejected_frames=0'),
                   'off': ('slqe.limb_tolerance=0',)},
     # the person scale's factors and warm-up (ScaleConfig: 0.87-1.15 with a 4-frame warm-up
-    # shipped, chosen on validation over 0.87-1.32, first shipped; '1': the depth's scale alone;
-    # the probe of a neighbouring scale every 8th frame)
+    # and no probe shipped, chosen on validation over 0.87-1.32, first shipped, and the probe
+    # of a neighbouring scale every 8th frame, shipped before; '1': the depth's scale alone)
     'person_scale': {'0.87-1.15': (), '2_frames': ('scale.warm_up_frames=2',),
                      '8_frames': ('scale.warm_up_frames=8',),
                      '0.87-1.32': ('scale.factors=0.87,1,1.15,1.32',),
                      '0.76-1.52': ('scale.factors=0.76,0.87,1,1.15,1.32,1.52',),
                      '1': ('scale.factors=1',),
-                     # a neighbouring scale probed every 16th frame after the warm-up, or never
-                     'probe_16': ('scale.probe_every=16',), 'no_probe': ('scale.probe_every=0',)},
+                     # a neighbouring scale probed every 8th or 16th frame after the warm-up
+                     'probe_8': ('scale.probe_every=8',), 'probe_16': ('scale.probe_every=16',)},
     # ForegroundConfig.floor_max_below (0: no rule, the floor before)
     'floor_below': {'0.25': (), **{str(b): (f'foreground.floor_max_below={b}',)
                                    for b in (0, 0.1, 0.5)}},
