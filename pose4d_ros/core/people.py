@@ -310,12 +310,11 @@ class PeopleDetector:
     make : a new `core.pipeline.DetectorStage` (sharing the model) for a new person.
     config : `TrackingConfig` (max_people, max_speed_mps, torso_std_m; a person's state is
         kept unseen as long as a track can be, the longer of max_unseen_s and max_hidden_s,
-        or `detector_keep_s`: a
-        person held behind a nearer one comes back to their person scale and arm prior, not to
-        a new track's three-scale warm-up). Chosen on validation (`pose4d eval data/synth/<set>
-        --model rgbd_14 --no-single-frame`, `rgbd_kf_ik` average7, max_unseen_s before):
-        valid60_people3 86.78 -> 86.87; valid60_people2 (88.64) and valid30_people2b (86.26)
-        and every tracking figure unchanged.
+        or `detector_keep_s`: a person held behind a nearer one comes back to their person
+        scale and arm prior, not to a new track's three-scale warm-up). Chosen on validation
+        (`pose4d eval data/synth/<set> --model rgbd_14 --no-single-frame`, `rgbd_kf_ik`
+        average7, max_unseen_s before): valid60_people3 86.78 -> 86.87; valid60_people2
+        (88.64) and valid30_people2b (86.26) and every tracking figure unchanged.
     """
 
     def __init__(self, make: Callable[[], object], config: TrackingConfig | None = None) -> None:
