@@ -55,6 +55,7 @@ from pose4d_ros.cli._args import factor_list
 from pose4d_ros.core.convnet import PHOTO_SCALES, ConvNet, valid_scales
 from pose4d_ros.core.dpm.infer import SearchConfig
 from pose4d_ros.core.dpm.model import PartModel, colour_channel
+from pose4d_ros.core.dpm.net_unary import NetUnary, UnaryConfig
 from pose4d_ros.core.dpm.scale import ScaleConfig
 from pose4d_ros.core.files import write_atomic, write_json
 from pose4d_ros.core.foreground import ForegroundConfig
@@ -117,7 +118,11 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
                    help='set a field of the core configuration of a stage, repeatable: '
                         'foreground.person_min_cut_height_m=0.5, slqe.limb_parts=left_wrist,'
                         'right_wrist, scale.warm_up_frames=2 (sections: foreground, search, '
-                        'scale, slqe; evaluation.overrides)')
+                        'scale, slqe, tracking, unary; evaluation.overrides)')
+    p.add_argument('--colour-net', metavar='NETWORK',
+                   help="the photograph network (shipped name or .npz, e.g. lspet_convnet) as a "
+                        "colour unary of every part model's tree (core.dpm.net_unary; its "
+                        'weights: --config unary.weight=W, unary.hog_weight=H)')
     p.add_argument('--no-single-frame', action='store_true',
                    help='skip the single-frame `rgbd` pass (the temporal rows only)')
     p.add_argument('--blas-threads', type=int, default=1)
@@ -192,6 +197,12 @@ def table_rows(args: argparse.Namespace, kind: str, models: dict[str, PartModel 
     settings = overrides.parse(args.config)
     people = None if max_people is None else overrides.apply(TrackingConfig(
         max_people=max_people, birth_score=args.birth_score), settings, 'tracking')
+    unary = None
+    if args.colour_net is not None:
+        net = load_any(args.colour_net)
+        if not isinstance(net, ConvNet):
+            raise ValueError(f'--colour-net {args.colour_net}: not a photograph network')
+        unary = NetUnary(net, overrides.apply(UnaryConfig(), settings, 'unary'))
     rows: dict[str, Row] = {}
     used: set[str] = set()
     for given, m in models.items():
@@ -219,7 +230,7 @@ def table_rows(args: argparse.Namespace, kind: str, models: dict[str, PartModel 
                                   foreground=overrides.apply(ForegroundConfig(), settings,
                                                              'foreground'),
                                   slqe=overrides.apply(SlqeConfig(), settings, 'slqe'),
-                                  people=people))
+                                  people=people, unary=unary))
     if peer is not None:
         rows.update(peer_rows(progress(frames, peer.name), peer, sequence=sequence))
         if args.fit_peer_depth is not None:

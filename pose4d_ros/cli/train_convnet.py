@@ -25,8 +25,14 @@ from pose4d_ros.core.convnet import ConvNet, save_convnet
 from pose4d_ros.core.dpm.samples import mirror_index
 from pose4d_ros.datasets import lspet
 from pose4d_ros.datasets.sources import parse_ranges, source_kind
-from pose4d_ros.training.convnet_torch import Budget, export_weights, import_torch, train
-from pose4d_ros.util.machine import command_line
+from pose4d_ros.training.convnet_torch import (
+    PRECISIONS,
+    Budget,
+    export_weights,
+    import_torch,
+    train,
+)
+from pose4d_ros.util.machine import command_line, machine
 from pose4d_ros.util.progress import log
 
 
@@ -47,6 +53,9 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument('--input-px', type=int, default=128, help='network input size, pixels')
     p.add_argument('--width', type=int, default=32, help='channels of the first stage')
     p.add_argument('--threads', type=int, default=2, help='PyTorch CPU threads')
+    p.add_argument('--precision', choices=PRECISIONS, default='fp32',
+                   help="the forward pass's arithmetic: bf16 (autocast; weights and optimiser "
+                        'float32) trains about 3x faster on a CPU with AMX or AVX512-BF16')
     p.add_argument('--seed', type=int, default=0)
     p.set_defaults(func=run)
 
@@ -77,7 +86,7 @@ def run(args: argparse.Namespace) -> int:
     # wall time from here, as before; the process's CPU time from its start (reading counts)
     budget = Budget(minutes=args.minutes, cpu_minutes=args.cpu_minutes)
     done = train(torch, images, all_uv[rows], all_vis[rows], mirror, budget=budget,
-                 input_px=args.input_px, width=args.width, rng=rng)
+                 input_px=args.input_px, width=args.width, rng=rng, precision=args.precision)
     minutes = (time.time() - started) / 60.0
     cpu_minutes = time.process_time() / 60.0
     data = ','.join(f'{a}-{b}' for a, b in ranges)
@@ -89,8 +98,9 @@ def run(args: argparse.Namespace) -> int:
         'budget': budget.text,
         'train_minutes': round(minutes, 1),
         'cpu_minutes': round(cpu_minutes, 1),
-        'threads': args.threads, 'omp_wait_policy': os.environ.get('OMP_WAIT_POLICY'),
-        'torch': str(torch.__version__),
+        'threads': args.threads, 'precision': args.precision,
+        'omp_wait_policy': os.environ.get('OMP_WAIT_POLICY'),
+        'torch': str(torch.__version__), 'cpu': str(machine()['cpu']),
     }
     model = ConvNet(names, tuple(mirror), args.input_px, export_weights(done.net), metadata)
     save_convnet(model, args.out)

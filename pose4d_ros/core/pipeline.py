@@ -182,8 +182,8 @@ class PeopleStages:
         self.templates = (detector, tracker, ik)
         self.detector = PeopleDetector(lambda: DetectorStage(
             detector.model, search=detector.detector.config,
-            scale=detector.person_scale.config, min_confidence=detector.min_confidence),
-            config)
+            scale=detector.person_scale.config, min_confidence=detector.min_confidence,
+            unary=detector.detector.unary), config)
         self.tracker = PeopleTracker(lambda: TrackerStage(
             kind=tracker.kind, slqe=tracker.slqe_config, cv=tracker.cv_config,
             tree=tracker.fixed_tree, depth_std_m=tracker.depth_std_m), config)

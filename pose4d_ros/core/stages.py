@@ -39,6 +39,7 @@ from pose4d_ros.core.camera import (
 from pose4d_ros.core.dh import DhLimits, infer_middle_joints_dh
 from pose4d_ros.core.dpm.infer import Detector, SearchConfig
 from pose4d_ros.core.dpm.model import PartModel
+from pose4d_ros.core.dpm.net_unary import NetUnary
 from pose4d_ros.core.dpm.scale import PersonScale, ScaleConfig
 from pose4d_ros.core.foreground import (
     ForegroundConfig,
@@ -236,14 +237,17 @@ class DetectorStage:
     scale : how the person's own scale is chosen per track (`core.dpm.scale`; with an RGB
         model, or without depth, the depth-free search covers every scale anyway).
     min_confidence : parts less confident than this are reported MISSING.
+    unary : the photograph network as a colour unary of the part model's tree
+        (`core.dpm.net_unary.NetUnary`); None = the model's HOG filters alone.
     """
 
     MIN_CONFIDENCE = 0.0  # the default of `min_confidence` (and of the detector node's)
 
     def __init__(self, model: PartModel, *, search: SearchConfig | None = None,
-                 scale: ScaleConfig | None = None, min_confidence: float = MIN_CONFIDENCE) -> None:
+                 scale: ScaleConfig | None = None, min_confidence: float = MIN_CONFIDENCE,
+                 unary: NetUnary | None = None) -> None:
         self.model = model
-        self.detector = Detector(model, search)
+        self.detector = Detector(model, search, unary)
         self.person_scale = PersonScale(scale)
         self.last_flags: tuple[str, ...] = ()
         self._previous: tuple[NDArray[np.float64], float] | None = None  # parts' uv, stamp

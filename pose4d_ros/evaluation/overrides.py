@@ -3,7 +3,9 @@ section.key=value` (repeatable), for the validation sweeps of `make results`.
 
 Sections are the configurations the offline pipeline builds: `foreground`
 (`core.foreground.ForegroundConfig`), `search` (`core.dpm.infer.SearchConfig`), `scale`
-(`core.dpm.scale.ScaleConfig`) and `slqe` (`core.slqe.SlqeConfig`). A value is read as the
+(`core.dpm.scale.ScaleConfig`), `slqe` (`core.slqe.SlqeConfig`), `tracking`
+(`core.people.TrackingConfig`) and `unary` (`core.dpm.net_unary.UnaryConfig`, with `pose4d
+eval --colour-net`). A value is read as the
 type of the field's default: a number, a boolean (true/false), a string, or a comma list for a
 tuple (of numbers or of names). The configuration checks the result as it checks any value.
 """
@@ -15,6 +17,7 @@ from collections.abc import Iterable
 from typing import Any, TypeVar
 
 from pose4d_ros.core.dpm.infer import SearchConfig
+from pose4d_ros.core.dpm.net_unary import UnaryConfig
 from pose4d_ros.core.dpm.scale import ScaleConfig
 from pose4d_ros.core.foreground import ForegroundConfig
 from pose4d_ros.core.people import TrackingConfig
@@ -22,7 +25,7 @@ from pose4d_ros.core.slqe import SlqeConfig
 
 SECTIONS: dict[str, type] = {'foreground': ForegroundConfig, 'search': SearchConfig,
                              'scale': ScaleConfig, 'slqe': SlqeConfig,
-                             'tracking': TrackingConfig}
+                             'tracking': TrackingConfig, 'unary': UnaryConfig}
 C = TypeVar('C')
 
 

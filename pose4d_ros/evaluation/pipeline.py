@@ -34,6 +34,7 @@ from pose4d_ros.core import joints as cj
 from pose4d_ros.core.convnet import PHOTO_SCALES, ConvNet
 from pose4d_ros.core.dpm.infer import SearchConfig, SearchWork
 from pose4d_ros.core.dpm.model import PartModel
+from pose4d_ros.core.dpm.net_unary import NetUnary
 from pose4d_ros.core.dpm.scale import ScaleConfig
 from pose4d_ros.core.foreground import ForegroundConfig
 from pose4d_ros.core.joints import MISSING, JointSet
@@ -92,8 +93,8 @@ def pipeline_rows(frames: Iterable[Frame], model: PartModel, *, name: str | None
                   sequence: bool = True, people: TrackingConfig | None = None,
                   single_frame: bool = True,
                   show: Callable[[Sequence[Frame], str], Iterable[Frame]] | None = None,
-                  foreground: ForegroundConfig | None = None, slqe: SlqeConfig | None = None
-                  ) -> dict[str, Row]:
+                  foreground: ForegroundConfig | None = None, slqe: SlqeConfig | None = None,
+                  unary: NetUnary | None = None) -> dict[str, Row]:
     """The rows of a part model over the frames ({`name` (default: its channels) + suffix:
     row}); `sequence` False puts each frame on its own (the detector's row alone). In a
     sequence, an RGB-D model gives `_t`, `_kf` and `_kf_ik` from one pass as the nodes run it
@@ -102,8 +103,8 @@ def pipeline_rows(frames: Iterable[Frame], model: PartModel, *, name: str | None
     pipeline (`FramePipeline(people=...)`, as the nodes run it), whose `_kf_ik` row also holds
     every person's skeleton (`Row.people`); `show(frames, label)` wraps each pass's frames
     (a progress bar); `foreground`, `slqe`: those stages' configurations (default: the
-    core's)."""
-    stages = {'foreground': foreground, 'slqe': slqe}
+    core's); `unary`: the photograph network in the part model's score (`DetectorStage`)."""
+    stages = {'foreground': foreground, 'slqe': slqe, 'unary': unary}
     frames = list(frames)
     name = name or model.channels
     show = show or (lambda fs, _label: fs)
@@ -123,11 +124,12 @@ def pipeline_rows(frames: Iterable[Frame], model: PartModel, *, name: str | None
 def _pass(frames: Iterable[Frame], model: PartModel, suffixes: tuple[str, ...],
           search: SearchConfig | None, scale: ScaleConfig | None,
           people: TrackingConfig | None, *, reset: bool,
-          foreground: ForegroundConfig | None = None, slqe: SlqeConfig | None = None
-          ) -> dict[str, Row]:
+          foreground: ForegroundConfig | None = None, slqe: SlqeConfig | None = None,
+          unary: NetUnary | None = None) -> dict[str, Row]:
     """One pass of the pipeline over the frames, the rows `suffixes` (the detector's, the
     filter's, the skeleton's, in that order); `reset`: before every frame."""
-    pipeline = FramePipeline(DetectorStage(model, search=search, scale=scale), people=people,
+    pipeline = FramePipeline(DetectorStage(model, search=search, scale=scale, unary=unary),
+                             people=people,
                              foreground=ForegroundStage(foreground),
                              tracker=TrackerStage(slqe=slqe))
     depth = model.channels == 'rgbd'

@@ -168,11 +168,19 @@ class Budget:
         return (self.clock() - self.start) / (self.end - self.start)
 
 
+PRECISIONS = ('fp32', 'bf16')
+
+
 def train(torch: Any, images: Sequence[np.ndarray], uv: np.ndarray, vis: np.ndarray,
           mirror: Sequence[int], *, budget: Budget, input_px: int, width: int,
-          rng: np.random.Generator) -> Trained:
+          rng: np.random.Generator, precision: str = 'fp32') -> Trained:
     """The network trained on `images` (their joints `uv`, visible where `vis`; `mirror` swaps
-    left and right) until `budget` is spent: the loop of the module docstring."""
+    left and right) until `budget` is spent: the loop of the module docstring. `precision`
+    'bf16' runs the network's forward pass under CPU autocast to bfloat16 (the weights, the
+    optimiser and the loss stay float32): on a CPU with AMX or AVX512-BF16 about 3x the steps
+    in the same time."""
+    if precision not in PRECISIONS:
+        raise ValueError(f'precision must be one of {PRECISIONS}, got {precision!r}')
     cells = input_px // 4
     # channels-last tensors: the same arithmetic, 13 % less CPU a step (oneDNN's layout)
     net = network(torch, width, len(mirror)).to(memory_format=torch.channels_last)
@@ -201,7 +209,9 @@ def train(torch: Any, images: Sequence[np.ndarray], uv: np.ndarray, vis: np.ndar
             x = torch.from_numpy(normalise(np.stack(xs))).permute(0, 3, 1, 2)  # channels last
             t = torch.from_numpy(np.stack(ts)).flatten(2)
             wt = torch.from_numpy(np.stack(ws))
-            logp = torch.nn.functional.log_softmax(net(x).flatten(2), -1)
+            with torch.autocast('cpu', dtype=torch.bfloat16, enabled=precision == 'bf16'):
+                out = net(x)
+            logp = torch.nn.functional.log_softmax(out.float().flatten(2), -1)
             loss = (-(t * logp).sum(-1) * wt).sum() / wt.sum().clamp(min=1)
             opt.zero_grad()
             loss.backward()

@@ -10,6 +10,7 @@ tree allows). The kernels are single-threaded numba: BLAS owns the threads (see 
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numba as nb
@@ -340,10 +341,12 @@ def model_arrays(model: PartModel) -> tuple:
             np.ascontiguousarray(model.bias, np.float32))
 
 
-def score_level(level: Level, model: PartModel, arrays: tuple | None = None
+def score_level(level: Level, model: PartModel, arrays: tuple | None = None,
+                unary: Callable[[Level, int, int], NDArray[np.float32]] | None = None
                 ) -> LevelResult | None:
     """Filter responses (one GEMM) and the tree DP on one pyramid level; None if the level's
-    image (without its padding) is smaller than a filter."""
+    image (without its padding) is smaller than a filter. `unary(level, ny, nx)`: a (P, ny,
+    nx) term added to every type's response of each part (`core.dpm.net_unary`)."""
     wmat, parents, springs, anchors, bias = arrays if arrays is not None else model_arrays(model)
     fh, fw = model.filter_shape
     h, w, _ = level.feat.shape
@@ -353,6 +356,8 @@ def score_level(level: Level, model: PartModel, arrays: tuple | None = None
     ny, nx = h - fh + 1, w - fw + 1
     cols = im2col(level.feat, fh, fw)
     resp = (wmat @ cols.T).reshape(model.n_parts, model.n_types, ny, nx)
+    if unary is not None:
+        resp += unary(level, ny, nx)[:, None]
     root, ix, iy, ik, score = tree_dp(resp, parents, springs, anchors, bias)
     return LevelResult(level, resp, root, ix, iy, ik, score)
 

@@ -27,6 +27,7 @@ BLAS thread and numba threads never made the per-frame detector faster on the sh
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -44,6 +45,7 @@ from pose4d_ros.core.dpm.dp import (
     subcell_offsets,
 )
 from pose4d_ros.core.dpm.model import PartModel
+from pose4d_ros.core.dpm.net_unary import NetMaps, NetUnary
 from pose4d_ros.core.foreground import apply_mask
 from pose4d_ros.core.hog import Level, depth_image, feature_pyramid
 from pose4d_ros.core.stats import median
@@ -194,11 +196,17 @@ class Detector:
     `Detector(model).detect(color, depth_m, mask=...)` is the call the ROS node makes per frame.
     """
 
-    def __init__(self, model: PartModel, config: SearchConfig | None = None) -> None:
+    def __init__(self, model: PartModel, config: SearchConfig | None = None,
+                 unary: NetUnary | None = None) -> None:
         self.model = model
         self.config = config or SearchConfig()
+        self.unary = unary
         self._arrays = model_arrays(model)
         self._limbs = arm_limbs(model.part_names, model.parents)
+        if unary is not None:
+            self._arrays = (unary.filter_matrix(self._arrays[0], model.n_channels),
+                            *self._arrays[1:])
+            self._net_joints = unary.joints_of(model.part_names)
 
     # ---------------------------------------------------------------- planning
     def plan(self, shape: tuple[int, int], depth_m: NDArray | None, *,
@@ -349,21 +357,53 @@ class Detector:
             if d is None or not (np.isfinite(d) & (d > 0)).any():
                 flags = ('no_depth',)
         levels = self.pyramid(color, depth_m, plan, mask=mask, blanked=blanked)
+        maps = None if self.unary is None else self.net_maps(color, plan, mask=mask,
+                                                             blanked=blanked)
         return self.poses_from_levels(
             levels, top_k=top_k, flags=flags, prior=prior,
-            scale_prior=0.0 if plan.depth_guided else self.model.scale_prior)
+            scale_prior=0.0 if plan.depth_guided else self.model.scale_prior, net_maps=maps)
+
+    def net_maps(self, color: NDArray, plan: SearchPlan, *,
+                 mask: NDArray[np.bool_] | None = None, blanked: bool = False) -> NetMaps:
+        """The network's maps of the plan's crop (`NetUnary.maps`), blanked outside `mask` as
+        the pyramid is for a model trained on masked frames."""
+        assert self.unary is not None
+        box = (plan.x0, plan.y0, plan.x1, plan.y1)
+        if self.model.masked_input and mask is not None and not blanked:
+            sl = np.s_[plan.y0:plan.y1, plan.x0:plan.x1]
+            crop = np.zeros_like(np.asarray(color))
+            crop[sl], _ = apply_mask(np.asarray(color)[sl], np.zeros(mask[sl].shape, np.float32),
+                                     mask[sl])
+            color = crop
+        return self.unary.maps(color, box)
+
+    def _unary(self, maps: NetMaps) -> Callable[[Level, int, int], NDArray[np.float32]]:
+        """The (P, ny, nx) network term of a level's parts (`dp.score_level`'s `unary`)."""
+        assert self.unary is not None
+        joints = self._net_joints
+        known = joints >= 0
+
+        def term(level: Level, ny: int, nx: int) -> NDArray[np.float32]:
+            per_joint = self.unary.level_unary(maps, level, self.model.filter_shape, ny, nx)
+            out = np.zeros((len(joints), ny, nx), np.float32)
+            out[known] = per_joint[joints[known]]
+            return out
+        return term
 
     def poses_from_levels(self, levels: list[Level], *, top_k: int = 1,
                           threshold: float = -np.inf, flags: tuple[str, ...] = (),
                           prior: NDArray[np.floating] | None = None,
-                          scale_prior: float = 0.0) -> list[Pose]:
+                          scale_prior: float = 0.0, net_maps: NetMaps | None = None
+                          ) -> list[Pose]:
         """Run every level and return the best poses over all of them, ranked by their score
         plus `scale_prior` per octave of the person scale they were found at (the search
-        without depth, `PartModel.scale_prior`; the poses keep their own scores)."""
+        without depth, `PartModel.scale_prior`; the poses keep their own scores). `net_maps`:
+        the frame's network maps, for a detector with a `NetUnary`."""
         cands: list[Pose] = []
         per_level = 1 if top_k == 1 else 4 * top_k
+        unary = None if net_maps is None else self._unary(net_maps)
         for level in levels:
-            res = score_level(level, self.model, self._arrays)
+            res = score_level(level, self.model, self._arrays, unary)
             if res is None:
                 continue
             SearchWork.cells += res.root.shape[1] * res.root.shape[2]

@@ -1,0 +1,129 @@
+"""The photograph network's heat maps as a colour unary term of the 4D-DPM's tree inference.
+
+The part model's colour filters are HOG templates learned from renders; on real photographs
+they place few joints (the models' README). The photograph network (`core.convnet`) learned
+real appearance instead. `NetUnary` adds, to every filter response of part i at a cell,
+
+    weight * max(log p_j(cell), floor)
+
+where p_j is the network's softmax over its grid for the joint j of the same name, read at the
+cell's centre (bilinear between the network's cells), and scales the model's colour filters by
+`hog_weight` (0: the network is the whole colour unary; 1: the HOG filters as trained). The
+tree, its springs, its co-occurrence biases and the depth filters are unchanged, so the search
+is still the exact optimum of Yang & Ramanan's score with one more unary per part (Chen &
+Yuille 2014 put a network's part scores into a tree model the same way). A part the network
+does not know gets nothing from it. `floor` keeps a cell the network rules out from vetoing a
+pose the rest of the model supports.
+
+The network reads the search's crop once per frame (`maps`), padded to a square; each pyramid
+level then samples those maps at its filter positions' centres with one affine warp
+(`level_unary`).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import cv2
+import numpy as np
+from numpy.typing import NDArray
+
+from pose4d_ros.core.convnet import STRIDE, ConvNet, valid_scales
+from pose4d_ros.core.hog import N_FEATURES, Level
+
+
+@dataclass(frozen=True)
+class NetMaps:
+    """The network's maps of one frame's crop: (cells, cells, J) float32 `log p - floor`, at
+    least 0; `transform` (2, 3) from full-image pixels to network input pixels."""
+
+    values: NDArray[np.float32]
+    transform: NDArray[np.float64]
+
+
+@dataclass(frozen=True)
+class UnaryConfig:
+    """How the network enters the part model's score (see the module docstring).
+
+    Attributes
+    ----------
+    weight : factor on the network's log-probability in a part's unary.
+    hog_weight : factor on the model's colour HOG filters (the depth filters keep theirs).
+    floor : log-probability below which a cell scores no worse.
+    scales : the network's reading scales of the crop (`ConvNet.heat_maps`).
+    """
+
+    weight: float = 1.0
+    hog_weight: float = 1.0
+    floor: float = -10.0
+    scales: tuple[float, ...] = (1.0,)
+
+    def __post_init__(self) -> None:
+        if not (np.isfinite(self.weight) and self.weight >= 0):
+            raise ValueError(f'unary weight must be >= 0, got {self.weight}')
+        if not (np.isfinite(self.hog_weight) and self.hog_weight >= 0):
+            raise ValueError(f'unary hog_weight must be >= 0, got {self.hog_weight}')
+        if not (np.isfinite(self.floor) and self.floor < 0):
+            raise ValueError(f'unary floor must be a log-probability < 0, got {self.floor}')
+        if not valid_scales(self.scales):
+            raise ValueError(f'unary scales must include 1 and lie within 0.25..4, got '
+                             f'{self.scales}')
+
+
+@dataclass(frozen=True)
+class NetUnary:
+    """A photograph network (`core.convnet`) as a colour unary of a part model."""
+
+    net: ConvNet
+    config: UnaryConfig = UnaryConfig()
+
+    def joints_of(self, part_names: tuple[str, ...]) -> NDArray[np.int64]:
+        """For each part, the index of the network's joint of the same name (-1: none)."""
+        index = {n: i for i, n in enumerate(self.net.joint_names)}
+        return np.array([index.get(n, -1) for n in part_names], np.int64)
+
+    def filter_matrix(self, wmat: NDArray[np.float32], groups: int) -> NDArray[np.float32]:
+        """The model's filter matrix (`PartModel.filter_matrix`, `groups` =
+        `PartModel.n_channels` groups of HOG features a cell) with its colour features (each
+        cell's first `N_FEATURES`) scaled by `hog_weight`."""
+        if self.config.hog_weight == 1.0:
+            return wmat
+        w = wmat.reshape(wmat.shape[0], -1, groups * N_FEATURES).copy()
+        w[:, :, :N_FEATURES] *= np.float32(self.config.hog_weight)
+        return np.ascontiguousarray(w.reshape(wmat.shape))
+
+    def maps(self, color: NDArray, box: tuple[int, int, int, int]) -> NetMaps:
+        """The network's maps of `color`'s crop `box` = (x0, y0, x1, y1) pixels (RGB; a grey
+        image is read as three equal channels)."""
+        x0, y0, x1, y1 = box
+        crop = np.asarray(color)[y0:y1, x0:x1]
+        if crop.ndim == 2:
+            crop = np.repeat(crop[:, :, None], 3, axis=2)
+        crop = np.ascontiguousarray(crop[:, :, :3], dtype=np.uint8)
+        logp, m = self.net.heat_maps(crop, self.config.scales)
+        values = np.maximum(logp - np.float32(self.config.floor), 0).transpose(1, 2, 0)
+        m = m.copy()
+        m[:, 2] -= m[:, :2] @ np.array([x0, y0], np.float64)  # from full-image pixels
+        return NetMaps(np.ascontiguousarray(values, np.float32), m)
+
+    def level_unary(self, maps: NetMaps, level: Level, filter_shape: tuple[int, int],
+                    ny: int, nx: int) -> NDArray[np.float32]:
+        """(J, ny, nx) float32: `weight` x the network's log-probability (floored) of each
+        joint at the centre of each of the level's (ny, nx) filter positions."""
+        # filter position (row, col) -> full-image pixel (`Level.cell_to_pixel`, linear)
+        # -> network input pixel (`maps.transform`, no rotation) -> network cell
+        u0, v0 = level.cell_to_pixel(np.float64(0), np.float64(0), filter_shape)
+        u1, v1 = level.cell_to_pixel(np.float64(1), np.float64(1), filter_shape)
+        m = maps.transform
+        ax = m[0, 0] * (u1 - u0) / STRIDE
+        bx = ((m[0, 0] * u0 + m[0, 2]) + 0.5) / STRIDE - 0.5
+        ay = m[1, 1] * (v1 - v0) / STRIDE
+        by = ((m[1, 1] * v0 + m[1, 2]) + 0.5) / STRIDE - 0.5
+        a = np.array([[ax, 0.0, bx], [0.0, ay, by]])
+        out = cv2.warpAffine(maps.values, a, (nx, ny), flags=cv2.INTER_LINEAR |
+                             cv2.WARP_INVERSE_MAP, borderMode=cv2.BORDER_CONSTANT,
+                             borderValue=0)
+        if out.ndim == 2:
+            out = out[:, :, None]
+        c = self.config
+        return (out.transpose(2, 0, 1) + np.float32(c.floor)) * np.float32(c.weight)
