@@ -9,7 +9,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from numpy.testing import assert_allclose
+from numpy.testing import assert_allclose, assert_array_equal
 
 from pose4d_ros.core import convnet as cn
 from pose4d_ros.core.convnet import ConvNet
@@ -245,16 +245,84 @@ def test_train_convnet_trains_on_several_ranges_within_a_cpu_budget(tmp_path: Pa
         cv2.imwrite(str(root / 'images' / f'im{i:05d}.jpg'),
                     rng.integers(0, 256, (80, 60, 3), dtype=np.uint8))
     out = tmp_path / 'net.npz'
-    # the process's CPU time counts from its start: what pytest spent so far plus 2 s
-    budget = f'{(time.process_time() + 2.0) / 60.0:.5f}'
+    # the process's CPU time counts from its start: what pytest spent so far plus 8 s
+    budget = f'{(time.process_time() + 8.0) / 60.0:.5f}'
     started = time.process_time()
     assert main(['train-convnet', str(root), '--range', '1-32,41-72', '--input-px', '64',
                  '--width', '4', '--threads', '1', '--cpu-minutes', budget,
                  '--out', str(out)]) == 0
-    assert time.process_time() - started < 2.0 + 1.0
+    # the budget is checked between steps: a step (the first compiles oneDNN's kernels) over
+    assert time.process_time() - started < 8.0 + 5.0
     meta = cn.load_convnet(out).metadata
     assert meta['data'] == 'LSPET 1-32,41-72' and meta['photographs'] == 64
     assert meta['steps'] >= 2 and meta['epochs'] >= 1
     assert meta['budget'] == f'{float(budget)} CPU min'
     assert meta['cpu_minutes'] >= float(budget) - 0.06 and meta['train_minutes'] >= 0
     assert meta['threads'] == 1
+
+
+def test_render_crops_cut_the_person_as_the_detector_sees_them() -> None:
+    from pose4d_ros.core.joints import JointSet
+    from pose4d_ros.core.skeleton import CAD60_JOINTS
+    from pose4d_ros.datasets.frame import Frame
+    from pose4d_ros.training.convnet_torch import render_crops
+
+    rng = np.random.default_rng(4)
+    color = rng.integers(1, 256, (240, 320, 3), dtype=np.uint8)
+    mask = np.zeros((240, 320), bool)
+    mask[40:200, 100:160] = True  # 160 rows: a margin of 0.12 is 19.2 px
+    n = len(CAD60_JOINTS)
+    uv = np.c_[rng.uniform(100, 160, n), rng.uniform(40, 200, n)]
+    hand = CAD60_JOINTS.index('left_hand')
+    uv[hand] = (5.0, 5.0)  # outside the crop: not labelled
+    truth = JointSet(CAD60_JOINTS, uv)
+    frames = [Frame(0, color, None, None, truth, mask), Frame(1, color, None, None, truth, None),
+              Frame(2, color, None, None, truth, mask, people=(truth, truth))]
+    images, pix, labelled = render_crops(frames, NAMES)
+    assert len(images) == 1 and pix.shape == (1, 14, 2) and labelled.shape == (1, 14)
+    crop = images[0]
+    # the box widened by 19.2 px, outwards to whole pixels: rows 20-219, columns 80-179
+    assert crop.shape == (200, 100, 3)
+    assert not crop[:20].any() and not crop[:, :20].any()  # blanked outside the mask
+    assert_array_equal(crop[20:180, 20:80], color[40:200, 100:160])
+    for j, name in enumerate(NAMES):
+        i = CAD60_JOINTS.index({'left_wrist': 'left_hand', 'right_wrist': 'right_hand',
+                                'left_ankle': 'left_foot', 'right_ankle': 'right_foot'
+                                }.get(name, name))
+        if i == hand:
+            assert not labelled[0, j] and np.isnan(pix[0, j]).all()
+        else:
+            assert labelled[0, j]
+            assert_allclose(pix[0, j], uv[i] - (80, 20))
+
+
+def test_train_convnet_adds_rendered_people_and_trains_in_bfloat16(tmp_path: Path) -> None:
+    pytest.importorskip('torch', reason='PyTorch trains the network only (make train-env); '
+                        'the suite runs without it')
+    import cv2
+    import scipy.io
+    from helpers import write_utkinect
+
+    from pose4d_ros.cli.main import main
+
+    root = tmp_path / 'lspet'
+    (root / 'images').mkdir(parents=True)
+    rng = np.random.default_rng(1)
+    joints = np.ones((14, 3, 8))
+    joints[:, :2] = rng.uniform(10, 50, (14, 2, 8))
+    scipy.io.savemat(root / 'joints.mat', {'joints': joints})
+    for i in range(1, 9):
+        cv2.imwrite(str(root / 'images' / f'im{i:05d}.jpg'),
+                    rng.integers(0, 256, (80, 60, 3), dtype=np.uint8))
+    write_utkinect(tmp_path / 'ut')
+    renders = tmp_path / 'renders'
+    assert main(['synth', '--utkinect', str(tmp_path / 'ut'), '--out', str(renders), '--seed',
+                 '3', '--takes', 's01-s02', '--frames', '4', '--stride', '3',
+                 '--videos-per-take', '1', '--quiet']) == 0
+    out = tmp_path / 'net.npz'
+    assert main(['train-convnet', str(root), '--range', '1-8', '--renders', str(renders),
+                 '--render-stride', '2', '--input-px', '64', '--width', '4', '--threads', '1',
+                 '--minutes', '0.05', '--precision', 'bf16', '--out', str(out)]) == 0
+    meta = cn.load_convnet(out).metadata
+    assert meta['renders'] == {str(renders): 4} and meta['photographs'] == 8  # 2 x 4 / 2
+    assert meta['precision'] == 'bf16' and meta['steps'] >= 1 and meta['cpu']

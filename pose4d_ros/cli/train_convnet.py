@@ -24,12 +24,13 @@ import numpy as np
 from pose4d_ros.core.convnet import ConvNet, save_convnet
 from pose4d_ros.core.dpm.samples import mirror_index
 from pose4d_ros.datasets import lspet
-from pose4d_ros.datasets.sources import parse_ranges, source_kind
+from pose4d_ros.datasets.sources import open_source, parse_ranges, source_kind
 from pose4d_ros.training.convnet_torch import (
     PRECISIONS,
     Budget,
     export_weights,
     import_torch,
+    render_crops,
     train,
 )
 from pose4d_ros.util.machine import command_line, machine
@@ -44,6 +45,12 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument('source', metavar='LSPET', help='LSPET root')
     p.add_argument('--range', dest='frame_range', default='1-2500', metavar='A-B[,C-D...]',
                    help='LSPET image numbers (inclusive), several ranges separated by commas')
+    p.add_argument('--renders', action='append', default=[], type=Path, metavar='DIR',
+                   help='also train on a rendered CAD-60 set (pose4d synth), each frame cut '
+                        "to its person as the detector's crop shows them (training."
+                        'convnet_torch.render_crops); repeatable')
+    p.add_argument('--render-stride', type=int, default=1, metavar='N',
+                   help='every N-th frame of each rendered video')
     p.add_argument('--out', required=True, type=Path, help='model file to write (.npz)')
     budget = p.add_mutually_exclusive_group()
     budget.add_argument('--minutes', type=float, default=None,
@@ -83,9 +90,21 @@ def run(args: argparse.Namespace) -> int:
     rows = np.array(numbers) - 1
     names = lspet.LSPET_JOINTS
     mirror = mirror_index(names)
+    uv, vis = all_uv[rows], all_vis[rows]
+    rendered = {}
+    for root in args.renders:
+        if source_kind(root) != 'cad60':
+            raise ValueError(f'--renders {root}: not a CAD-60 directory (pose4d synth)')
+        crops, r_uv, r_vis = render_crops(open_source(root, stride=args.render_stride), names)
+        if not crops:
+            raise ValueError(f'--renders {root}: no frame with one person and a mask')
+        images += crops
+        uv, vis = np.concatenate([uv, r_uv]), np.concatenate([vis, r_vis])
+        rendered[str(root)] = len(crops)
+        log(f'{root}: {len(crops)} rendered frames')
     # wall time from here, as before; the process's CPU time from its start (reading counts)
     budget = Budget(minutes=args.minutes, cpu_minutes=args.cpu_minutes)
-    done = train(torch, images, all_uv[rows], all_vis[rows], mirror, budget=budget,
+    done = train(torch, images, uv, vis, mirror, budget=budget,
                  input_px=args.input_px, width=args.width, rng=rng, precision=args.precision)
     minutes = (time.time() - started) / 60.0
     cpu_minutes = time.process_time() / 60.0
@@ -93,6 +112,7 @@ def run(args: argparse.Namespace) -> int:
     metadata = {
         'command': command_line('train-convnet'),
         'data': f'LSPET {data}', 'photographs': len(numbers), 'seed': args.seed,
+        **({'renders': rendered} if rendered else {}),
         'steps': done.steps, 'epochs': done.epochs,
         'final_loss': round(float(np.mean(done.losses[-200:])), 4) if done.losses else None,
         'budget': budget.text,

@@ -17,7 +17,7 @@ from __future__ import annotations
 import math
 import os
 import time
-from collections.abc import Sequence
+from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
 from typing import Any
 
@@ -30,6 +30,9 @@ from pose4d_ros.core.convnet import (
     normalise,
     warp,
 )
+from pose4d_ros.core.foreground import apply_mask
+from pose4d_ros.core.skeleton import ground_truth_name
+from pose4d_ros.datasets.frame import Frame
 from pose4d_ros.util.progress import log
 
 INSTALL = '`make train-env`, then .venv-train/bin/pose4d train-convnet ...'
@@ -114,6 +117,44 @@ def export_weights(net: Any) -> dict[str, tuple[np.ndarray, np.ndarray]]:
     return out
 
 
+def render_crops(frames: Iterable[Frame], names: Sequence[str], *, margin: float = 0.12
+                 ) -> tuple[list[np.ndarray], np.ndarray, np.ndarray]:
+    """Training photographs from rendered RGB-D frames, the person as the detector's crop shows
+    them (`core.dpm.net_unary`): the colour blanked outside the person's ground-truth mask
+    (as the foreground stage blanks it), cut to the mask's box plus `margin` of its height on
+    every side; each joint of `names` at its pixel in the crop (the truth's `*_hand` and
+    `*_foot` for `*_wrist` and `*_ankle`), labelled where the truth has it inside the crop.
+    Frames without a mask, an empty one or several people are left out. Returns the crops,
+    (N, J, 2) pixels and (N, J) labelled flags."""
+    images, uvs, labelled = [], [], []
+    for f in frames:
+        if f.mask is None or f.truth is None or f.people or not f.mask.any():
+            continue
+        rows = np.flatnonzero(f.mask.any(axis=1))
+        cols = np.flatnonzero(f.mask.any(axis=0))
+        pad = margin * (rows[-1] + 1 - rows[0])
+        h, w = f.mask.shape
+        x0, y0 = max(int(cols[0] - pad), 0), max(int(rows[0] - pad), 0)
+        x1, y1 = min(int(np.ceil(cols[-1] + 1 + pad)), w), min(int(np.ceil(rows[-1] + 1 + pad)), h)
+        color, _ = apply_mask(f.color, np.zeros(f.mask.shape, np.float32), f.mask)
+        truth = f.truth
+        index = {n: i for i, n in enumerate(truth.names)}
+        uv = np.full((len(names), 2), np.nan)
+        vis = np.zeros(len(names), bool)
+        for j, name in enumerate(names):
+            i = index.get(ground_truth_name(name), index.get(name))
+            if i is None or not truth.confidence[i] > 0:
+                continue
+            u, v = truth.uv[i, 0] - x0, truth.uv[i, 1] - y0
+            if 0 <= u < x1 - x0 and 0 <= v < y1 - y0:
+                uv[j], vis[j] = (u, v), True
+        images.append(np.ascontiguousarray(color[y0:y1, x0:x1]))
+        uvs.append(uv)
+        labelled.append(vis)
+    return images, np.array(uvs).reshape(-1, len(names), 2), \
+        np.array(labelled, bool).reshape(-1, len(names))
+
+
 def _sample(rng: np.random.Generator, image: np.ndarray, uv: np.ndarray, vis: np.ndarray,
             mirror: list[int], input_px: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """One augmented photograph: input (S, S, 3) float 0-255, its joints' input pixels and
@@ -190,7 +231,9 @@ def train(torch: Any, images: Sequence[np.ndarray], uv: np.ndarray, vis: np.ndar
     t0, c0 = time.time(), time.process_time()
     steps = epochs = 0
     losses: list[float] = []
-    batch = 32
+    batch = min(32, len(images))  # a set smaller than a batch trains in batches of all of it
+    if batch < 1:
+        raise ValueError('train-convnet: no photographs to train on')
     while budget.done() < 1:
         order = rng.permutation(len(images))
         for k in range(0, len(order) - batch + 1, batch):
