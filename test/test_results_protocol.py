@@ -3,6 +3,7 @@ validation sets only, reported tables from test sets only (nothing is run here).
 
 from __future__ import annotations
 
+import json
 import re
 import shlex
 from pathlib import Path
@@ -55,8 +56,14 @@ def test_choices_on_validation_reports_on_test() -> None:
     ctx = r.Context('U', 'L', peer=True, dry=True)
     for job in r.JOBS:
         roles = {r.SETS[s].role for s in job.sets}
-        if job.name == 'validation':
+        if job.name in ('validation', 'colour_net'):
             assert roles == {'validation'}
+            # photographs: the validation slice no network was trained on, never the test's
+            for cmd in job.commands(ctx):
+                if '--range' in cmd:
+                    assert cmd[cmd.index('--range') + 1] == r.COLOUR_NET_VALID == '8501-9000'
+                    assert cmd[cmd.index('--model') + 1] == 'rgbd_14'
+                    assert '--peer' not in cmd
         elif job.name == 'peer_depth':
             assert roles == {'training'}
         else:
@@ -175,3 +182,34 @@ def test_a_bench_set_is_made_with_its_bag(tmp_path, monkeypatch):
     assert r.make_set(r.SETS['bench300']) == 'reused'
     job = next(j for j in r.JOBS if j.name == 'bench_graph300')
     assert str(tmp_path / 'bench300_bag') in job.commands(r.Context('u', 'l', False))[0]
+
+
+def test_the_colour_network_is_chosen_on_validation_and_reported_on_test(tmp_path, monkeypatch):
+    """The weighting that keeps the RGB-D rows within COLOUR_NET_RGBD_LOSS and places most
+    joints of the validation photographs is chosen; the held-out LSPET job runs it."""
+    monkeypatch.setattr(r, 'WORK', tmp_path / 'work')
+    monkeypatch.setattr(r, 'RESULTS', tmp_path / 'results')
+    r.WORK.mkdir()
+    r.RESULTS.mkdir()
+    figures = {'none': (12.0, 98.8), 'w4_h0': (60.0, 98.5), 'w16_h0': (65.0, 97.0),
+               'w64_h0': (64.0, 96.0), 'w16_h1': (58.0, 98.9), 'w1_h1': (40.0, 98.7),
+               'w0.1_h1': (15.0, 98.8)}
+    for label, (photos, renders) in figures.items():
+        row = {'pck': {'average': photos - 10}, 'pck@0.2': {'average': photos}}
+        r.colour_net_file(label, 'lspet').write_text(json.dumps(
+            {'frames': 500, 'rows': {'rgbd_14' + ('+lspet_convnet' if label != 'none' else ''):
+                                     row}}))
+        r.colour_net_file(label, 'valid30').write_text(json.dumps(
+            {'frames': 540, 'rows': {'rgbd_kf_ik': {'pck': {'average7': renders}}}}))
+    v = r.summarize_colour_net()
+    # w16_h0 places most but loses 1.8 on the renders: w4_h0 (loses 0.3) is chosen
+    assert v['chosen'] == 'w4_h0' and v['best_on_photographs'] == 'w16_h0'
+    (r.RESULTS / 'colour_net.json').write_text(json.dumps(v))
+    ctx = r.Context('U', 'L', peer=True, dry=True)
+    cmds = next(j for j in r.JOBS if j.name == 'lspet').commands(ctx)
+    held_out = cmds[-1]
+    assert held_out[held_out.index('--range') + 1] == '2501-3000'
+    assert held_out[held_out.index('--colour-net') + 1] == r.COLOUR_NET
+    assert 'unary.weight=4' in held_out and 'unary.hog_weight=0' in held_out
+    (r.RESULTS / 'colour_net.json').write_text(json.dumps({**v, 'chosen': 'none'}))
+    assert len(next(j for j in r.JOBS if j.name == 'lspet').commands(ctx)) == 1

@@ -35,6 +35,10 @@ cad60-to-bag`) or an LSPET root (with --range). Every row runs the live pipeline
   photographs gives one row named after it: its colour channel alone
   (`core.dpm.model.colour_channel`: the depth half of every filter dropped, the search without
   depth over its training people's scales), the real-appearance test of the nodes' detector.
+- `--colour-net NETWORK`: every part model's colour unary also takes the photograph network's
+  heat maps (`core.dpm.net_unary`, the detector node's `detector.colour_net`), weighted by
+  `--config unary.weight=W` and `unary.hog_weight=H`; an RGB-D model's row on photographs is
+  then `<model>+<network>`.
 
 Default models: the shipped `rgbd_14` (what the nodes run) and `rgb_10` for a CAD-60 set,
 `lspet_convnet` for LSPET; `--model` (repeatable) replaces them (`--model rgbd_10` gives the
@@ -203,13 +207,18 @@ def table_rows(args: argparse.Namespace, kind: str, models: dict[str, PartModel 
         if not isinstance(net, ConvNet):
             raise ValueError(f'--colour-net {args.colour_net}: not a photograph network')
         unary = NetUnary(net, overrides.apply(UnaryConfig(), settings, 'unary'))
+    elif 'unary' in settings:
+        raise ValueError('--config unary.*: needs --colour-net')
     rows: dict[str, Row] = {}
     used: set[str] = set()
     for given, m in models.items():
         name = m.channels
         if m.channels == 'rgbd' and all(f.depth_m is None for f in frames):
             # photographs: the model's colour channel alone, its row named after the model
+            # (and the network in its colour unary: rgbd_14+lspet_convnet)
             m, name = colour_channel(m), Path(given).stem
+            if unary is not None:
+                name += '+' + Path(args.colour_net).stem
         elif m.channels == 'rgbd' and any(f.depth_m is None for f in frames):
             raise ValueError(f'{args.source}: some frames have no depth image for the rgbd '
                              'model')

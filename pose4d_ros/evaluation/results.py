@@ -249,6 +249,88 @@ def _validation(ctx: Context) -> list[list[str]]:
     return cmds
 
 
+# The photograph network as the detector's colour unary (core.dpm.net_unary, the detector
+# node's detector.colour_net): its weights swept on validation (LSPET 8501-9000, which no
+# network saw, the nodes' rgbd_14 by its colour channel alone; valid30, RGB-D as the nodes
+# run it), the first value the colour HOG alone (no network)
+COLOUR_NET = 'lspet_convnet'
+COLOUR_NET_VALID = '8501-9000'
+COLOUR_NET_GRID: dict[str, tuple[str, ...]] = {
+    'none': (), **{f'w{w:g}_h{h:g}': (f'unary.weight={w:g}', f'unary.hog_weight={h:g}',
+                                      'unary.scales=1,1.3')
+                   for w, h in ((4, 0), (16, 0), (64, 0), (16, 1), (1, 1), (0.1, 1))}}
+# the RGB-D rows may lose at most this much of valid30's rgbd_kf_ik average7 against none
+COLOUR_NET_RGBD_LOSS = 0.5
+
+
+def colour_net_file(label: str, data: str) -> Path:
+    return WORK / f'colour_net_{label}_{data}.json'
+
+
+def _colour_net(ctx: Context) -> list[list[str]]:
+    cmds = []
+    for label, items in COLOUR_NET_GRID.items():
+        net = ('--colour-net', COLOUR_NET) if items else ()
+        config = [a for item in items for a in ('--config', item)]
+        cmds.append(_eval(ctx, ctx.lspet, colour_net_file(label, 'lspet'), '--range',
+                          COLOUR_NET_VALID, '--model', 'rgbd_14', *net, *config, peer=False))
+        cmds.append(_eval(ctx, str(DATA / 'valid30'), colour_net_file(label, 'valid30'),
+                          '--model', 'rgbd_14', *net, *config, '--no-single-frame',
+                          peer=False))
+    return cmds
+
+
+def _lspet(ctx: Context) -> list[list[str]]:
+    cmds = [_eval(ctx, ctx.lspet, RESULTS / 'lspet.json', '--range', '2501-3000', '--model',
+                  'lspet_convnet', '--model', 'lspet_rgb_14', '--model', 'rgbd_14')]
+    chosen = chosen_colour_net()
+    if chosen:
+        cmds.append(_eval(ctx, ctx.lspet, RESULTS / 'lspet_colour_net.json', '--range',
+                          '2501-3000', '--model', 'rgbd_14', '--colour-net', COLOUR_NET,
+                          *(a for item in chosen for a in ('--config', item)), peer=False))
+    return cmds
+
+
+def chosen_colour_net() -> tuple[str, ...]:
+    """The colour network's weighting chosen on validation (`docs/results/colour_net.json`),
+    as `--config` items; () when none is chosen or it is the colour HOG alone."""
+    path = RESULTS / 'colour_net.json'
+    if not path.exists():
+        return ()
+    chosen = json.loads(path.read_text()).get('chosen')
+    return COLOUR_NET_GRID.get(chosen, ()) if chosen else ()
+
+
+def summarize_colour_net() -> dict:
+    """Each weighting's figures on the two validation sets, and the one chosen: the best
+    PCK@0.2 average of the nodes' model on photographs (colour alone) among those losing at
+    most `COLOUR_NET_RGBD_LOSS` of valid30's rgbd_kf_ik average7 against the colour HOG
+    alone."""
+    table = {}
+    for label, items in COLOUR_NET_GRID.items():
+        files = [colour_net_file(label, d) for d in ('lspet', 'valid30')]
+        if not all(f.exists() for f in files):
+            continue
+        photos, renders = (json.loads(f.read_text())['rows'] for f in files)
+        (photo,) = photos.values()
+        r = renders['rgbd_kf_ik']
+        table[label] = {'config': list(items),
+                        'lspet': {'pck': photo['pck']['average'],
+                                  'pck@0.2': photo['pck@0.2']['average'],
+                                  'cpu_ms': photo.get('cpu_ms', {}).get('p50')},
+                        'valid30': {'average7': r['pck']['average7'],
+                                    'within_10cm': r.get('within_10cm', {}).get('average'),
+                                    'cpu_ms': r.get('cpu_ms', {}).get('p50')}}
+    out: dict = {'network': COLOUR_NET, 'photographs': f'LSPET {COLOUR_NET_VALID}',
+                 'renders': 'valid30', 'max_rgbd_loss': COLOUR_NET_RGBD_LOSS, 'values': table}
+    if 'none' in table:
+        floor = table['none']['valid30']['average7'] - COLOUR_NET_RGBD_LOSS
+        ok = {k: v for k, v in table.items() if v['valid30']['average7'] >= floor}
+        out['chosen'] = max(ok, key=lambda k: ok[k]['lspet']['pck@0.2'])
+        out['best_on_photographs'] = max(table, key=lambda k: table[k]['lspet']['pck@0.2'])
+    return out
+
+
 JOBS: tuple[Job, ...] = (
     Job('peer_depth', "MediaPipe's per-joint depth offsets, fitted on the training renders",
         ('train',), lambda c: [[
@@ -261,6 +343,9 @@ JOBS: tuple[Job, ...] = (
         ('valid30', 'valid30_near', 'valid60_people2', 'valid60_people2_alone1',
          'valid60_people2_alone2', 'valid60_people3', 'valid30_people2b', 'valid30_msr'),
         _validation),
+    Job('colour_net', "the photograph network as the detector's colour unary, its weights "
+        'swept on validation: LSPET 8501-9000 (colour alone) and valid30 (RGB-D)', ('valid30',),
+        _colour_net, needs='lspet'),
     Job('test', 'held-out test (s07-s08, 400 frames 0.1 s apart): rgbd_14 and rgb_10',
         ('test',), lambda c: [_eval(c, str(DATA / 'test'), RESULTS / 'test.json')]),
     Job('test30', 'held-out test30 (720 frames at 30 fps), with the PCK curves',
@@ -288,11 +373,9 @@ JOBS: tuple[Job, ...] = (
                    for s in ('test60_people2', 'test60_people2_alone1', 'test60_people2_alone2',
                              'test60_people3')]),
     Job('lspet', 'LSPET photographs 2501-3000: the photograph network, the photograph part '
-        "model, and the nodes' rgbd_14 by its colour channel alone", (),
-        lambda c: [_eval(c, c.lspet, RESULTS / 'lspet.json', '--range', '2501-3000',
-                         '--model', 'lspet_convnet', '--model', 'lspet_rgb_14',
-                         '--model', 'rgbd_14')],
-        needs='lspet'),
+        "model, and the nodes' rgbd_14 by its colour channel alone, without and with the "
+        'photograph network in its colour unary (the weights chosen on validation)', (),
+        _lspet, needs='lspet'),
     Job('bench', 'CPU per stage on the demo bag, and MediaPipe in the same run; again on '
         "the nodes' several-person path", (),
         lambda c: [['pose4d', 'bench', 'bags/sample', '--json', str(RESULTS / name),
@@ -396,6 +479,8 @@ def run(only: Sequence[str] | None = None, *, utkinect: str = UTKINECT, lspet: s
                 _run(c)
             if job.name == 'validation':
                 write_json(RESULTS / 'validation.json', summarize_validation(), indent=1)
+            if job.name == 'colour_net':
+                write_json(RESULTS / 'colour_net.json', summarize_colour_net(), indent=1)
         except (RuntimeError, OSError, ValueError, KeyError) as e:
             log(f'{job.name}: failed ({e})')
             run_skipped.append({'job': job.name, 'why': f'failed: {e}'})

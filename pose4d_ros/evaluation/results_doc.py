@@ -156,18 +156,50 @@ def write_all(results: Path, index: dict, *, readme: Path = Path('README.md'),
               'test60_people2_alone1': 'The same videos, the first person alone',
               'test60_people2_alone2': 'The same videos, the second person alone',
               'test60_people3': 'Held-out three-person renders',
-              'lspet': 'LSPET photographs 2501-3000'}
+              'lspet': 'LSPET photographs 2501-3000',
+              'lspet_colour_net': "LSPET photographs 2501-3000: the nodes' model with the "
+                                  'photograph network in its colour unary'}
     for stem, title in titles.items():
         data = load(results, stem)
         if data is not None:
             lines += eval_section(title, data, jobs.get(
-                'people' if stem.startswith('test60_people') else stem))
+                'people' if stem.startswith('test60_people') else
+                'lspet' if stem.startswith('lspet') else stem))
             if stem == 'test30' and (results / 'pck_test30.png').exists():
                 lines += ['![PCK curves on test30](results/pck_test30.png)', '']
     lines += bench_section(results, jobs)
     lines += validation_section(results, jobs)
+    lines += colour_net_section(results, jobs)
     write_atomic(out, ('\n'.join(lines).rstrip() + '\n').encode())
     update_readme(readme, results)
+
+
+def colour_net_section(results: Path, jobs: dict) -> list[str]:
+    """The colour network's weights on validation (`results.summarize_colour_net`)."""
+    v = load(results, 'colour_net')
+    if not v or not v.get('values'):
+        return []
+    out = ["## The photograph network as the detector's colour unary, on validation", '',
+           f"`{v['network']}` in the part model's colour unary (`core.dpm.net_unary`, the "
+           "detector node's `detector.colour_net`): the nodes' `rgbd_14` by its colour channel "
+           f"alone on {v['photographs']} (no network saw them), and as the nodes run it on "
+           f"{v['renders']} (`rgbd_kf_ik`). `none` is the colour HOG alone (what the nodes "
+           'run by default).', '',
+           '| weighting | photographs PCK@0.1 | photographs PCK@0.2 | CPU ms a photo | '
+           f"{v['renders']} average7 | within 10 cm | CPU ms a frame |",
+           '|---|---|---|---|---|---|---|']
+    for label, r in v['values'].items():
+        p, d = r['lspet'], r['valid30']
+        out.append(f"| `{label}` {' '.join(r['config'])} | {fmt(p['pck'])} | "
+                   f"{fmt(p['pck@0.2'])} | {fmt(p['cpu_ms'])} | {fmt(d['average7'])} | "
+                   f"{fmt(d['within_10cm'])} | {fmt(d['cpu_ms'])} |")
+    if 'chosen' in v:
+        out += ['', f"Chosen on validation: `{v['chosen']}` (the best photographs' PCK@0.2 "
+                f"among those losing at most {v['max_rgbd_loss']} of {v['renders']}' average7 "
+                f"against `none`; best on photographs alone: `{v['best_on_photographs']}`).",
+                '']
+    out += commands(jobs.get('colour_net'))
+    return out
 
 
 def bench_section(results: Path, jobs: dict) -> list[str]:

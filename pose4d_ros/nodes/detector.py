@@ -26,7 +26,8 @@ Publications (input header)
 Parameters (config/detector.yaml)
     detector.model, detector.n_levels, detector.margin, detector.person_scales,
     detector.scale_warm_up_frames, detector.scale_probe_every, detector.min_confidence,
-    detector.max_people, detector.quiet_frames, detector.keep_unseen_s
+    detector.max_people, detector.quiet_frames, detector.keep_unseen_s, detector.colour_net,
+    detector.colour_net_weight, detector.colour_hog_weight
     (a part's depth look-up is the model's: `core.lifting.lift_parts`)
 """
 
@@ -42,8 +43,10 @@ from rclpy.node import Node
 from sensor_msgs.msg import Image
 
 from pose4d_ros.core.camera import cad60_intrinsics
+from pose4d_ros.core.convnet import is_convnet, load_convnet
 from pose4d_ros.core.dpm.infer import SearchConfig
 from pose4d_ros.core.dpm.model import load_model
+from pose4d_ros.core.dpm.net_unary import NetUnary, UnaryConfig
 from pose4d_ros.core.dpm.scale import ScaleConfig
 from pose4d_ros.core.joints import JointSet
 from pose4d_ros.core.people import PeopleDetector, TrackingConfig, people_from_labels
@@ -69,6 +72,7 @@ from pose4d_ros.nodes.params import NodeParams, Param, ParameterError
 
 _S = SearchConfig()
 _C = ScaleConfig()
+_U = UnaryConfig()
 
 
 def _model_exists(value: str) -> str | None:
@@ -77,6 +81,16 @@ def _model_exists(value: str) -> str | None:
     except FileNotFoundError as exc:
         return str(exc)
     return None
+
+
+def _network_exists(value: str) -> str | None:
+    if not value:
+        return None
+    try:
+        path = model_path(value)
+    except FileNotFoundError as exc:
+        return str(exc)
+    return None if is_convnet(path) else f'{path}: not a photograph network (core.convnet)'
 
 
 def _scale_factors(value: list[float]) -> str | None:
@@ -91,6 +105,18 @@ PARAMS = (
     Param('detector.model', 'rgbd_14', 'Part model: the name of a shipped model (rgbd_14, '
           'rgbd_10, rgb_10, ...) or the path of a .npz.', check=_model_exists,
           restart='the model is loaded, and its kernels compiled, at start-up'),
+    Param('detector.colour_net', '', "A photograph network (a shipped name such as "
+          "lspet_convnet, or a .npz) whose joint heat maps, read on the search's crop, join each "
+          "part's colour unary in the part model's tree (core.dpm.net_unary); '' = the model's "
+          'colour HOG filters alone.', check=_network_exists,
+          restart='the network is loaded at start-up'),
+    Param('detector.colour_net_weight', _U.weight, "Factor on the network's log-probability "
+          "in a part's unary (with detector.colour_net).", range=(0.0, 1000.0),
+          restart='the network term is built at start-up'),
+    Param('detector.colour_hog_weight', _U.hog_weight, "Factor on the model's colour HOG "
+          'filters when detector.colour_net is set (0 = the network is the whole colour '
+          'unary; the depth filters keep theirs).', range=(0.0, 10.0),
+          restart="the model's filters are prepared at start-up"),
     Param('detector.n_levels', _S.n_levels, 'Pyramid levels searched around the scale the '
           "person's depth predicts.", range=(1, 9), live=True),
     Param('detector.margin', _S.margin, 'Search margin around the foreground box, in person '
@@ -146,7 +172,20 @@ def detector_stage(p: dict[str, Any]) -> DetectorStage:
         model = load_model(path)
     except (OSError, ValueError) as exc:
         raise ParameterError(f'parameter detector.model: {exc}') from None
-    return DetectorStage(model, **detector_settings(p))
+    return DetectorStage(model, **detector_settings(p), unary=colour_net(p))
+
+
+def colour_net(p: dict[str, Any]) -> NetUnary | None:
+    """The photograph network as a colour unary (`detector.colour_net`), or None."""
+    if not p['detector.colour_net']:
+        return None
+    path = model_path(p['detector.colour_net'])
+    try:
+        net = load_convnet(path)
+    except (OSError, ValueError) as exc:
+        raise ParameterError(f'parameter detector.colour_net: {exc}') from None
+    return NetUnary(net, UnaryConfig(weight=p['detector.colour_net_weight'],
+                                     hog_weight=p['detector.colour_hog_weight']))
 
 
 def people_config(p: dict[str, Any]) -> TrackingConfig:
@@ -180,9 +219,11 @@ class DetectorNode(Node):
         self.inputs = PairedInputs(
             self, [(Image, f'pose4d/foreground/{name}', qos.SENSOR_QOS)
                    for name in ('color', 'depth', 'mask')], self.process, self.monitor)
+        net = Path(str(p['detector.colour_net'])).name
         self.get_logger().info(
             f'detecting {len(self.template.names)} parts with '
-            f'{Path(str(p["detector.model"])).name} ({self.template.model.channels}) in '
+            f'{Path(str(p["detector.model"])).name} ({self.template.model.channels}'
+            f'{", colour net " + net if net else ""}) in '
             f'{self.resolve_topic_name("pose4d/foreground")} -> '
             f'{self.resolve_topic_name("pose4d/parts")}(/people), up to '
             f'{p["detector.max_people"]} people')
@@ -190,7 +231,7 @@ class DetectorNode(Node):
     def _new_stage(self) -> DetectorStage:
         t = self.template
         return DetectorStage(t.model, search=t.detector.config, scale=t.person_scale.config,
-                             min_confidence=t.min_confidence)
+                             min_confidence=t.min_confidence, unary=t.detector.unary)
 
     def process(self, items: Any) -> None:
         if (p := self.params.changes()) is not None:
