@@ -126,7 +126,10 @@ def _camera_publishers(ros):
             ros.node.create_publisher(CameraInfo, 'camera/color/camera_info', qos.OUTPUT_QOS))
 
 
-def test_foreground_and_detector_nodes_find_the_parts(ros, frames, tmp_path):
+@pytest.mark.parametrize('detector_params', [
+    {}, {'detector.colour_net': 'lspet_convnet', 'detector.colour_net_weight': 0.1}],
+    ids=['hog', 'colour_net'])
+def test_foreground_and_detector_nodes_find_the_parts(ros, frames, tmp_path, detector_params):
     from pose4d_msgs.msg import JointArray
     from std_msgs.msg import Header
 
@@ -135,7 +138,8 @@ def test_foreground_and_detector_nodes_find_the_parts(ros, frames, tmp_path):
     from pose4d_ros.nodes import qos
     from pose4d_ros.nodes.convert import joints_from_msg, ns_to_stamp
 
-    nodes = [start('foreground', {}, log_dir=tmp_path), start('detector', {}, log_dir=tmp_path)]
+    nodes = [start('foreground', {}, log_dir=tmp_path),
+             start('detector', detector_params, log_dir=tmp_path)]
     try:
         pubs = _camera_publishers(ros)
         parts = ros.collect(JointArray, 'pose4d/parts', qos.OUTPUT_QOS)
@@ -151,6 +155,8 @@ def test_foreground_and_detector_nodes_find_the_parts(ros, frames, tmp_path):
     finally:
         for node in nodes:
             assert node.stop() == 0, node.output()
+    # the network in the part model's colour unary is said at start-up
+    assert ('colour net lspet_convnet)' in nodes[1].output()) == bool(detector_params)
     answers = {m.header.stamp.nanosec: m for m in parts
                if np.isfinite(m.joints[head].position.z)}
     assert sorted(answers) == sorted(h.stamp.nanosec for h in headers)
