@@ -107,9 +107,11 @@ bench: setup
 
 # Every set, table and figure the READMEs report (`pose4d results`; RESULTS_ONLY=job,job for a
 # part). With the peer venv (make peer) MediaPipe's rows too; without it they are skipped, and said.
+# RESULTS_PARALLEL=2: a validation job's evaluations two at a time (never the timings).
 RESULTS_ONLY ?=
+RESULTS_PARALLEL ?= 1
 results: setup
-	$(BIN)/pose4d results $(if $(RESULTS_ONLY),--only $(RESULTS_ONLY))
+	$(BIN)/pose4d results $(if $(RESULTS_ONLY),--only $(RESULTS_ONLY)) --parallel $(RESULTS_PARALLEL)
 
 # The peer: MediaPipe Pose in a venv of its own (its numpy<2 and opencv-contrib-python clash with
 # ours); `pose4d eval/bench --peer mediapipe` run its worker there. Nodes and tests never need it.

@@ -9,8 +9,7 @@ command), runs `pose4d eval` and `pose4d bench` for every table (with `--peer me
 offsets are skipped and said so), and writes docs/results/*.json, docs/results/index.json (the
 commands, the machine, the commit, what was skipped), the generated docs/RESULTS.md and the
 README's summary (`evaluation.results`, `evaluation.results_doc`). Run from the repository
-root. Jobs, in order: peer_depth, validation, test, test30, test30_arms, test30_msr, sample,
-test30_people2, people, lspet, bench, bench_graph.
+root. Jobs, in order: see `--help` (`--only`).
 """
 
 from __future__ import annotations
@@ -33,16 +32,22 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
                    help='MSR Action3D motion, for the rendered sets posed by it')
     p.add_argument('--lspet', default='../shared/data/lspet', help='LSPET root')
     p.add_argument('--no-peer', action='store_true', help='do not run MediaPipe')
+    p.add_argument('--parallel', type=int, default=1, metavar='N',
+                   help="run N of a validation job's evaluations side by side (their "
+                        'accuracies and search work do not depend on it; timings would)')
     p.set_defaults(func=run)
 
 
 def run(args: argparse.Namespace) -> int:
+    if args.parallel < 1:
+        raise ValueError(f'--parallel {args.parallel}: must be at least 1')
     unknown = [j for j in args.only or () if j not in results.JOB_NAMES]
     if unknown:
         raise ValueError(f'--only {",".join(unknown)}: no such job (jobs: '
                          f'{", ".join(results.JOB_NAMES)})')
     index = results.run(args.only, utkinect=args.utkinect, lspet=args.lspet,
-                        peer=False if args.no_peer else None, msraction3d=args.msraction3d)
+                        peer=False if args.no_peer else None, msraction3d=args.msraction3d,
+                        parallel=args.parallel)
     skipped = index['last_run']['skipped']
     print(f"ran {len(index['last_run']['jobs']) - len(skipped)} job(s), skipped "
           f"{len(skipped)}" + ''.join(f"\n  {s['job']}: {s['why']}" for s in skipped))

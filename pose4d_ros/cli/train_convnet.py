@@ -1,7 +1,7 @@
 """`pose4d train-convnet`: train the photograph joint network (`core.convnet`) on LSPET.
 
-    pose4d train-convnet LSPET --range 1-2500,3001-8500 --threads 2 --cpu-minutes 110 \
-        --out lspet_convnet.npz
+    pose4d train-convnet LSPET --range 1-2500,3001-8500 --renders data/synth/train ... \
+        --precision bf16 --minutes 55 --out lspet_convnet.npz
 
 Needs PyTorch, for training only: `make train-env` makes `.venv-train` (our Python
 dependencies, PyTorch's CPU build from `requirements/convnet.txt`, pose4d_ros, no ROS), whose

@@ -7,7 +7,7 @@ fully convolutional network (a residual encoder to 1/16 of the input, decoded wi
 connections to 1/4) gives, for each joint, a score for every cell of a 4-pixel grid over the
 photograph, trained with a softmax over the cells against a Gaussian around the labelled joint
 (as the keypoint heads of Mask R-CNN, He et al. 2017). A joint is put at its map's best cell
-(refined by a quarter cell towards the larger neighbour); its confidence is the softmax
+(refined to the top of the parabola through it and its neighbours); its confidence is the softmax
 probability there. The mirrored photograph is searched too and the two maps averaged.
 
 The input is the whole photograph, padded to a square and resized to `input_px` (LSPET's
@@ -163,13 +163,14 @@ class ConvNet:
         y = self._block(_up2(y) + _conv(a, *w['l2'], 1), 'u2', 1)
         return _conv(y, *w['head'], 1).transpose(2, 0, 1)
 
-    def heat_maps(self, color: NDArray[np.uint8], scales: Sequence[float] = PHOTO_SCALES
-                  ) -> tuple[NDArray[np.float32], NDArray[np.float64]]:
+    def heat_maps(self, color: NDArray[np.uint8], scales: Sequence[float] = PHOTO_SCALES, *,
+                  mirror: bool = True) -> tuple[NDArray[np.float32], NDArray[np.float64]]:
         """Log-probabilities (J, S/4, S/4) of each joint over the cells of `color` ((H, W, 3)
-        uint8 RGB), the photograph and its mirror image averaged, and the (2, 3) transform
-        from photograph to input pixels. `scales`: the photograph is also read enlarged (or
-        shrunk) by each factor (1 among them), and each map, brought back onto the grid of
-        scale 1, averaged in where it sees the photograph."""
+        uint8 RGB), the photograph and its mirror image averaged (the photograph alone unless
+        `mirror`: half the work), and the (2, 3) transform from photograph to input pixels.
+        `scales`: the photograph is also read enlarged (or shrunk) by each factor (1 among
+        them), and each map, brought back onto the grid of scale 1, averaged in where it sees
+        the photograph."""
         color = np.asarray(color)
         if color.ndim != 3 or color.shape[2] != 3 or color.dtype != np.uint8:
             raise ValueError(f'ConvNet: colour must be (H, W, 3) uint8, got {color.shape} '
@@ -183,7 +184,9 @@ class ConvNet:
         for k in scales:
             mk = crop_transform(color.shape, self.input_px, scale=k)
             x = normalise(warp(color, mk, self.input_px))
-            s = 0.5 * (self.forward(x) + self.forward(x[:, ::-1])[list(self.mirror), :, ::-1])
+            s = self.forward(x)
+            if mirror:
+                s = 0.5 * (s + self.forward(x[:, ::-1])[list(self.mirror), :, ::-1])
             w = np.ones((cells, cells), np.float32)
             if k != 1.0:
                 a = _cell_map(m, mk)
@@ -222,20 +225,33 @@ def _cell_map(m1: NDArray[np.float64], mk: NDArray[np.float64]) -> NDArray[np.fl
 
 def decode(logp: NDArray[np.floating], transform: NDArray[np.float64]
            ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-    """Each map's best cell, a quarter cell towards the larger neighbour, in the pixels the
-    (2, 3) `transform` maps to the input; and the probability there."""
+    """Each map's best cell, moved along each axis to the top of the parabola through it and
+    its two neighbours' log-probabilities (at most half a cell), in the pixels the (2, 3)
+    `transform` maps to the input; and the probability at the best cell. (Chosen on LSPET
+    8501-9000, two networks: PCK@0.1 +0.5 and +0.8 against a quarter cell towards the larger
+    neighbour, PCK@0.2 the same within 0.3.)"""
     n, cells = logp.shape[0], logp.shape[1]
     flat = logp.reshape(n, -1).argmax(axis=1)
     y, x = np.divmod(flat, cells)
     j = np.arange(n)
-    right = logp[j, y, np.minimum(x + 1, cells - 1)] - logp[j, y, np.maximum(x - 1, 0)]
-    down = logp[j, np.minimum(y + 1, cells - 1), x] - logp[j, np.maximum(y - 1, 0), x]
-    cx = x + 0.25 * np.sign(right)
-    cy = y + 0.25 * np.sign(down)
+    peak = logp[j, y, x]
+    cx = x + _vertex(logp[j, y, np.maximum(x - 1, 0)], peak,
+                     logp[j, y, np.minimum(x + 1, cells - 1)])
+    cy = y + _vertex(logp[j, np.maximum(y - 1, 0), x], peak,
+                     logp[j, np.minimum(y + 1, cells - 1), x])
     uv_in = np.stack([(cx + 0.5) * STRIDE - 0.5, (cy + 0.5) * STRIDE - 0.5], axis=1)
     inverse = cv2.invertAffineTransform(transform)
     uv = np.c_[uv_in, np.ones(n)] @ inverse.T
     return uv, np.exp(logp[j, y, x]).astype(np.float64)
+
+
+def _vertex(before: NDArray, peak: NDArray, after: NDArray) -> NDArray[np.float64]:
+    """Offset of the top of the parabola through (-1, before), (0, peak), (1, after) from 0,
+    within half a cell (0 where the three do not bend down)."""
+    bend = 2.0 * peak - before - after
+    with np.errstate(divide='ignore', invalid='ignore'):
+        offset = np.where(bend > 1e-9, 0.5 * (after - before) / bend, 0.0)
+    return np.clip(offset, -0.5, 0.5).astype(np.float64)
 
 
 def save_convnet(net: ConvNet, path: str | Path) -> None:

@@ -324,7 +324,7 @@ class DetectorStage:
             return JointSet.missing(self.names)
         if scaled:
             chosen = self.person_scale.update(
-                {f: poses[0].score if poses else math.nan for f, poses in found.items()})
+                {f: poses[0].rank if poses else math.nan for f, poses in found.items()})
             pose = found[chosen][0]
             poses = [v[0] for v in found.values()
                      if v and np.logical_and.reduce(np.isfinite(v[0].uv), axis=None)]

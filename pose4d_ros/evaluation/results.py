@@ -224,6 +224,9 @@ class Job:
     commands: Callable[[Context], list[list[str]]]
     needs_peer: bool = False
     needs: str = ''  # 'lspet': shared data it reads besides its sets' motion
+    # its commands are independent evaluations that may run side by side (`run(parallel=N)`):
+    # only for jobs whose figures are accuracies and search work, never timings
+    parallel: bool = False
 
 
 def _validation(ctx: Context) -> list[list[str]]:
@@ -251,15 +254,16 @@ def _validation(ctx: Context) -> list[list[str]]:
 
 # The photograph network as the detector's colour unary (core.dpm.net_unary, the detector
 # node's detector.colour_net): its weights swept on validation (LSPET 8501-9000, which no
-# network saw, the nodes' rgbd_14 by its colour channel alone; valid30, RGB-D as the nodes
-# run it), the first value the colour HOG alone (no network)
+# network saw, the nodes' rgbd_14 by its colour channel alone; valid30 and valid30_msr, RGB-D
+# as the nodes run it), the first value the colour HOG alone (no network)
 COLOUR_NET = 'lspet_convnet'
 COLOUR_NET_VALID = '8501-9000'
+COLOUR_NET_RENDERS = ('valid30', 'valid30_msr')
 COLOUR_NET_GRID: dict[str, tuple[str, ...]] = {
-    'none': (), **{f'w{w:g}_h{h:g}': (f'unary.weight={w:g}', f'unary.hog_weight={h:g}',
-                                      'unary.scales=1,1.3')
-                   for w, h in ((4, 0), (16, 0), (64, 0), (16, 1), (1, 1), (0.1, 1))}}
-# the RGB-D rows may lose at most this much of valid30's rgbd_kf_ik average7 against none
+    'none': (), **{f'w{w:g}_h{h:g}': (f'unary.weight={w:g}', f'unary.hog_weight={h:g}')
+                   for w, h in ((1, 1), (2, 1), (4, 1), (16, 1), (4, 0), (16, 0))}}
+# the RGB-D rows may lose at most this much of the renders' rgbd_kf_ik average7 (pooled over
+# COLOUR_NET_RENDERS) against none
 COLOUR_NET_RGBD_LOSS = 0.5
 
 
@@ -274,9 +278,9 @@ def _colour_net(ctx: Context) -> list[list[str]]:
         config = [a for item in items for a in ('--config', item)]
         cmds.append(_eval(ctx, ctx.lspet, colour_net_file(label, 'lspet'), '--range',
                           COLOUR_NET_VALID, '--model', 'rgbd_14', *net, *config, peer=False))
-        cmds.append(_eval(ctx, str(DATA / 'valid30'), colour_net_file(label, 'valid30'),
-                          '--model', 'rgbd_14', *net, *config, '--no-single-frame',
-                          peer=False))
+        cmds += [_eval(ctx, str(DATA / s), colour_net_file(label, s), '--model', 'rgbd_14',
+                       *net, *config, '--no-single-frame', peer=False)
+                 for s in COLOUR_NET_RENDERS]
     return cmds
 
 
@@ -302,30 +306,37 @@ def chosen_colour_net() -> tuple[str, ...]:
 
 
 def summarize_colour_net() -> dict:
-    """Each weighting's figures on the two validation sets, and the one chosen: the best
-    PCK@0.2 average of the nodes' model on photographs (colour alone) among those losing at
-    most `COLOUR_NET_RGBD_LOSS` of valid30's rgbd_kf_ik average7 against the colour HOG
-    alone."""
+    """Each weighting's figures on the validation sets, and the one chosen: the best PCK@0.2
+    average of the nodes' model on photographs (colour alone) among those losing at most
+    `COLOUR_NET_RGBD_LOSS` of the renders' rgbd_kf_ik average7 (pooled over
+    `COLOUR_NET_RENDERS`, frames weighted) against the colour HOG alone."""
     table = {}
     for label, items in COLOUR_NET_GRID.items():
-        files = [colour_net_file(label, d) for d in ('lspet', 'valid30')]
+        files = [colour_net_file(label, d) for d in ('lspet', *COLOUR_NET_RENDERS)]
         if not all(f.exists() for f in files):
             continue
-        photos, renders = (json.loads(f.read_text())['rows'] for f in files)
-        (photo,) = photos.values()
-        r = renders['rgbd_kf_ik']
-        table[label] = {'config': list(items),
-                        'lspet': {'pck': photo['pck']['average'],
-                                  'pck@0.2': photo['pck@0.2']['average'],
-                                  'cpu_ms': photo.get('cpu_ms', {}).get('p50')},
-                        'valid30': {'average7': r['pck']['average7'],
-                                    'within_10cm': r.get('within_10cm', {}).get('average'),
-                                    'cpu_ms': r.get('cpu_ms', {}).get('p50')}}
+        photos, *renders = (json.loads(f.read_text()) for f in files)
+        (photo,) = photos['rows'].values()
+        rows = [run['rows']['rgbd_kf_ik'] for run in renders]
+        frames = [run['frames'] for run in renders]
+        table[label] = {
+            'config': list(items),
+            'lspet': {'pck': photo['pck']['average'], 'pck@0.2': photo['pck@0.2']['average'],
+                      'cpu_ms': photo.get('cpu_ms', {}).get('p50')},
+            'renders': {'average7': _pooled([r['pck']['average7'] for r in rows], frames),
+                        'within_10cm': _pooled([r.get('within_10cm', {}).get('average')
+                                                for r in rows], frames),
+                        'cpu_ms': _pooled([r.get('cpu_ms', {}).get('p50') for r in rows],
+                                          frames)},
+            'sets': {s: {'average7': r['pck']['average7'],
+                         'within_10cm': r.get('within_10cm', {}).get('average')}
+                     for s, r in zip(COLOUR_NET_RENDERS, rows, strict=True)}}
     out: dict = {'network': COLOUR_NET, 'photographs': f'LSPET {COLOUR_NET_VALID}',
-                 'renders': 'valid30', 'max_rgbd_loss': COLOUR_NET_RGBD_LOSS, 'values': table}
+                 'renders': ' + '.join(COLOUR_NET_RENDERS),
+                 'max_rgbd_loss': COLOUR_NET_RGBD_LOSS, 'values': table}
     if 'none' in table:
-        floor = table['none']['valid30']['average7'] - COLOUR_NET_RGBD_LOSS
-        ok = {k: v for k, v in table.items() if v['valid30']['average7'] >= floor}
+        floor = table['none']['renders']['average7'] - COLOUR_NET_RGBD_LOSS
+        ok = {k: v for k, v in table.items() if v['renders']['average7'] >= floor}
         out['chosen'] = max(ok, key=lambda k: ok[k]['lspet']['pck@0.2'])
         out['best_on_photographs'] = max(table, key=lambda k: table[k]['lspet']['pck@0.2'])
     return out
@@ -342,10 +353,10 @@ JOBS: tuple[Job, ...] = (
         'renders; the MSR Action3D validation set',
         ('valid30', 'valid30_near', 'valid60_people2', 'valid60_people2_alone1',
          'valid60_people2_alone2', 'valid60_people3', 'valid30_people2b', 'valid30_msr'),
-        _validation),
+        _validation, parallel=True),
     Job('colour_net', "the photograph network as the detector's colour unary, its weights "
-        'swept on validation: LSPET 8501-9000 (colour alone) and valid30 (RGB-D)', ('valid30',),
-        _colour_net, needs='lspet'),
+        'swept on validation: LSPET 8501-9000 (colour alone), valid30 and valid30_msr (RGB-D)',
+        COLOUR_NET_RENDERS, _colour_net, needs='lspet', parallel=True),
     Job('test', 'held-out test (s07-s08, 400 frames 0.1 s apart): rgbd_14 and rgb_10',
         ('test',), lambda c: [_eval(c, str(DATA / 'test'), RESULTS / 'test.json')]),
     Job('test30', 'held-out test30 (720 frames at 30 fps), with the PCK curves',
@@ -400,6 +411,20 @@ def pose4d_executable() -> str:
     return str(exe) if exe.exists() else 'pose4d'
 
 
+def _run_all(cmds: Sequence[Sequence[str]], parallel: int = 1) -> None:
+    """Run the commands, `parallel` at a time (each in its own process); RuntimeError naming
+    the first that failed."""
+    if parallel <= 1:
+        for c in cmds:
+            _run(c)
+        return
+    from concurrent.futures import ThreadPoolExecutor
+
+    with ThreadPoolExecutor(parallel) as pool:
+        for future in [pool.submit(_run, c) for c in cmds]:
+            future.result()
+
+
 def _run(cmd: Sequence[str]) -> float:
     """Run a `pose4d ...` command (or another program's), its output passed through; its wall
     time, seconds. RuntimeError when it fails."""
@@ -448,9 +473,10 @@ def peer_available() -> bool:
 
 
 def run(only: Sequence[str] | None = None, *, utkinect: str = UTKINECT, lspet: str = LSPET,
-        peer: bool | None = None, msraction3d: str = MSRACTION3D) -> dict:
+        peer: bool | None = None, msraction3d: str = MSRACTION3D, parallel: int = 1) -> dict:
     """Run the jobs (`only`: those named, in `JOBS` order), write their JSON, the index,
-    `docs/RESULTS.md` and the README summary; the index."""
+    `docs/RESULTS.md` and the README summary; the index. `parallel`: how many of a job's
+    commands run side by side where the job allows it (`Job.parallel`)."""
     from pose4d_ros.evaluation import results_doc
 
     selected = [j for j in JOBS if only is None or j.name in only]
@@ -475,8 +501,7 @@ def run(only: Sequence[str] | None = None, *, utkinect: str = UTKINECT, lspet: s
         commands = [shlex.join(c) for c in job.commands(ctx)]
         try:
             sets = {s: make_set(SETS[s], utkinect, msraction3d) for s in job.sets}
-            for c in job.commands(ctx):
-                _run(c)
+            _run_all(job.commands(ctx), parallel if job.parallel else 1)
             if job.name == 'validation':
                 write_json(RESULTS / 'validation.json', summarize_validation(), indent=1)
             if job.name == 'colour_net':
@@ -493,6 +518,8 @@ def run(only: Sequence[str] | None = None, *, utkinect: str = UTKINECT, lspet: s
             'when': time.strftime('%Y-%m-%d %H:%M:%S'), 'commit': git_commit(),
             'peer': ctx.peer and (job.needs_peer or 'mediapipe' in ' '.join(commands)),
         }
+        if job.parallel and parallel > 1:
+            jobs[job.name]['note'] = f'its commands run {parallel} at a time'
         if not ctx.peer and not job.needs_peer and any(
                 c[1] in ('eval', 'bench') for c in job.commands(ctx)):
             jobs[job.name]['note'] = 'run without the peer (no .venv-peer: `make peer`)'

@@ -186,18 +186,19 @@ def colour_net_section(results: Path, jobs: dict) -> list[str]:
            f"{v['renders']} (`rgbd_kf_ik`). `none` is the colour HOG alone (what the nodes "
            'run by default).', '',
            '| weighting | photographs PCK@0.1 | photographs PCK@0.2 | CPU ms a photo | '
-           f"{v['renders']} average7 | within 10 cm | CPU ms a frame |",
-           '|---|---|---|---|---|---|---|']
+           'renders average7 (' + ', '.join(v['values'].get('none', {}).get('sets', {}))
+           + ') | within 10 cm | CPU ms a frame |', '|---|---|---|---|---|---|---|']
     for label, r in v['values'].items():
-        p, d = r['lspet'], r['valid30']
+        p, d = r['lspet'], r['renders']
+        each = ', '.join(fmt(s['average7']) for s in r.get('sets', {}).values())
         out.append(f"| `{label}` {' '.join(r['config'])} | {fmt(p['pck'])} | "
-                   f"{fmt(p['pck@0.2'])} | {fmt(p['cpu_ms'])} | {fmt(d['average7'])} | "
-                   f"{fmt(d['within_10cm'])} | {fmt(d['cpu_ms'])} |")
+                   f"{fmt(p['pck@0.2'])} | {fmt(p['cpu_ms'])} | {fmt(d['average7'])} "
+                   f"({each}) | {fmt(d['within_10cm'])} | {fmt(d['cpu_ms'])} |")
     if 'chosen' in v:
         out += ['', f"Chosen on validation: `{v['chosen']}` (the best photographs' PCK@0.2 "
-                f"among those losing at most {v['max_rgbd_loss']} of {v['renders']}' average7 "
-                f"against `none`; best on photographs alone: `{v['best_on_photographs']}`).",
-                '']
+                f"among those losing at most {v['max_rgbd_loss']} of the renders' average7 "
+                f"({v['renders']}, pooled) against `none`; best on photographs alone: "
+                f"`{v['best_on_photographs']}`).", '']
     out += commands(jobs.get('colour_net'))
     return out
 

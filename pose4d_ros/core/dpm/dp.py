@@ -330,6 +330,7 @@ class LevelResult:
     iy: NDArray[np.int32]
     ik: NDArray[np.int32]
     score: NDArray[np.float32] | None = None   # (P, K, ny, nx) subtree scores
+    unary: NDArray[np.float32] | None = None   # (P, ny, nx) the network's term in `resp`
 
 
 def model_arrays(model: PartModel) -> tuple:
@@ -356,10 +357,12 @@ def score_level(level: Level, model: PartModel, arrays: tuple | None = None,
     ny, nx = h - fh + 1, w - fw + 1
     cols = im2col(level.feat, fh, fw)
     resp = (wmat @ cols.T).reshape(model.n_parts, model.n_types, ny, nx)
+    extra = None
     if unary is not None:
-        resp += unary(level, ny, nx)[:, None]
+        extra = unary(level, ny, nx)
+        resp += extra[:, None]
     root, ix, iy, ik, score = tree_dp(resp, parents, springs, anchors, bias)
-    return LevelResult(level, resp, root, ix, iy, ik, score)
+    return LevelResult(level, resp, root, ix, iy, ik, score, extra)
 
 
 def best_roots(result: LevelResult, count: int, threshold: float = -np.inf,

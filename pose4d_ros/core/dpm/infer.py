@@ -107,6 +107,10 @@ class Pose:
     part_scores : (P,) float64 each part's share of the score (filter + spring + bias).
     confidence : (P,) float64 in [0, 1] (the model's logistic calibration).
     score : whole-pose score (the sum of `part_scores`).
+    search_score : the score the search ranked the pose by: `score` plus, with the photograph
+        network in the colour unary (`core.dpm.net_unary`), the network's term at the parts'
+        cells (which `score`, `part_scores` and `confidence` leave out, so that they keep the
+        part model's scale that every threshold downstream was set on); NaN = `score`.
     scale : level pixels per image pixel of the level the pose was found on.
     types : (P,) int mixture type of each part.
     flags : why the pose is doubtful: 'low_score' (score < SearchConfig.low_score),
@@ -121,10 +125,16 @@ class Pose:
     scale: float
     types: NDArray[np.int64]
     flags: tuple[str, ...] = ()
+    search_score: float = math.nan
 
     @property
     def low_confidence(self) -> bool:
         return bool(self.flags)
+
+    @property
+    def rank(self) -> float:
+        """What the search ranks poses by (`search_score`, or `score` without a network)."""
+        return self.score if math.isnan(self.search_score) else self.search_score
 
 
 # --------------------------------------------------------------------------- the detector
@@ -410,7 +420,7 @@ class Detector:
             roots = best_roots(res, per_level, threshold, min_dist=2)
             cands.extend(self._poses(res, roots, flags, prior))
         canonical = self.model.canonical_scale_px
-        cands.sort(key=lambda p: -(p.score + scale_prior * np.log2(canonical / p.scale)))
+        cands.sort(key=lambda p: -(p.rank + scale_prior * np.log2(canonical / p.scale)))
         if top_k == 1:
             return cands[:1]
         kept: list[Pose] = []
@@ -477,6 +487,11 @@ class Detector:
                 cols += dc
             u, v = res.level.cell_to_pixel(rows, cols, m.filter_shape)
             loc = local[j].astype(np.float64)
+            search = math.nan
+            if res.unary is not None:
+                # the network's share out of the part scores, kept in the ranking alone
+                search = float(loc.sum())
+                loc = loc - res.unary[np.arange(m.n_parts), parts[j, :, 1], parts[j, :, 2]]
             total = float(loc.sum())
             if m.calibration is not None:
                 c = m.calibration.astype(np.float64)
@@ -485,7 +500,7 @@ class Detector:
                 conf = _sigmoid(loc)
             f = flags + (('low_score',) if total < self.config.low_score else ())
             out.append(Pose(m.part_names, np.stack([u, v], axis=1), loc, conf, total,
-                            res.level.scale, parts[j, :, 0].copy(), f))
+                            res.level.scale, parts[j, :, 0].copy(), f, search))
         return out
 
 

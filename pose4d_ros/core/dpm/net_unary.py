@@ -22,7 +22,7 @@ level then samples those maps at its filter positions' centres with one affine w
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import cv2
 import numpy as np
@@ -51,12 +51,17 @@ class UnaryConfig:
     hog_weight : factor on the model's colour HOG filters (the depth filters keep theirs).
     floor : log-probability below which a cell scores no worse.
     scales : the network's reading scales of the crop (`ConvNet.heat_maps`).
+    mirror : the crop's mirror image read too and the maps averaged (twice the work).
+    input_px : the size the crop is read at, pixels (a multiple of 32; 0 = the network's own
+        `input_px`): the network is fully convolutional.
     """
 
     weight: float = 1.0
     hog_weight: float = 1.0
     floor: float = -10.0
     scales: tuple[float, ...] = (1.0,)
+    mirror: bool = True
+    input_px: int = 0
 
     def __post_init__(self) -> None:
         if not (np.isfinite(self.weight) and self.weight >= 0):
@@ -65,6 +70,9 @@ class UnaryConfig:
             raise ValueError(f'unary hog_weight must be >= 0, got {self.hog_weight}')
         if not (np.isfinite(self.floor) and self.floor < 0):
             raise ValueError(f'unary floor must be a log-probability < 0, got {self.floor}')
+        if self.input_px < 0 or self.input_px % 32:
+            raise ValueError(f'unary input_px must be 0 or a multiple of 32, got '
+                             f'{self.input_px}')
         if not valid_scales(self.scales):
             raise ValueError(f'unary scales must include 1 and lie within 0.25..4, got '
                              f'{self.scales}')
@@ -76,6 +84,10 @@ class NetUnary:
 
     net: ConvNet
     config: UnaryConfig = UnaryConfig()
+
+    def __post_init__(self) -> None:
+        if self.config.input_px and self.config.input_px != self.net.input_px:
+            object.__setattr__(self, 'net', replace(self.net, input_px=self.config.input_px))
 
     def joints_of(self, part_names: tuple[str, ...]) -> NDArray[np.int64]:
         """For each part, the index of the network's joint of the same name (-1: none)."""
@@ -100,7 +112,7 @@ class NetUnary:
         if crop.ndim == 2:
             crop = np.repeat(crop[:, :, None], 3, axis=2)
         crop = np.ascontiguousarray(crop[:, :, :3], dtype=np.uint8)
-        logp, m = self.net.heat_maps(crop, self.config.scales)
+        logp, m = self.net.heat_maps(crop, self.config.scales, mirror=self.config.mirror)
         values = np.maximum(logp - np.float32(self.config.floor), 0).transpose(1, 2, 0)
         m = m.copy()
         m[:, 2] -= m[:, :2] @ np.array([x0, y0], np.float64)  # from full-image pixels
