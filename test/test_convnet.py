@@ -228,20 +228,13 @@ def test_a_cpu_budget_counts_this_process_s_cpu_time_not_the_wall_clock() -> Non
         Budget(cpu_minutes=0.0)
 
 
-def test_train_convnet_trains_on_several_ranges_within_a_cpu_budget(tmp_path: Path) -> None:
-    pytest.importorskip('torch', reason='PyTorch trains the network only (make train-env); '
-                        'the suite runs without it')
-    import time
-
+def tiny_lspet(root: Path, n: int, seed: int = 0) -> Path:
+    """An LSPET root of `n` random 80x60 photographs, every joint labelled inside them."""
     import cv2
     import scipy.io
 
-    from pose4d_ros.cli.main import main
-
-    root = tmp_path / 'lspet'
     (root / 'images').mkdir(parents=True)
-    rng = np.random.default_rng(0)
-    n = 72
+    rng = np.random.default_rng(seed)
     joints = np.ones((14, 3, n))
     joints[:, 0] = rng.uniform(10, 50, (14, n))
     joints[:, 1] = rng.uniform(10, 70, (14, n))
@@ -249,6 +242,17 @@ def test_train_convnet_trains_on_several_ranges_within_a_cpu_budget(tmp_path: Pa
     for i in range(1, n + 1):
         cv2.imwrite(str(root / 'images' / f'im{i:05d}.jpg'),
                     rng.integers(0, 256, (80, 60, 3), dtype=np.uint8))
+    return root
+
+
+def test_train_convnet_trains_on_several_ranges_within_a_cpu_budget(tmp_path: Path) -> None:
+    pytest.importorskip('torch', reason='PyTorch trains the network only (make train-env); '
+                        'the suite runs without it')
+    import time
+
+    from pose4d_ros.cli.main import main
+
+    root = tiny_lspet(tmp_path / 'lspet', 72)
     out = tmp_path / 'net.npz'
     # the process's CPU time counts from its start: what pytest spent so far plus 8 s
     budget = f'{(time.process_time() + 8.0) / 60.0:.5f}'
@@ -304,21 +308,11 @@ def test_render_crops_cut_the_person_as_the_detector_sees_them() -> None:
 def test_train_convnet_adds_rendered_people_and_trains_in_bfloat16(tmp_path: Path) -> None:
     pytest.importorskip('torch', reason='PyTorch trains the network only (make train-env); '
                         'the suite runs without it')
-    import cv2
-    import scipy.io
     from helpers import write_utkinect
 
     from pose4d_ros.cli.main import main
 
-    root = tmp_path / 'lspet'
-    (root / 'images').mkdir(parents=True)
-    rng = np.random.default_rng(1)
-    joints = np.ones((14, 3, 8))
-    joints[:, :2] = rng.uniform(10, 50, (14, 2, 8))
-    scipy.io.savemat(root / 'joints.mat', {'joints': joints})
-    for i in range(1, 9):
-        cv2.imwrite(str(root / 'images' / f'im{i:05d}.jpg'),
-                    rng.integers(0, 256, (80, 60, 3), dtype=np.uint8))
+    root = tiny_lspet(tmp_path / 'lspet', 8, seed=1)
     write_utkinect(tmp_path / 'ut')
     renders = tmp_path / 'renders'
     assert main(['synth', '--utkinect', str(tmp_path / 'ut'), '--out', str(renders), '--seed',

@@ -218,8 +218,12 @@ def test_the_colour_network_is_chosen_on_validation_and_reported_on_test(tmp_pat
     assert 'unary.weight=4' in held_out and 'unary.hog_weight=0' in held_out
     assert sorted(r.SETS[s].role for s in next(
         j for j in r.JOBS if j.name == 'colour_net').sets) == ['validation', 'validation']
+    tests = next(j for j in r.JOBS if j.name == 'colour_net_test').commands(ctx)
+    assert [c[2] for c in tests] == [f'data/synth/{s}' for s in ('test', 'test30', 'test30_msr')]
+    assert all('unary.weight=4' in c and '--peer' not in c for c in tests)
     (r.RESULTS / 'colour_net.json').write_text(json.dumps({**v, 'chosen': 'none'}))
     assert len(next(j for j in r.JOBS if j.name == 'lspet').commands(ctx)) == 1
+    assert next(j for j in r.JOBS if j.name == 'colour_net_test').commands(ctx) == []
 
 
 def test_a_validation_job_runs_its_evaluations_side_by_side(monkeypatch) -> None:

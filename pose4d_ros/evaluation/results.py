@@ -295,6 +295,19 @@ def _lspet(ctx: Context) -> list[list[str]]:
     return cmds
 
 
+# the held-out RGB-D sets the chosen colour network is reported on (not the nodes' default)
+COLOUR_NET_TESTS = ('test', 'test30', 'test30_msr')
+
+
+def _colour_net_test(ctx: Context) -> list[list[str]]:
+    chosen = chosen_colour_net()
+    return [_eval(ctx, str(DATA / s), RESULTS / f'colour_net_{s}.json', '--model', 'rgbd_14',
+                  '--colour-net', COLOUR_NET,
+                  *(a for item in chosen for a in ('--config', item)), '--no-single-frame',
+                  peer=False)
+            for s in COLOUR_NET_TESTS] if chosen else []
+
+
 def chosen_colour_net() -> tuple[str, ...]:
     """The colour network's weighting chosen on validation (`docs/results/colour_net.json`),
     as `--config` items; () when none is chosen or it is the colour HOG alone."""
@@ -387,6 +400,9 @@ JOBS: tuple[Job, ...] = (
         "model, and the nodes' rgbd_14 by its colour channel alone, without and with the "
         'photograph network in its colour unary (the weights chosen on validation)', (),
         _lspet, needs='lspet'),
+    Job('colour_net_test', "the held-out RGB-D sets with the photograph network in the "
+        "detector's colour unary at the weights chosen on validation (not the nodes' default)",
+        COLOUR_NET_TESTS, _colour_net_test),
     Job('bench', 'CPU per stage on the demo bag, and MediaPipe in the same run; again on '
         "the nodes' several-person path", (),
         lambda c: [['pose4d', 'bench', 'bags/sample', '--json', str(RESULTS / name),

@@ -158,13 +158,17 @@ def write_all(results: Path, index: dict, *, readme: Path = Path('README.md'),
               'test60_people3': 'Held-out three-person renders',
               'lspet': 'LSPET photographs 2501-3000',
               'lspet_colour_net': "LSPET photographs 2501-3000: the nodes' model with the "
-                                  'photograph network in its colour unary'}
+                                  'photograph network in its colour unary',
+              **{f'colour_net_{s}': f'Held-out {s} with the photograph network in the colour '
+                                    "unary (not the nodes' default)"
+                 for s in ('test', 'test30', 'test30_msr')}}
     for stem, title in titles.items():
         data = load(results, stem)
         if data is not None:
             lines += eval_section(title, data, jobs.get(
                 'people' if stem.startswith('test60_people') else
-                'lspet' if stem.startswith('lspet') else stem))
+                'lspet' if stem.startswith('lspet') else
+                'colour_net_test' if stem.startswith('colour_net_') else stem))
             if stem == 'test30' and (results / 'pck_test30.png').exists():
                 lines += ['![PCK curves on test30](results/pck_test30.png)', '']
     lines += bench_section(results, jobs)
