@@ -205,22 +205,24 @@ def test_the_colour_network_is_chosen_on_validation_and_reported_on_test(tmp_pat
             r.colour_net_file(label, s).write_text(json.dumps(
                 {'frames': frames, 'rows': {'rgbd_kf_ik': {'pck': {'average7': a7}}}}))
     v = r.summarize_colour_net()
-    # pooled 94.75 for none: w16_h1 (94.25) and w4_h0 (95.2) qualify, w16_h0 (93.3) does
-    # not; of those within 0.5, w4_h0 places most (valid30 alone would have refused it)
+    # each set within 0.5 of none's: w1_h1, w2_h1 and w4_h1 (w4_h0 loses 1.8 on valid30
+    # however much it gains on valid30_msr, its pooled 95.2 above none's 94.75); of those,
+    # w2_h1 places most
     assert v['values']['none']['renders']['average7'] == pytest.approx(94.75)
-    assert v['chosen'] == 'w4_h0' and v['best_on_photographs'] == 'w16_h0'
+    assert v['values']['w4_h0']['renders']['average7'] == pytest.approx(95.2)
+    assert v['chosen'] == 'w2_h1' and v['best_on_photographs'] == 'w16_h0'
     (r.RESULTS / 'colour_net.json').write_text(json.dumps(v))
     ctx = r.Context('U', 'L', peer=True, dry=True)
     cmds = next(j for j in r.JOBS if j.name == 'lspet').commands(ctx)
     held_out = cmds[-1]
     assert held_out[held_out.index('--range') + 1] == '2501-3000'
     assert held_out[held_out.index('--colour-net') + 1] == r.COLOUR_NET
-    assert 'unary.weight=4' in held_out and 'unary.hog_weight=0' in held_out
+    assert 'unary.weight=2' in held_out and 'unary.hog_weight=1' in held_out
     assert sorted(r.SETS[s].role for s in next(
         j for j in r.JOBS if j.name == 'colour_net').sets) == ['validation', 'validation']
     tests = next(j for j in r.JOBS if j.name == 'colour_net_test').commands(ctx)
     assert [c[2] for c in tests] == [f'data/synth/{s}' for s in ('test', 'test30', 'test30_msr')]
-    assert all('unary.weight=4' in c and '--peer' not in c for c in tests)
+    assert all('unary.weight=2' in c and '--peer' not in c for c in tests)
     (r.RESULTS / 'colour_net.json').write_text(json.dumps({**v, 'chosen': 'none'}))
     assert len(next(j for j in r.JOBS if j.name == 'lspet').commands(ctx)) == 1
     assert next(j for j in r.JOBS if j.name == 'colour_net_test').commands(ctx) == []

@@ -125,6 +125,7 @@ def commands(job: dict | None) -> list[str]:
     if not job or 'commands' not in job:
         return []
     out = ['Commands (' + f"{job['seconds']:.0f} s, {job['when']}, commit {job['commit'][:10]}"
+           + (f", {job['machine']}" if 'machine' in job else '')
            + (f"; {job['note']}" if 'note' in job else '') + '):', '', '```']
     out += [*job.get('sets', {}).values(), *job['commands'], '```', '']
     return out
@@ -140,8 +141,10 @@ def write_all(results: Path, index: dict, *, readme: Path = Path('README.md'),
              'not edit by hand. The protocol (which sets, which choices were made where): '
              '[pose4d_ros/models/README.md](../pose4d_ros/models/README.md). Narrative and '
              'history of the measurements: [NOTES.md](NOTES.md).', '',
-             f"Machine: {m.get('cpu', '?')}, {m.get('cores', '?')} cores, Python "
-             f"{m.get('python', '?')}; commit {index.get('commit', '')[:10]}.", '']
+             f"Last run on: {m.get('cpu', '?')}, {m.get('cores', '?')} cores, Python "
+             f"{m.get('python', '?')}; commit {index.get('commit', '')[:10]}. Each table's "
+             'commands say the machine they ran on (CPU times differ between machines; the '
+             'ratios to MediaPipe are of one run on one machine).', '']
     skipped = index.get('last_run', {}).get('skipped', [])
     if skipped:
         lines += ['Skipped in the last run: ' + '; '.join(
@@ -200,8 +203,8 @@ def colour_net_section(results: Path, jobs: dict) -> list[str]:
                    f"({each}) | {fmt(d['within_10cm'])} | {fmt(d['cpu_ms'])} |")
     if 'chosen' in v:
         out += ['', f"Chosen on validation: `{v['chosen']}` (the best photographs' PCK@0.2 "
-                f"among those losing at most {v['max_rgbd_loss']} of the renders' average7 "
-                f"({v['renders']}, pooled) against `none`; best on photographs alone: "
+                f"among those losing at most {v['max_rgbd_loss']} of any render set's average7 "
+                f"({v['renders']}) against `none`; best on photographs alone: "
                 f"`{v['best_on_photographs']}`).", '']
     out += commands(jobs.get('colour_net'))
     return out
