@@ -255,3 +255,13 @@ def test_a_validation_job_runs_its_evaluations_side_by_side(monkeypatch) -> None
     with pytest.raises(RuntimeError, match='fail'):
         r._run_all([['a'], ['fail'], ['c']], 2)
     assert {j.name for j in r.JOBS if j.parallel} == {'validation', 'colour_net'}
+
+
+def test_the_colour_unary_s_defaults_are_the_weighting_chosen_on_validation() -> None:
+    from pose4d_ros.core.dpm.net_unary import UnaryConfig
+
+    chosen = json.loads((Path(__file__).parents[1] / 'docs' / 'results' /
+                         'colour_net.json').read_text())['chosen']
+    default = UnaryConfig()
+    assert r.COLOUR_NET_GRID[chosen] == (f'unary.weight={default.weight:g}',
+                                         f'unary.hog_weight={default.hog_weight:g}')

@@ -49,6 +49,8 @@ class UnaryConfig:
     ----------
     weight : factor on the network's log-probability in a part's unary.
     hog_weight : factor on the model's colour HOG filters (the depth filters keep theirs).
+        `weight` 4 and `hog_weight` 1 were chosen on validation for the shipped `rgbd_14` and
+        `lspet_convnet` (`make results`' colour_net job, `docs/results/colour_net.json`).
     floor : log-probability below which a cell scores no worse.
     scales : the network's reading scales of the crop (`ConvNet.heat_maps`).
     mirror : the crop's mirror image read too and the maps averaged (twice the work).
@@ -56,7 +58,7 @@ class UnaryConfig:
         `input_px`): the network is fully convolutional.
     """
 
-    weight: float = 1.0
+    weight: float = 4.0
     hog_weight: float = 1.0
     floor: float = -10.0
     scales: tuple[float, ...] = (1.0,)
