@@ -84,6 +84,9 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument('--person-scales', type=factor_list, default=ScaleConfig.factors,
                    metavar='F,F,...', help="factors on the depth-predicted person scale, one "
                    'chosen per track (core.dpm.scale); 1 = the predicted scale only')
+    p.add_argument('--colour-net', metavar='NETWORK',
+                   help="the photograph network in the part model's colour unary (the detector "
+                        "node's detector.colour_net, its default weights), timed in the detector")
     p.add_argument('--blas-threads', type=int, default=1, help='OpenBLAS threads')
     p.add_argument('--people', choices=('auto', 'one', 'several'), default='auto',
                    help='track one person (the paper) or several (core.people); auto: several '
@@ -119,6 +122,12 @@ def run(args: argparse.Namespace) -> int:
     # the stages time a part model; the photograph network's CPU per photo is `eval`'s cpu_ms
     model = load_model(model_path(args.model or ('lspet_rgb_14' if kind == 'lspet'
                                                  else default_models(kind)[0])))
+    unary = None
+    if args.colour_net:
+        from pose4d_ros.core.convnet import load_convnet
+        from pose4d_ros.core.dpm.net_unary import NetUnary
+
+        unary = NetUnary(load_convnet(model_path(args.colour_net)))
     peer = MediaPipePeer() if args.peer else None  # without its venv, stop before any work
     try:
         frames = load_frames([args.source], frame_range=args.frame_range,
@@ -132,7 +141,7 @@ def run(args: argparse.Namespace) -> int:
         def new_pipeline() -> FramePipeline:
             return FramePipeline(
                 DetectorStage(model, search=SearchConfig(n_levels=args.levels),
-                              scale=ScaleConfig(factors=args.person_scales)),
+                              scale=ScaleConfig(factors=args.person_scales), unary=unary),
                 people=TrackingConfig() if several else None)
 
         timed = time_stages(new_pipeline(), frames, args.warmup, use_depth=use_depth,

@@ -300,12 +300,20 @@ COLOUR_NET_TESTS = ('test', 'test30', 'test30_msr')
 
 
 def _colour_net_test(ctx: Context) -> list[list[str]]:
+    """Each held-out set with the network at the chosen weights, and without it in the same
+    run (the nodes' default, so that the two rows come from one machine and one render)."""
     chosen = chosen_colour_net()
-    return [_eval(ctx, str(DATA / s), RESULTS / f'colour_net_{s}.json', '--model', 'rgbd_14',
-                  '--colour-net', COLOUR_NET,
-                  *(a for item in chosen for a in ('--config', item)), '--no-single-frame',
-                  peer=False)
-            for s in COLOUR_NET_TESTS] if chosen else []
+    if not chosen:
+        return []
+    cmds = []
+    for s in COLOUR_NET_TESTS:
+        cmds.append(_eval(ctx, str(DATA / s), RESULTS / f'colour_net_{s}_none.json', '--model',
+                          'rgbd_14', '--no-single-frame', peer=False))
+        cmds.append(_eval(ctx, str(DATA / s), RESULTS / f'colour_net_{s}.json', '--model',
+                          'rgbd_14', '--colour-net', COLOUR_NET,
+                          *(a for item in chosen for a in ('--config', item)),
+                          '--no-single-frame', peer=False))
+    return cmds
 
 
 def chosen_colour_net() -> tuple[str, ...]:

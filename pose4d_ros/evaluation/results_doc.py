@@ -162,9 +162,10 @@ def write_all(results: Path, index: dict, *, readme: Path = Path('README.md'),
               'lspet': 'LSPET photographs 2501-3000',
               'lspet_colour_net': "LSPET photographs 2501-3000: the nodes' model with the "
                                   'photograph network in its colour unary',
-              **{f'colour_net_{s}': f'Held-out {s} with the photograph network in the colour '
-                                    "unary (not the nodes' default)"
-                 for s in ('test', 'test30', 'test30_msr')}}
+              **{f'colour_net_{s}{k}': f'Held-out {s} with the photograph network in the '
+                                        "colour unary (not the nodes' default)" + w
+                 for s in ('test', 'test30', 'test30_msr')
+                 for k, w in (('_none', ': without it, the same run'), ('', ''))}}
     for stem, title in titles.items():
         data = load(results, stem)
         if data is not None:
