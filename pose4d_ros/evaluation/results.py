@@ -419,6 +419,13 @@ JOBS: tuple[Job, ...] = (
                     *people, *(['--peer', 'mediapipe'] if c.peer else [])]
                    for name, people in (('bench.json', []),
                                         ('bench_people.json', ['--people', 'several']))]),
+    Job('bench_colour_net', "CPU per stage as the nodes run them with the photograph network "
+        "in the detector's colour unary, and without it, in the same session, with MediaPipe",
+        (), lambda c: [['pose4d', 'bench', 'bags/sample', '--json', str(RESULTS / name),
+                        '--people', 'several', *net, *(['--peer', 'mediapipe'] if c.peer else [])]
+                       for name, net in (('bench_colour_net_none.json', []),
+                                         ('bench_colour_net.json',
+                                          ['--colour-net', COLOUR_NET]))]),
     Job('bench_graph', 'the node graph on the demo bag: frames in and out, latency', (),
         lambda c: [['pose4d', 'bench', 'bags/sample', '--json',
                     str(RESULTS / 'bench_graph.json'), '--frames', '20', '--graph']]),

@@ -215,7 +215,12 @@ def bench_section(results: Path, jobs: dict) -> list[str]:
     out = []
     for name, title in (('bench', 'CPU per stage (demo bag)'),
                         ('bench_people', "CPU per stage as the nodes run them (demo bag, the "
-                                         'several-person path: every person region searched)')):
+                                         'several-person path: every person region searched)'),
+                        ('bench_colour_net_none', 'CPU per stage as the nodes run them, the '
+                                                  "session of the colour network's bench"),
+                        ('bench_colour_net', 'CPU per stage with the photograph network in '
+                                             "the detector's colour unary (not the nodes' "
+                                             'default)')):
         bench = load(results, name)
         if not bench:
             continue
@@ -236,8 +241,10 @@ def bench_section(results: Path, jobs: dict) -> list[str]:
             out += ['', f'The detector scored {fmt(cells)} filter positions a frame (counted, '
                         'the same on any machine).']
         out.append('')
-    if load(results, 'bench'):
-        out += [*commands(jobs.get('bench'))]
+        if name == 'bench_people' and load(results, 'bench'):
+            out += [*commands(jobs.get('bench'))]
+    if load(results, 'bench_colour_net'):
+        out += [*commands(jobs.get('bench_colour_net'))]
     for name, title in (('bench_graph', 'The node graph (demo bag)'),
                         ('bench_graph300', 'The node graph and the pipeline node, 300 frames '
                                            'at 30 fps (1x), the ros2 command line querying '
