@@ -1,5 +1,6 @@
 """Test data shared by several test modules: a body in front of the camera and its parts as a
-message, synthetic Kinect motion and tiny UTKinect and MSR Action3D files made from it."""
+message, synthetic Kinect motion and tiny UTKinect and MSR Action3D files made from it, small
+part models and photograph networks of random weights."""
 
 from __future__ import annotations
 
@@ -9,6 +10,8 @@ import numpy as np
 
 from pose4d_ros.core import joints as cj
 from pose4d_ros.core.camera import cad60_intrinsics, project
+from pose4d_ros.core.convnet import ConvNet
+from pose4d_ros.core.dpm import PartModel
 from pose4d_ros.core.joints import JointSet
 from pose4d_ros.core.skeleton import PARTS_10
 from pose4d_ros.datasets.msraction3d import MSR_JOINTS
@@ -109,3 +112,80 @@ def parts_msg(k: int, header, *, missing=()):
         uv[i], xyz[i], src[i] = np.nan, np.nan, cj.MISSING
     return joints_to_msg(JointSet(PARTS_10.names, uv, xyz, source=src,
                                   confidence=np.where(src == 0, 0.9, 0.0)), header)
+
+
+# ------------------------------------------------------------------- part models and networks
+
+NAMES = ('right_ankle', 'right_knee', 'right_hip', 'left_hip', 'left_knee', 'left_ankle',
+         'right_wrist', 'right_elbow', 'right_shoulder', 'left_shoulder', 'left_elbow',
+         'left_wrist', 'neck', 'head')
+
+
+MIRROR = (5, 4, 3, 2, 1, 0, 11, 10, 9, 8, 7, 6, 12, 13)
+
+
+def random_net(width: int = 4, input_px: int = 64, seed: int = 0) -> ConvNet:
+    """A network of the shipped shape with random weights."""
+    rng = np.random.default_rng(seed)
+    shapes = {'stem': (3, 3, width)}
+    for stage, cin, cout, blocks in (('s2', width, 2 * width, 2), ('s3', 2 * width, 4 * width, 2),
+                                     ('s4', 4 * width, 6 * width, 3)):
+        for i in range(blocks):
+            shapes[f'{stage}.{i}.c1'] = (3, cin if i == 0 else cout, cout)
+            shapes[f'{stage}.{i}.c2'] = (3, cout, cout)
+            if i == 0:
+                shapes[f'{stage}.{i}.skip'] = (1, cin, cout)
+    shapes.update({'l3': (1, 4 * width, 6 * width), 'u3.c1': (3, 6 * width, 4 * width),
+                   'u3.c2': (3, 4 * width, 4 * width), 'u3.skip': (1, 6 * width, 4 * width),
+                   'l2': (1, 2 * width, 4 * width), 'u2.c1': (3, 4 * width, 2 * width),
+                   'u2.c2': (3, 2 * width, 2 * width), 'u2.skip': (1, 4 * width, 2 * width),
+                   'head': (1, 2 * width, 14)})
+    weights = {n: ((rng.normal(0, (2 / (k * k * i)) ** 0.5, (k, k, i, o))).astype(np.float32),
+                   rng.normal(0, 0.1, o).astype(np.float32))
+               for n, (k, i, o) in shapes.items()}
+    return ConvNet(NAMES, MIRROR, input_px, weights, {'seed': seed})
+
+
+def random_model(parents, k=2, fs=2, channels='rgb', seed=0) -> PartModel:
+    rng = np.random.default_rng(seed)
+    p = len(parents)
+    c = 32 if channels == 'rgb' else 64
+    springs = np.zeros((p, k, 4), np.float32)
+    springs[1:] = rng.uniform(0.0, 0.3, (p - 1, k, 4))
+    springs[1:, :, [1, 3]] += 0.05
+    names = tuple(f'p{i}' for i in range(p))
+    return PartModel(names, tuple(parents), channels, 4,
+                     rng.normal(size=(p, k, fs, fs, c)).astype(np.float32),
+                     springs, rng.integers(-2, 3, (p, k, 2)).astype(np.int32),
+                     rng.normal(size=(p, k, k)).astype(np.float32), 32.0, 0.5, (20.0, 60.0),
+                     'float' if channels == 'rgbd' else '')
+
+
+def planted_image(rng: np.random.Generator) -> np.ndarray:
+    """Grey noise with three distinct bright/dark blobs (the 'parts')."""
+    im = rng.integers(90, 110, (96, 96)).astype(np.float32)
+    yy, xx = np.mgrid[0:96, 0:96]
+    for (cy, cx, r, v) in ((30, 40, 6, 250.0), (60, 30, 5, 0.0), (62, 66, 7, 200.0)):
+        im[(yy - cy) ** 2 + (xx - cx) ** 2 < r * r] = v
+    return np.repeat(im[:, :, None], 3, axis=2).astype(np.uint8)
+
+
+def tenpart_model(channels: str = 'rgbd') -> PartModel:
+    rng = np.random.default_rng(1)
+    k = 3
+    base = random_model(PARTS_10.parents, k=k, fs=5, channels=channels, seed=1)
+    return PartModel(PARTS_10.names, PARTS_10.parents, channels, 4, base.filters * 0.05,
+                     base.springs, base.anchors, base.bias * 0.1, 32.0, 0.5, (30.0, 80.0),
+                     base.depth_encoding, (0.5, 4.5),
+                     rng.normal(size=(10, 3)).astype(np.float32), True,
+                     {'data': 'unit test', 'seed': '1'})
+
+
+def person_frame(rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """A box 'person' at 2.5 m in front of a wall at 4 m."""
+    col = rng.integers(0, 256, (240, 320, 3)).astype(np.uint8)
+    depth = np.full((240, 320), 4.0, np.float32)
+    mask = np.zeros((240, 320), bool)
+    mask[40:220, 130:190] = True
+    depth[mask] = 2.5
+    return col, depth, mask

@@ -9,39 +9,13 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from helpers import MIRROR, NAMES, random_net
 from numpy.testing import assert_allclose, assert_array_equal
 
 from pose4d_ros.core import convnet as cn
 from pose4d_ros.core.convnet import ConvNet
 from pose4d_ros.core.metrics import reference_size
 from pose4d_ros.models import model_path
-
-NAMES = ('right_ankle', 'right_knee', 'right_hip', 'left_hip', 'left_knee', 'left_ankle',
-         'right_wrist', 'right_elbow', 'right_shoulder', 'left_shoulder', 'left_elbow',
-         'left_wrist', 'neck', 'head')
-MIRROR = (5, 4, 3, 2, 1, 0, 11, 10, 9, 8, 7, 6, 12, 13)
-
-
-def random_net(width: int = 4, input_px: int = 64, seed: int = 0) -> ConvNet:
-    """A network of the shipped shape with random weights."""
-    rng = np.random.default_rng(seed)
-    shapes = {'stem': (3, 3, width)}
-    for stage, cin, cout, blocks in (('s2', width, 2 * width, 2), ('s3', 2 * width, 4 * width, 2),
-                                     ('s4', 4 * width, 6 * width, 3)):
-        for i in range(blocks):
-            shapes[f'{stage}.{i}.c1'] = (3, cin if i == 0 else cout, cout)
-            shapes[f'{stage}.{i}.c2'] = (3, cout, cout)
-            if i == 0:
-                shapes[f'{stage}.{i}.skip'] = (1, cin, cout)
-    shapes.update({'l3': (1, 4 * width, 6 * width), 'u3.c1': (3, 6 * width, 4 * width),
-                   'u3.c2': (3, 4 * width, 4 * width), 'u3.skip': (1, 6 * width, 4 * width),
-                   'l2': (1, 2 * width, 4 * width), 'u2.c1': (3, 4 * width, 2 * width),
-                   'u2.c2': (3, 2 * width, 2 * width), 'u2.skip': (1, 4 * width, 2 * width),
-                   'head': (1, 2 * width, 14)})
-    weights = {n: ((rng.normal(0, (2 / (k * k * i)) ** 0.5, (k, k, i, o))).astype(np.float32),
-                   rng.normal(0, 0.1, o).astype(np.float32))
-               for n, (k, i, o) in shapes.items()}
-    return ConvNet(NAMES, MIRROR, input_px, weights, {'seed': seed})
 
 
 @pytest.mark.parametrize('stride', [1, 2])

@@ -8,6 +8,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from helpers import person_frame, planted_image, random_model, tenpart_model
 from numpy.testing import assert_allclose, assert_array_equal
 
 from pose4d_ros.core.camera import cad60_intrinsics
@@ -96,20 +97,6 @@ def test_dt2d_equals_brute_force() -> None:
 
 # --------------------------------------------------------------------------- tree inference
 
-def random_model(parents, k=2, fs=2, channels='rgb', seed=0) -> PartModel:
-    rng = np.random.default_rng(seed)
-    p = len(parents)
-    c = 32 if channels == 'rgb' else 64
-    springs = np.zeros((p, k, 4), np.float32)
-    springs[1:] = rng.uniform(0.0, 0.3, (p - 1, k, 4))
-    springs[1:, :, [1, 3]] += 0.05
-    names = tuple(f'p{i}' for i in range(p))
-    return PartModel(names, tuple(parents), channels, 4,
-                     rng.normal(size=(p, k, fs, fs, c)).astype(np.float32),
-                     springs, rng.integers(-2, 3, (p, k, 2)).astype(np.int32),
-                     rng.normal(size=(p, k, k)).astype(np.float32), 32.0, 0.5, (20.0, 60.0),
-                     'float' if channels == 'rgbd' else '')
-
 
 def test_tree_dp_equals_brute_force_over_all_poses() -> None:
     """A 4-part tree (root with two children, one grandchild) on a 2x3 map, 2 types."""
@@ -158,15 +145,6 @@ def test_im2col_rows_are_the_filter_windows() -> None:
     assert cols.shape == (4 * 6, 3 * 2 * 5)
     for y, x in ((0, 0), (3, 5), (2, 1)):
         assert_array_equal(cols[y * 6 + x], feat[y:y + 3, x:x + 2].ravel())
-
-
-def planted_image(rng: np.random.Generator) -> np.ndarray:
-    """Grey noise with three distinct bright/dark blobs (the 'parts')."""
-    im = rng.integers(90, 110, (96, 96)).astype(np.float32)
-    yy, xx = np.mgrid[0:96, 0:96]
-    for (cy, cx, r, v) in ((30, 40, 6, 250.0), (60, 30, 5, 0.0), (62, 66, 7, 200.0)):
-        im[(yy - cy) ** 2 + (xx - cx) ** 2 < r * r] = v
-    return np.repeat(im[:, :, None], 3, axis=2).astype(np.uint8)
 
 
 def test_inference_recovers_a_planted_pose_exactly() -> None:
@@ -302,17 +280,6 @@ def test_the_prior_moves_an_arm_to_the_candidate_near_it_and_only_then() -> None
 
 # --------------------------------------------------------------------------- model files
 
-def tenpart_model(channels: str = 'rgbd') -> PartModel:
-    rng = np.random.default_rng(1)
-    k = 3
-    base = random_model(PARTS_10.parents, k=k, fs=5, channels=channels, seed=1)
-    return PartModel(PARTS_10.names, PARTS_10.parents, channels, 4, base.filters * 0.05,
-                     base.springs, base.anchors, base.bias * 0.1, 32.0, 0.5, (30.0, 80.0),
-                     base.depth_encoding, (0.5, 4.5),
-                     rng.normal(size=(10, 3)).astype(np.float32), True,
-                     {'data': 'unit test', 'seed': '1'})
-
-
 
 def test_choose_depth_lookup_takes_the_look_up_that_lands_joints_near_the_truth() -> None:
     rng = np.random.default_rng(2)
@@ -403,15 +370,6 @@ def test_model_validation() -> None:
 
 # --------------------------------------------------------------------------- bad input
 
-def person_frame(rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """A box 'person' at 2.5 m in front of a wall at 4 m."""
-    col = rng.integers(0, 256, (240, 320, 3)).astype(np.uint8)
-    depth = np.full((240, 320), 4.0, np.float32)
-    mask = np.zeros((240, 320), bool)
-    mask[40:220, 130:190] = True
-    depth[mask] = 2.5
-    return col, depth, mask
-
 
 def test_detect_finds_a_pose_and_maps_it_into_the_box() -> None:
     rng = np.random.default_rng(0)
@@ -439,7 +397,6 @@ def test_scale_factor_searches_a_person_that_much_larger() -> None:
     assert big.x0 < base.x0 and big.x1 > base.x1  # and a margin as much larger
     (pose,) = det.detect(col, depth, mask=mask, scale=2 ** 0.4)
     assert_allclose(pose.scale, big.scales[0])
-
 
 
 def test_the_search_without_depth_covers_the_models_search_range() -> None:

@@ -8,9 +8,8 @@ from dataclasses import replace
 
 import numpy as np
 import pytest
+from helpers import person_frame, planted_image, random_net, tenpart_model
 from numpy.testing import assert_allclose, assert_array_equal
-from test_convnet import random_net
-from test_dpm import person_frame, planted_image, tenpart_model
 
 from pose4d_ros.core.convnet import STRIDE
 from pose4d_ros.core.dpm import Detector, PartModel, SearchConfig
