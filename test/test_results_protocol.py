@@ -267,3 +267,18 @@ def test_the_colour_unary_s_defaults_are_the_weighting_chosen_on_validation() ->
     default = UnaryConfig()
     assert r.COLOUR_NET_GRID[chosen] == (f'unary.weight={default.weight:g}',
                                          f'unary.hog_weight={default.hog_weight:g}')
+
+
+def test_a_value_tracking_several_people_worse_is_never_chosen():
+    """`tracks_worse`: more false skeletons (over MAX_FALSE_INCREASE per 1000 frames) or a
+    lower IDF1 (over IDF1_TIE) on any several-person set than the shipped value's; a
+    single-person set has no tracking figures and is not judged."""
+    def value(false: float, idf1: float) -> dict:
+        return {'sets': {'valid30': {'average7': 98.9},
+                         'valid60_people2': {'tracking': {'false_per_1000': false,
+                                                          'idf1': idf1}}}}
+    shipped = value(0.0, 0.981)
+    assert not r.tracks_worse(value(0.0, 0.981), shipped)
+    assert not r.tracks_worse(value(1.0, 0.977), shipped)
+    assert r.tracks_worse(value(37.5, 0.981), shipped)
+    assert r.tracks_worse(value(0.0, 0.97), shipped)

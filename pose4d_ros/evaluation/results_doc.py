@@ -296,6 +296,10 @@ def rule(v: dict) -> str:
         out += (f"; or, none being better, the value searching least of those scoring at least "
                 f"the shipped one's and searching at least {100 * v['min_search_saving']:.0f} % "
                 'less')
+    if 'max_false_increase' in v:
+        out += (f"; never a value tracking several people worse on any set (over "
+                f"{v['max_false_increase']:g} more false skeletons per 1000 frames, or an IDF1 "
+                f"lower by over {v['idf1_tie']:g})")
     return out
 
 
@@ -313,7 +317,9 @@ SWEEP_TITLES = {
     'bent_top': 'A person of the previous frame bending or crouching '
                 '(`ForegroundConfig.person_min_bent_top_m`, m; off: the usual rules only)',
     'hidden': 'How long a person held behind a nearer one keeps their track unseen '
-              '(`TrackingConfig.max_hidden_s`, s; 1: `max_unseen_s`, the tracker before)'}
+              '(`TrackingConfig.max_hidden_s`, s; 1: `max_unseen_s`, the tracker before)',
+    'tree_step': "The foreground's component tree on every n-th pixel "
+                 '(`ForegroundConfig.tree_step`)'}
 
 
 def sweeps_section(v: dict) -> list[str]:
