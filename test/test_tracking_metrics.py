@@ -23,6 +23,7 @@ from pose4d_ros.evaluation.tracking_metrics import (
     assign,
     assign_frame,
     match_people,
+    occlusion_gaps,
     score_people,
     seen_share,
     seen_table,
@@ -351,7 +352,8 @@ def test_match_people_within_half_the_person_size() -> None:
 
 def score_people_fixture() -> tuple[list[tuple[JointSet, ...]], list[tuple[JointSet, ...]]]:
     """Person 1 at (100, 200), person 2 at (300, 200), four frames; skeletons 5 and 6 follow them
-    3 px to the right. IdFrame 1: person 2 unlabelled (not there), no skeleton 6. IdFrame 2:
+    3 px to the right. IdFrame 1: person 2 unlabelled (hidden, between frames in which they are
+    labelled: a person to track, with no joint to score), no skeleton 6. IdFrame 2:
     skeleton 6 reports no joint (no output: not a skeleton), person 2 missed. IdFrame 3: a
     skeleton 9 far from both (false positive)."""
     a, b = (100.0, 200.0), (300.0, 200.0)
@@ -368,14 +370,15 @@ def test_score_people_by_hand() -> None:
     truths, preds = score_people_fixture()
     out = score_people(truths, preds, SKELETON_14)
     tracking = out['tracking']
-    # 7 person-frames, 6 matches, 1 miss (person 2, frame 2), 1 false (skeleton 9); person 2 is
-    # matched, missed, matched: one fragmentation; torsos (3, -5) apart: MOTP sqrt(34)
+    # 8 person-frames (person 2 hidden in frame 1 counts), 6 matches, 2 misses (person 2,
+    # frames 1 and 2), 1 false (skeleton 9); person 2 is matched, missed twice, matched: one
+    # fragmentation; torsos (3, -5) apart: MOTP sqrt(34)
     assert (tracking['gt_objects'], tracking['matches'], tracking['misses'],
             tracking['false_positives'], tracking['id_switches'],
-            tracking['fragmentations']) == (7, 6, 1, 1, 0, 1)
-    assert_allclose(tracking['mota'], 1 - 2 / 7)
+            tracking['fragmentations']) == (8, 6, 2, 1, 0, 1)
+    assert_allclose(tracking['mota'], 1 - 3 / 8)
     assert_allclose(tracking['motp'], np.sqrt(34.0))
-    assert_allclose(tracking['idf1'], 2 * 6 / (7 + 7))
+    assert_allclose(tracking['idf1'], 2 * 6 / (8 + 7))
     found, labels = out['matched']
     assert [t.track_id for t in labels] == [1, 2, 1, 1, 2, 1, 2]
     assert [p.track_id if p is not None else None for p in found] == [5, 6, 5, 5, None, 5, 6]
@@ -412,10 +415,41 @@ def test_score_people_starts_a_sequence_at_each_video() -> None:
     assert (one_video['fragmentations'], two['fragmentations']) == (1, 0)
     assert (one_video['mostly_tracked'], one_video['partially_tracked']) == (1, 1)
     assert (two['mostly_tracked'], two['partially_tracked']) == (3, 1)
-    for key in ('mota', 'motp', 'idf1', 'id_switches', 'misses', 'false_positives', 'matches'):
+    # person 2, unlabelled in frame 1, is hidden between labelled frames of one video only:
+    # split there, they were last seen in frame 0 (not there in frame 1, not missed)
+    assert (one_video['misses'], two['misses']) == (2, 1)
+    assert_allclose(two['mota'], 1 - 2 / 7)
+    for key in ('motp', 'id_switches', 'false_positives', 'matches'):
         assert_allclose(two[key], one_video[key], rtol=1e-12, err_msg=key)
     with pytest.raises(ValueError, match='3 videos for 4 frames'):
         score_people(truths, preds, SKELETON_14, videos=['a'] * 3)
+
+
+def test_a_person_hidden_between_labelled_frames_is_a_person_to_track() -> None:
+    """MOTChallenge counts people through occlusions: person 2, hidden (no labelled joint, the
+    pixels of their ground-truth position kept) in frames 1-2 between labelled frames 0 and 3,
+    is matched by the skeleton held for them; hidden again after their last labelled frame
+    (frames 4-5), they are not there and the skeleton kept is a false positive. The joint
+    table scores only the labelled person-frames."""
+    a, b = (100.0, 200.0), (300.0, 200.0)
+    labelled = [True, False, False, True, False, False]
+    truths = [(truth(a, 1), truth(b, 2, labelled=lab)) for lab in labelled]
+    hidden = truths[1][1].with_(source=np.full(len(CAD60_JOINTS), cj.MISSING, np.uint8))
+    truths[1] = (truths[1][0], hidden)  # as `pose4d synth` writes a hidden person
+    preds = [(skeleton(a, 5), skeleton((306.0, 200.0), 6)) for _ in labelled]
+    assert occlusion_gaps(truths) == [set(), {2}, {2}, set(), set(), set()]
+    out = score_people(truths, preds, SKELETON_14)
+    tracking = out['tracking']
+    assert (tracking['gt_objects'], tracking['matches'], tracking['misses'],
+            tracking['false_positives']) == (10, 10, 0, 2)
+    assert [t.track_id for t in out['matched'][1]] == [1, 2, 1, 1, 1, 2, 1, 1]
+    # a hidden person outside the image is not there
+    outside = score_people(truths, preds, SKELETON_14, image_sizes=[(200, 480)] * 6)
+    assert outside['tracking']['gt_objects'] == 8
+    # with no skeleton kept for them, the hidden frames are misses
+    dropped = [p if k not in (1, 2) else p[:1] for k, p in enumerate(preds)]
+    tracking = score_people(truths, dropped, SKELETON_14)['tracking']
+    assert (tracking['matches'], tracking['misses'], tracking['false_positives']) == (8, 2, 2)
 
 
 def test_seen_share_counts_the_joints_the_depth_image_shows() -> None:

@@ -8,8 +8,10 @@ the located shoulders and hips). A pair may be matched only when that distance i
 `core.metrics.reference_size`); 0.5 by default, the MOTChallenge-like rule that a hypothesis
 covers an object when it is within half the object's size. A person or a skeleton without a
 located torso (or a truth without a reference size) is never matched: the truth is a miss, the
-skeleton a false positive (`score_people` leaves out a person without a labelled joint and a
-skeleton without a reported joint: they are not there). A CAD-60 truth's 'torso' joint lies a
+skeleton a false positive (`score_people` leaves out a skeleton without a reported joint and a
+person without a labelled joint: they are not there; but a person hidden between two frames in
+which they are labelled is there, at their ground-truth position, as MOTChallenge annotates
+people through occlusions: `occlusion_gaps`). A CAD-60 truth's 'torso' joint lies a
 few pixels from its shoulders' and hips' mean, which a skeleton without 'torso' gives: that
 offset is part of MOTP.
 
@@ -74,27 +76,35 @@ MOSTLY_TRACKED = 0.8
 MOSTLY_LOST = 0.2
 
 
-def _located(joints: JointSet, *, labelled: bool) -> NDArray[np.bool_]:
+def _located(joints: JointSet, *, labelled: bool, positions: bool = False
+             ) -> NDArray[np.bool_]:
     """(J,) joints with a finite pixel that are not MISSING (and, for a truth, labelled:
-    confidence > 0)."""
-    ok = np.isfinite(joints.uv).all(axis=1) & (joints.source != MISSING)
+    confidence > 0); `positions`: every joint with a finite pixel (a hidden person's
+    ground-truth position)."""
+    ok = np.isfinite(joints.uv).all(axis=1)
+    if positions:
+        return ok
+    ok &= joints.source != MISSING
     return ok & (joints.confidence > 0) if labelled else ok
 
 
-def torso_point(joints: JointSet, *, labelled: bool = False) -> NDArray[np.float64]:
+def torso_point(joints: JointSet, *, labelled: bool = False,
+                positions: bool = False) -> NDArray[np.float64]:
     """The torso of one person in pixels.
 
     Parameters
     ----------
     joints : one person (any skeleton naming; CAD-60 truths have 'torso').
     labelled : a ground truth: only joints with a positive confidence count as located.
+    positions : a ground truth read at its positions: every joint with a finite pixel counts
+        (a person hidden behind another, `score_people`).
 
     Returns
     -------
     (2,) float64 pixel (u, v): the located 'torso' joint, else the mean of the located
     shoulders and hips; NaN when there is neither.
     """
-    ok = _located(joints, labelled=labelled)
+    ok = _located(joints, labelled=labelled, positions=positions)
     k = joints.get('torso')
     if k is not None and ok[k]:
         return joints.uv[k].copy()
@@ -102,15 +112,17 @@ def torso_point(joints: JointSet, *, labelled: bool = False) -> NDArray[np.float
     return joints.uv[idx].mean(axis=0) if idx else np.full(2, np.nan)
 
 
-def person_size(truth: JointSet) -> float:
+def person_size(truth: JointSet, *, positions: bool = False) -> float:
     """max(h, w) in pixels of the box around a truth's labelled joints
-    (`core.metrics.reference_size`); NaN with fewer than two."""
-    ok = _located(truth, labelled=True)
+    (`core.metrics.reference_size`; `positions`: around every joint with a finite pixel);
+    NaN with fewer than two."""
+    ok = _located(truth, labelled=True, positions=positions)
     return float(reference_size(truth.uv[None], ok[None])[0])
 
 
 def torso_distances(truths: Sequence[JointSet], preds: Sequence[JointSet], *,
-                    max_distance: float = MATCH_FRACTION) -> NDArray[np.float64]:
+                    max_distance: float = MATCH_FRACTION,
+                    positions: bool = False) -> NDArray[np.float64]:
     """Torso distances of every truth-skeleton pair of one frame, NaN where no match may be.
 
     Parameters
@@ -119,6 +131,8 @@ def torso_distances(truths: Sequence[JointSet], preds: Sequence[JointSet], *,
     preds : P skeletons.
     max_distance : the largest distance of a match, in reference sizes of the truth
         (`person_size`); 0.5 = `MATCH_FRACTION`.
+    positions : the truths read at their positions, labelled or not (hidden people,
+        `score_people`): their torso points and sizes from every joint with a finite pixel.
 
     Returns
     -------
@@ -130,9 +144,9 @@ def torso_distances(truths: Sequence[JointSet], preds: Sequence[JointSet], *,
     dist = np.full((len(truths), len(preds)), np.nan)
     if not len(truths) or not len(preds):
         return dist
-    t = np.array([torso_point(j, labelled=True) for j in truths])
+    t = np.array([torso_point(j, labelled=True, positions=positions) for j in truths])
     p = np.array([torso_point(j) for j in preds])
-    limit = max_distance * np.array([person_size(j) for j in truths])
+    limit = max_distance * np.array([person_size(j, positions=positions) for j in truths])
     d = np.hypot(*(t[:, None, :] - p[None, :, :]).transpose(2, 0, 1))
     with np.errstate(invalid='ignore'):
         keep = d <= limit[:, None]
@@ -475,6 +489,40 @@ def seen_table(preds: Sequence[JointSet | None], truths: Sequence[JointSet],
     return out
 
 
+def occlusion_gaps(frames_truths: Sequence[Sequence[JointSet]],
+                   videos: Sequence[Hashable] | None = None) -> list[set[int]]:
+    """Per frame, the ids of the people hidden there: given but without a labelled joint, and
+    labelled in an earlier and in a later frame of the same video (`videos`; None: one video).
+    MOTChallenge annotates people through occlusions ("always annotate during occlusions if
+    the position can be determined unambiguously", Milan et al., MOT16, table 1) and counts
+    them: a skeleton kept for a person hidden behind another is a match, none a miss. Before
+    a person is first seen and after they are last seen they are not there."""
+    out: list[set[int]] = [set() for _ in frames_truths]
+    start = 0
+    for end in range(1, len(frames_truths) + 1):
+        if end < len(frames_truths) and (videos is None or videos[end] == videos[start]):
+            continue
+        seen: dict[int, list[int]] = {}
+        for k in range(start, end):
+            for t in frames_truths[k]:
+                if _located(t, labelled=True).any():
+                    seen.setdefault(t.track_id, []).append(k)
+        for k in range(start, end):
+            for t in frames_truths[k]:
+                ks = seen.get(t.track_id)
+                if ks and ks[0] < k < ks[-1] and not _located(t, labelled=True).any():
+                    out[k].add(t.track_id)
+        start = end
+    return out
+
+
+def _inside(point: NDArray[np.float64], size: tuple[int, int] | None) -> bool:
+    """Whether a pixel is finite and, with an image size (width, height), inside it."""
+    if not np.isfinite(point).all():
+        return False
+    return size is None or (0 <= point[0] < size[0] and 0 <= point[1] < size[1])
+
+
 def score_people(frames_truths: Sequence[Sequence[JointSet]],
                  frames_preds: Sequence[Sequence[JointSet]], names: tuple[str, ...], *,
                  max_distance: float = MATCH_FRACTION,
@@ -485,7 +533,10 @@ def score_people(frames_truths: Sequence[Sequence[JointSet]],
     Parameters
     ----------
     frames_truths : per frame, every person's ground truth (`track_id` = the person's id); a
-        person without a labelled joint is not there.
+        person without a labelled joint is not there, but between two frames of the same
+        video in which they are labelled (hidden behind someone, `occlusion_gaps`): there
+        they are a person to track, at their ground-truth position (inside the image when
+        `image_sizes` are given), with no joint to score.
     frames_preds : per frame, the skeletons (`track_id` = the tracker's id); one without a
         reported joint (all MISSING, no output) is not there.
     names : the joints to score (predicted names, as `core.metrics.joint_arrays`).
@@ -513,14 +564,21 @@ def score_people(frames_truths: Sequence[Sequence[JointSet]],
     preds_out: list[JointSet | None] = []
     truths_out: list[JointSet] = []
     index_out: list[int] = []
+    gaps = occlusion_gaps(frames_truths, videos)
     for k, (truths, preds) in enumerate(zip(frames_truths, frames_preds, strict=True)):
         if not accs or (videos is not None and videos[k] != videos[k - 1]):
             accs.append(TrackingAccumulator())
+        hidden = [t for t in truths if t.track_id in gaps[k]
+                  and _inside(torso_point(t, positions=True),
+                              None if image_sizes is None else image_sizes[k])]
         truths = [t for t in truths if _located(t, labelled=True).any()]
         preds = [p for p in preds if _located(p, labelled=False).any()]
+        distances = np.vstack((torso_distances(truths, preds, max_distance=max_distance),
+                               torso_distances(hidden, preds, max_distance=max_distance,
+                                               positions=True)))
         try:
-            events = accs[-1].update([t.track_id for t in truths], [p.track_id for p in preds],
-                                torso_distances(truths, preds, max_distance=max_distance))
+            events = accs[-1].update([t.track_id for t in truths + hidden],
+                                     [p.track_id for p in preds], distances)
         except ValueError as err:
             raise ValueError(f'frame {k}: {err}') from None
         by_id = {p.track_id: p for p in preds}
