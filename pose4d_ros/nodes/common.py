@@ -130,8 +130,20 @@ def run(factory: Callable[[], Node], args: list[str] | None = None,
             if close is not None:
                 close()
             node.destroy_node()
-        rclpy.try_shutdown()
+        _try_shutdown()
     return code
+
+
+def _try_shutdown() -> None:
+    """`rclpy.try_shutdown`, where a signal's shutdown of the context (rclpy's signal handler
+    thread) may land between its check and its call: rcl then refuses the second shutdown
+    ('rcl_shutdown already called on the given context', ros2/rclpy#1352, fixed after
+    Jazzy's rclpy by ros2/rclpy#1353), and the node is down all the same."""
+    try:
+        rclpy.try_shutdown()
+    except _rclpy.RCLError:
+        if rclpy.ok():
+            raise
 
 
 class StageMonitor:
