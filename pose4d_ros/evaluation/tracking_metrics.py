@@ -497,21 +497,21 @@ def occlusion_gaps(frames_truths: Sequence[Sequence[JointSet]],
     the position can be determined unambiguously", Milan et al., MOT16, table 1) and counts
     them: a skeleton kept for a person hidden behind another is a match, none a miss. Before
     a person is first seen and after they are last seen they are not there."""
+    labelled = [[(t.track_id, bool(_located(t, labelled=True).any())) for t in truths]
+                for truths in frames_truths]
     out: list[set[int]] = [set() for _ in frames_truths]
     start = 0
     for end in range(1, len(frames_truths) + 1):
         if end < len(frames_truths) and (videos is None or videos[end] == videos[start]):
             continue
-        seen: dict[int, list[int]] = {}
+        seen: dict[int, tuple[int, int]] = {}  # id -> first and last frame labelled
         for k in range(start, end):
-            for t in frames_truths[k]:
-                if _located(t, labelled=True).any():
-                    seen.setdefault(t.track_id, []).append(k)
+            for i, lab in labelled[k]:
+                if lab:
+                    seen[i] = (seen.get(i, (k, k))[0], k)
         for k in range(start, end):
-            for t in frames_truths[k]:
-                ks = seen.get(t.track_id)
-                if ks and ks[0] < k < ks[-1] and not _located(t, labelled=True).any():
-                    out[k].add(t.track_id)
+            out[k] = {i for i, lab in labelled[k]
+                      if not lab and i in seen and seen[i][0] < k < seen[i][1]}
         start = end
     return out
 

@@ -39,6 +39,8 @@ def param_get(node_name: str, timeout_s: float = 2.0) -> bool:
     import rclpy.executors
     from rcl_interfaces.srv import GetParameters
 
+    from pose4d_ros.nodes.common import try_shutdown
+
     context = rclpy.Context()
     rclpy.init(context=context)
     try:
@@ -54,8 +56,7 @@ def param_get(node_name: str, timeout_s: float = 2.0) -> bool:
         executor.spin_until_future_complete(future, timeout_sec=timeout_s)
         return future.done() and future.result() is not None
     finally:
-        if context.ok():  # a SIGINT may have shut it down already
-            context.try_shutdown()
+        try_shutdown(context)  # a SIGINT may have shut it down already, or be doing so
 
 
 def query(nodes: list[str]) -> None:

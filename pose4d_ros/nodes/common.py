@@ -130,19 +130,20 @@ def run(factory: Callable[[], Node], args: list[str] | None = None,
             if close is not None:
                 close()
             node.destroy_node()
-        _try_shutdown()
+        try_shutdown()
     return code
 
 
-def _try_shutdown() -> None:
-    """`rclpy.try_shutdown`, where a signal's shutdown of the context (rclpy's signal handler
-    thread) may land between its check and its call: rcl then refuses the second shutdown
-    ('rcl_shutdown already called on the given context', ros2/rclpy#1352, fixed after
-    Jazzy's rclpy by ros2/rclpy#1353), and the node is down all the same."""
+def try_shutdown(context: rclpy.context.Context | None = None) -> None:
+    """`rclpy.try_shutdown` of `context` (None: the default one), where a signal's shutdown of
+    it (rclpy's signal handler thread) may land between its check and its call: rcl then
+    refuses the second shutdown ('rcl_shutdown already called on the given context',
+    ros2/rclpy#1352, fixed after Jazzy's rclpy by ros2/rclpy#1353), and the context is down
+    all the same."""
     try:
-        rclpy.try_shutdown()
+        rclpy.try_shutdown(context=context)
     except _rclpy.RCLError:
-        if rclpy.ok():
+        if rclpy.ok(context=context):
             raise
 
 
