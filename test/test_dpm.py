@@ -24,7 +24,7 @@ from pose4d_ros.core.dpm.dp import (
     tree_dp,
 )
 from pose4d_ros.core.dpm.dt import dt2d
-from pose4d_ros.core.dpm.infer import arm_limbs
+from pose4d_ros.core.dpm.infer import OcclusionFloor, arm_limbs
 from pose4d_ros.core.dpm.samples import TrainConfig
 from pose4d_ros.core.dpm.solver import Examples, dcd, margins, rebuild_w
 from pose4d_ros.core.dpm.train import choose_depth_lookup, kmeans
@@ -276,6 +276,42 @@ def test_the_prior_moves_an_arm_to_the_candidate_near_it_and_only_then() -> None
         det.poses_from_levels([level], prior=np.zeros((3, 2)))
     with pytest.raises(ValueError, match='arm_prior'):
         SearchConfig(arm_prior=-1.0)
+
+
+def test_the_occlusion_floor_raises_the_hidden_positions_alone_to_the_persons_quantile() -> None:
+    rng = np.random.default_rng(6)
+    m = _arm_model()
+    (level,) = feature_pyramid(rng.integers(0, 255, (64, 72, 3)).astype(np.uint8), None, [1.0],
+                               sbin=4, pad=(2, 2))
+    mask = np.zeros((64, 72), bool)
+    mask[:, 36:] = True                    # the person: the right half
+    occluder = np.zeros((64, 72), bool)
+    occluder[:, :30] = True                # a nearer person: the left part
+    plain = score_level(level, m).resp
+    floored = score_level(level, m, floor=OcclusionFloor(mask, occluder, 0.5, m.filter_shape))
+    ny, nx = plain.shape[2:]
+    u, v = level.cell_to_pixel(np.arange(ny)[:, None], np.arange(nx)[None, :], m.filter_shape)
+    u = np.broadcast_to(np.clip(np.rint(u), 0, 71), (ny, nx)).astype(int)
+    v = np.broadcast_to(np.clip(np.rint(v), 0, 63), (ny, nx)).astype(int)
+    hidden, own = occluder[v, u], mask[v, u]
+    assert hidden.any() and own.any()
+    floor = np.quantile(plain.max(axis=1)[:, own], 0.5, axis=1)
+    want = np.where(hidden, np.maximum(plain, floor[:, None, None, None]), plain)
+    assert_allclose(floored.resp, want, rtol=1e-6)
+    assert (floored.resp > plain).any()                       # some hidden position raised
+    assert_array_equal(floored.resp[:, :, ~hidden], plain[:, :, ~hidden])
+    # nobody in front, or the floor off: the detector before
+    empty = OcclusionFloor(mask, np.zeros_like(mask), 0.5, m.filter_shape)
+    assert_array_equal(score_level(level, m, floor=empty).resp, plain)
+    det = Detector(m, SearchConfig(subcell=False, occluded_quantile=0.0))
+    col = rng.integers(0, 255, (64, 72, 3)).astype(np.uint8)
+    (a,) = det.detect(col, box=(0, 0, 72, 64), mask=mask, occluder=occluder)
+    (b,) = det.detect(col, box=(0, 0, 72, 64), mask=mask)
+    assert_allclose(a.uv, b.uv)
+    with pytest.raises(ValueError, match='occluder'):
+        OcclusionFloor(mask, occluder[:, :10], 0.5, m.filter_shape)
+    with pytest.raises(ValueError, match='occluded_quantile'):
+        SearchConfig(occluded_quantile=1.5)
 
 
 # --------------------------------------------------------------------------- model files

@@ -203,7 +203,7 @@ def test_work_is_bounded_by_max_people():
     searched = []
 
     class Counting:
-        def step(self, color, depth, intrinsics, *, mask, stamp_s, blanked):
+        def step(self, color, depth, intrinsics, *, mask, stamp_s, blanked, occluder=None):
             searched.append(int(np.flatnonzero(mask.any(axis=0))[0]))
             return JointSet.missing(PARTS_10.names)
 
@@ -221,6 +221,36 @@ def test_work_is_bounded_by_max_people():
     assert len(detector.slots) == 4
 
 
+def test_a_person_is_searched_with_the_nearer_people_in_front_of_them():
+    """The candidates nearer by over `torso_std_m` are passed as the occluder of a person's
+    search (`core.dpm.infer.OcclusionFloor`); a person with nobody in front gets none."""
+    from pose4d_ros.core.foreground import ForegroundResult
+    from pose4d_ros.core.people import PeopleDetector
+
+    given = {}
+
+    class Recording:
+        def step(self, color, depth, intrinsics, *, mask, stamp_s, blanked, occluder=None):
+            given[int(np.flatnonzero(mask.any(axis=0))[0])] = occluder
+            return JointSet.missing(PARTS_10.names)
+
+    color = np.zeros((INTR.height, INTR.width, 3), np.uint8)
+    depth = np.full((INTR.height, INTR.width), 3.0, np.float32)
+    people = []
+    for x, z in ((0, 4.0), (60, 2.0), (120, 3.9), (180, 3.0)):
+        mask = np.zeros(depth.shape, bool)
+        mask[50:200, x:x + 40] = True
+        people.append(ForegroundResult(mask=mask, box=(x, 50, x + 40, 200), depth_m=z,
+                                       found=True))
+    PeopleDetector(Recording, TrackingConfig(torso_std_m=0.15)).step(
+        color, depth, INTR, people, stamp_s=0.0)
+    assert given[60] is None                                     # the nearest
+    assert (given[180] == people[1].mask).all()                  # 2 m in front of 3 m
+    # 4 m: those at 2 and 3 m, not the one at 3.9 m (within torso_std_m)
+    assert (given[0] == (people[1].mask | people[3].mask)).all()
+    assert (given[120] == (people[1].mask | people[3].mask)).all()
+
+
 def test_a_persons_detector_state_lives_as_long_as_their_track():
     """A person gone from the foreground (hidden behind a nearer one) comes back to their own
     detector state (person scale, arm prior) within `max_hidden_s`, as their track does; gone
@@ -234,7 +264,7 @@ def test_a_persons_detector_state_lives_as_long_as_their_track():
         def __init__(self):
             made.append(self)
 
-        def step(self, color, depth, intrinsics, *, mask, stamp_s, blanked):
+        def step(self, color, depth, intrinsics, *, mask, stamp_s, blanked, occluder=None):
             return JointSet.missing(PARTS_10.names).with_(score=12.0)
 
     color = np.zeros((INTR.height, INTR.width, 3), np.uint8)
@@ -273,7 +303,7 @@ def test_a_still_region_that_scored_low_keeps_its_detection_a_few_frames():
     searched = []
 
     class Scoring:
-        def step(self, color, depth, intrinsics, *, mask, stamp_s, blanked):
+        def step(self, color, depth, intrinsics, *, mask, stamp_s, blanked, occluder=None):
             x = int(np.flatnonzero(mask.any(axis=0))[0])
             searched.append((round(stamp_s / DT), x))
             # the region at x < 100 is a wall's edge (score 1), the one at x 100 a person (12)

@@ -329,7 +329,8 @@ class PeopleDetector:
              intrinsics: Intrinsics | None, people: Sequence[ForegroundResult], *,
              stamp_s: float) -> list[JointSet]:
         """The detected parts of each candidate in `people` (at most `max_people`, in their
-        order), each searched in its own mask with its person's state."""
+        order), each searched in its own mask with its person's state, where the candidates
+        nearer than them stand as what may hide their parts (`_in_front`)."""
         people = list(people)[:self.config.max_people]
         centres = [_centre(p, intrinsics) for p in people]
         cfg = self.config
@@ -353,7 +354,8 @@ class PeopleDetector:
                 continue
             color_m, depth_mm = apply_mask(color, depth_m, person.mask)
             slot.last = slot.stage.step(color_m, depth_mm, intrinsics, mask=person.mask,
-                                        stamp_s=stamp_s, blanked=True)
+                                        stamp_s=stamp_s, blanked=True,
+                                        occluder=_in_front(people, j, cfg.torso_std_m))
             slot.depth_m, slot.mask, slot.kept = person.depth_m, person.mask, 0
             out.append(slot.last)
         keep_s = cfg.detector_keep_s or max(cfg.max_unseen_s, cfg.max_hidden_s)
@@ -371,6 +373,15 @@ class PeopleDetector:
         # a person partly hidden scores as low, but moves within their region
         union = np.count_nonzero(slot.mask | person.mask)
         return np.count_nonzero(slot.mask & person.mask) >= STILL_IOU * union
+
+
+def _in_front(people: Sequence[ForegroundResult], j: int, by_m: float
+              ) -> NDArray[np.bool_] | None:
+    """The pixels of the candidates nearer than `people[j]` by over `by_m` (their median
+    depths), or None: where a nearer person may hide them (`core.dpm.infer.OcclusionFloor`)."""
+    near = [p.mask for k, p in enumerate(people)
+            if k != j and p.depth_m < people[j].depth_m - by_m]
+    return np.logical_or.reduce(near) if near else None
 
 
 def _centre(person: ForegroundResult, intrinsics: Intrinsics | None) -> NDArray[np.float64]:

@@ -170,6 +170,10 @@ SWEEPS: dict[str, dict[str, tuple[str, ...]]] = {
     # (ForegroundConfig.tree_step): at 3 and 4 the foreground's CPU 10 % and 24 % less (the
     # demo bag, one core: 3.4 -> 3.0 and 2.6 ms a frame)
     'tree_step': {'2': (), **{str(s): (f'foreground.tree_step={s}',) for s in (3, 4)}},
+    # the floor of a part's response where a nearer person hides the searched one
+    # (SearchConfig.occluded_quantile; '0': off, the detector before)
+    'occluded': {'0.3': (), **{str(q): (f'search.occluded_quantile={q}',)
+                               for q in (0, 0.2, 0.5)}},
 }
 
 
@@ -179,7 +183,8 @@ SWEEP_SETS = {'cut_height': ('valid30_near',),
               'tracking_rules': ('valid60_people2', 'valid60_people3', 'valid30_people2b'),
               'bent_top': ('valid30_msr', 'valid60_people2'),
               'hidden': ('valid60_people2', 'valid60_people3', 'valid30_people2b'),
-              'tree_step': ('valid30', 'valid30_msr', 'valid60_people2')}
+              'tree_step': ('valid30', 'valid30_msr', 'valid60_people2'),
+              'occluded': ('valid60_people2', 'valid60_people3', 'valid30_people2b')}
 # the shipped settings' run on a set, made anyway (the margin sweep's, valid30_msr's own)
 SHIPPED_RUNS = {'valid30': f'margin_{DEFAULT_MARGIN}.json', 'valid30_msr': 'valid30_msr.json'}
 

@@ -319,7 +319,10 @@ SWEEP_TITLES = {
     'hidden': 'How long a person held behind a nearer one keeps their track unseen '
               '(`TrackingConfig.max_hidden_s`, s; 1: `max_unseen_s`, the tracker before)',
     'tree_step': "The foreground's component tree on every n-th pixel "
-                 '(`ForegroundConfig.tree_step`)'}
+                 '(`ForegroundConfig.tree_step`)',
+    'occluded': "A part's least response where a nearer person hides the searched one "
+                '(`SearchConfig.occluded_quantile`: that quantile of its responses on the '
+                "person's own pixels; 0: off)"}
 
 
 def sweeps_section(v: dict) -> list[str]:

@@ -343,11 +343,14 @@ def model_arrays(model: PartModel) -> tuple:
 
 
 def score_level(level: Level, model: PartModel, arrays: tuple | None = None,
-                unary: Callable[[Level, int, int], NDArray[np.float32]] | None = None
+                unary: Callable[[Level, int, int], NDArray[np.float32]] | None = None,
+                floor: Callable[[Level, NDArray[np.float32]], None] | None = None
                 ) -> LevelResult | None:
     """Filter responses (one GEMM) and the tree DP on one pyramid level; None if the level's
     image (without its padding) is smaller than a filter. `unary(level, ny, nx)`: a (P, ny,
-    nx) term added to every type's response of each part (`core.dpm.net_unary`)."""
+    nx) term added to every type's response of each part (`core.dpm.net_unary`);
+    `floor(level, resp)`: raises the responses in place before the DP
+    (`core.dpm.infer.OcclusionFloor`)."""
     wmat, parents, springs, anchors, bias = arrays if arrays is not None else model_arrays(model)
     fh, fw = model.filter_shape
     h, w, _ = level.feat.shape
@@ -361,6 +364,8 @@ def score_level(level: Level, model: PartModel, arrays: tuple | None = None,
     if unary is not None:
         extra = unary(level, ny, nx)
         resp += extra[:, None]
+    if floor is not None:
+        floor(level, resp)
     root, ix, iy, ik, score = tree_dp(resp, parents, springs, anchors, bias)
     return LevelResult(level, resp, root, ix, iy, ik, score, extra)
 

@@ -70,6 +70,9 @@ class SearchConfig:
         its spring) at the chosen cell and its two neighbours, per axis (at most half a cell).
     arm_prior : weight of the previous frame's elbows and wrists when a prior is given (score
         units per squared person scale of distance); 0 = the tree's choice alone.
+    occluded_quantile : where a nearer person hides this one (`Detector.detect(occluder=...)`),
+        each part's response is at least this quantile of its responses over the person's own
+        pixels (`OcclusionFloor`); 0 = off.
     """
 
     n_levels: int = 1
@@ -80,6 +83,7 @@ class SearchConfig:
     nms_overlap: float = 0.5
     subcell: bool = True
     arm_prior: float = 1.0
+    occluded_quantile: float = 0.3
 
     def __post_init__(self) -> None:
         if not 1 <= self.n_levels <= 9:
@@ -94,6 +98,8 @@ class SearchConfig:
             raise ValueError(f'nms_overlap must be in (0, 1], got {self.nms_overlap}')
         if not self.arm_prior >= 0:
             raise ValueError(f'arm_prior must be >= 0, got {self.arm_prior}')
+        if not 0 <= self.occluded_quantile <= 1:
+            raise ValueError(f'occluded_quantile must be in [0, 1], got {self.occluded_quantile}')
 
 
 @dataclass(frozen=True)
@@ -198,6 +204,46 @@ class SearchWork:
     validation sweeps' CPU rule reads it beside the CPU time (`evaluation.results`)."""
 
     cells: int = 0
+
+
+
+class OcclusionFloor:
+    """The responses of the filter positions a nearer person hides, raised to a floor.
+
+    A person partly hidden behind a nearer one is searched in their own mask, so where the
+    nearer one stands their features are blank, as beyond a silhouette's edge: every part
+    scores as on the background there, and the tree pulls the whole pose onto the visible half
+    (the torso 10-12 px sideways on validation's crossings). Here a position whose window
+    centre lies on the `occluder`'s pixels scores, for each part, at least the `quantile` of
+    that part's best-type responses over the positions on the person's own `mask`: as well as
+    a middling place on their visible body, so a hidden part lies where the springs put it and
+    the visible parts where their filters do. Chosen on validation (`make results`' sweep
+    `occluded`; `SearchConfig.occluded_quantile`).
+    """
+
+    def __init__(self, mask: NDArray[np.bool_], occluder: NDArray[np.bool_], quantile: float,
+                 filter_shape: tuple[int, int]) -> None:
+        if mask.shape != occluder.shape:
+            raise ValueError(f'occluder {occluder.shape} and mask {mask.shape} differ in shape')
+        self.mask, self.occluder = mask, occluder
+        self.quantile, self.filter_shape = quantile, filter_shape
+
+    def __call__(self, level: Level, resp: NDArray[np.float32]) -> None:
+        """Raise `resp` (P, K, ny, nx) of `level` in place."""
+        ny, nx = resp.shape[2:]
+        h, w = self.mask.shape
+        u, v = level.cell_to_pixel(np.arange(ny)[:, None], np.arange(nx)[None, :],
+                                   self.filter_shape)
+        cols = np.clip(np.rint(u).astype(np.intp), 0, w - 1)
+        rows = np.clip(np.rint(v).astype(np.intp), 0, h - 1)
+        rows, cols = np.broadcast_arrays(rows, cols)
+        hidden = self.occluder[rows, cols]
+        own = self.mask[rows, cols]
+        if not (hidden.any() and own.any()):
+            return
+        best = resp.max(axis=1)  # (P, ny, nx)
+        floor = np.quantile(best[:, own], self.quantile, axis=1).astype(np.float32)
+        resp[:, :, hidden] = np.maximum(resp[:, :, hidden], floor[:, None, None])
 
 
 class Detector:
@@ -328,7 +374,8 @@ class Detector:
     def detect(self, color: NDArray, depth_m: NDArray | None = None, *,
                mask: NDArray[np.bool_] | None = None, box: tuple | None = None,
                intrinsics: Intrinsics | None = None, top_k: int = 1, scale: float = 1.0,
-               blanked: bool = False, prior: NDArray[np.floating] | None = None) -> list[Pose]:
+               blanked: bool = False, prior: NDArray[np.floating] | None = None,
+               occluder: NDArray[np.bool_] | None = None) -> list[Pose]:
         """The best `top_k` poses in a frame.
 
         Parameters
@@ -346,6 +393,8 @@ class Detector:
             colour), as the foreground stage publishes them: not blanked again.
         prior : (P, 2) pixels of the parts in the previous frame of the video (NaN rows =
             unknown): its elbows and wrists guide the arms (`SearchConfig.arm_prior`).
+        occluder : (H, W) bool pixels of nearer people in front of this one (with `mask`):
+            a part may lie there, hidden (`SearchConfig.occluded_quantile`).
 
         Returns
         -------
@@ -369,9 +418,14 @@ class Detector:
         levels = self.pyramid(color, depth_m, plan, mask=mask, blanked=blanked)
         maps = None if self.unary is None else self.net_maps(color, plan, mask=mask,
                                                              blanked=blanked)
+        floor = None
+        if occluder is not None and mask is not None and self.config.occluded_quantile > 0:
+            floor = OcclusionFloor(mask, occluder, self.config.occluded_quantile,
+                                   self.model.filter_shape)
         return self.poses_from_levels(
             levels, top_k=top_k, flags=flags, prior=prior,
-            scale_prior=0.0 if plan.depth_guided else self.model.scale_prior, net_maps=maps)
+            scale_prior=0.0 if plan.depth_guided else self.model.scale_prior, net_maps=maps,
+            floor=floor)
 
     def net_maps(self, color: NDArray, plan: SearchPlan, *,
                  mask: NDArray[np.bool_] | None = None, blanked: bool = False) -> NetMaps:
@@ -403,17 +457,18 @@ class Detector:
     def poses_from_levels(self, levels: list[Level], *, top_k: int = 1,
                           threshold: float = -np.inf, flags: tuple[str, ...] = (),
                           prior: NDArray[np.floating] | None = None,
-                          scale_prior: float = 0.0, net_maps: NetMaps | None = None
-                          ) -> list[Pose]:
+                          scale_prior: float = 0.0, net_maps: NetMaps | None = None,
+                          floor: OcclusionFloor | None = None) -> list[Pose]:
         """Run every level and return the best poses over all of them, ranked by their score
         plus `scale_prior` per octave of the person scale they were found at (the search
         without depth, `PartModel.scale_prior`; the poses keep their own scores). `net_maps`:
-        the frame's network maps, for a detector with a `NetUnary`."""
+        the frame's network maps, for a detector with a `NetUnary`; `floor`: the responses
+        raised where a nearer person hides this one (`OcclusionFloor`)."""
         cands: list[Pose] = []
         per_level = 1 if top_k == 1 else 4 * top_k
         unary = None if net_maps is None else self._unary(net_maps)
         for level in levels:
-            res = score_level(level, self.model, self._arrays, unary)
+            res = score_level(level, self.model, self._arrays, unary, floor)
             if res is None:
                 continue
             SearchWork.cells += res.root.shape[1] * res.root.shape[2]
