@@ -77,3 +77,15 @@ def test_a_drifted_figure_fails(tmp_path: Path) -> None:
     titles, rows = parse_table(summary_block(readme.read_text()))
     assert titles == ['test (400)'] and rows == {'rgbd_kf': ['96.0 / 90.5']}
     assert readme.read_text().startswith('x\n') and readme.read_text().endswith('y\n')
+
+
+def test_the_cost_of_each_person_past_the_first_is_their_share_of_the_first_s_total() -> None:
+    def group(frames: int, total: float) -> dict:
+        return {'frames': frames, 'total': {'p50': total},
+                **{k: {'p50': total / 4} for k in ('foreground', 'detector', 'tracker', 'ik')}}
+    bench = {'people_ms': {'1': group(40, 10.0), '2': group(100, 16.0), '3': group(60, 24.0)}}
+    rows = [line for line in doc.people_cost_section(bench, None) if line.startswith('| ')]
+    assert rows[1:] == ['| 1 | 40 | 2.5 | 2.5 | 2.5 | 2.5 | 10.0 |  |',
+                        '| 2 | 100 | 4.0 | 4.0 | 4.0 | 4.0 | 16.0 | 0.60 |',
+                        '| 3 | 60 | 6.0 | 6.0 | 6.0 | 6.0 | 24.0 | 0.70 |']
+    assert doc.people_cost_section({'stages_ms': {}}, None) == []

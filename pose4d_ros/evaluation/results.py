@@ -140,10 +140,11 @@ SWEEPS: dict[str, dict[str, tuple[str, ...]]] = {
                   'limbs_second': (f'slqe.limb_parts={_LIMBS}',),
                   'limbs_first': (f'slqe.limb_parts={_LIMBS}', 'slqe.limb_rejected_frames=0'),
                   'off': ('slqe.limb_tolerance=0',)},
-    # the person scale's factors and warm-up (ScaleConfig: 0.87-1.15 with a 4-frame warm-up
-    # and no probe shipped, chosen on validation over 0.87-1.32, first shipped, and the probe
-    # of a neighbouring scale every 8th frame, shipped before; '1': the depth's scale alone)
-    'person_scale': {'0.87-1.15': (), '2_frames': ('scale.warm_up_frames=2',),
+    # the person scale's factors and warm-up (ScaleConfig: 0.87-1.15 with a 2-frame warm-up
+    # and no probe shipped, chosen on validation over 0.87-1.32, first shipped, the 4-frame
+    # warm-up and the probe of a neighbouring scale every 8th frame, shipped before; '1': the
+    # depth's scale alone)
+    'person_scale': {'0.87-1.15': (), '4_frames': ('scale.warm_up_frames=4',),
                      '8_frames': ('scale.warm_up_frames=8',),
                      '0.87-1.32': ('scale.factors=0.87,1,1.15,1.32',),
                      '0.76-1.52': ('scale.factors=0.76,0.87,1,1.15,1.32,1.52',),
@@ -429,6 +430,12 @@ JOBS: tuple[Job, ...] = (
                     *people, *(['--peer', 'mediapipe'] if c.peer else [])]
                    for name, people in (('bench.json', []),
                                         ('bench_people.json', ['--people', 'several']))]),
+    Job('bench_people3', 'CPU per stage by the number of people tracked in a frame (1-3: the '
+        "held-out three-person renders, every frame, the nodes' several-person path)",
+        ('test60_people3',),
+        lambda c: [['pose4d', 'bench', str(DATA / 'test60_people3'), '--json',
+                    str(RESULTS / 'bench_people3.json'), '--people', 'several', '--frames',
+                    '480']]),
     Job('bench_colour_net', "CPU per stage as the nodes run them with the photograph network "
         "in the detector's colour unary, and without it, in the same session, with MediaPipe",
         (), lambda c: [['pose4d', 'bench', 'bags/sample', '--json', str(RESULTS / name),

@@ -243,6 +243,7 @@ def bench_section(results: Path, jobs: dict) -> list[str]:
         out.append('')
         if name == 'bench_people' and load(results, 'bench'):
             out += [*commands(jobs.get('bench'))]
+    out += people_cost_section(load(results, 'bench_people3'), jobs.get('bench_people3'))
     if load(results, 'bench_colour_net'):
         out += [*commands(jobs.get('bench_colour_net'))]
     for name, title in (('bench_graph', 'The node graph (demo bag)'),
@@ -254,6 +255,27 @@ def bench_section(results: Path, jobs: dict) -> list[str]:
             out += [f'## {title}', '', '```', json.dumps(graph['graph'], indent=1), '```', '',
                     *commands(jobs.get(name))]
     return out
+
+
+def people_cost_section(bench: dict | None, job: dict | None) -> list[str]:
+    """CPU p50 by stage for the frames with 1, 2 and 3 people tracked (`people_ms`), and what
+    each person past the first costs against the first's total (the mask is shared)."""
+    if not bench or 'people_ms' not in bench:
+        return []
+    groups = bench['people_ms']
+    out = ['## CPU per stage by the number of people tracked (held-out three-person renders)', '',
+           '| people | frames | foreground | detector | tracker | ik | total | each past the '
+           "first / the first's total |", '|---|---|---|---|---|---|---|---|']
+    one = groups.get('1', {}).get('total', {}).get('p50')
+    for n, g in groups.items():
+        total = g['total']['p50']
+        extra = ('' if n in ('0', '1') or not one or total is None
+                 else f'{(total - one) / (int(n) - 1) / one:.2f}')
+        out.append(f"| {n} | {g['frames']} | " + ' | '.join(
+            fmt(g[k]['p50']) for k in ('foreground', 'detector', 'tracker', 'ik', 'total'))
+            + f' | {extra} |')
+    return [*out, '', 'CPU ms p50 a frame, the frames grouped by the skeletons published.', '',
+            *commands(job)]
 
 
 def validation_section(results: Path, jobs: dict) -> list[str]:
