@@ -26,8 +26,9 @@ Publications (input header)
 Parameters (config/detector.yaml)
     detector.model, detector.n_levels, detector.margin, detector.person_scales,
     detector.scale_warm_up_frames, detector.scale_probe_every, detector.min_confidence,
-    detector.max_people, detector.quiet_frames, detector.keep_unseen_s, detector.colour_net,
-    detector.colour_net_weight, detector.colour_hog_weight
+    detector.max_people, detector.quiet_frames, detector.keep_unseen_s, detector.arm_prior,
+    detector.occluded_quantile, detector.colour_net, detector.colour_net_weight,
+    detector.colour_hog_weight
     (a part's depth look-up is the model's: `core.lifting.lift_parts`)
 """
 
@@ -151,6 +152,11 @@ PARAMS = (
           'wrists (at most 0.25 s old) when each arm is chosen among the few best the part model '
           'allows, per squared person scale of distance; 0 = the part model alone.',
           range=(0.0, 100.0), live=True),
+    Param('detector.occluded_quantile', _S.occluded_quantile, 'Where a nearer person hides the '
+          "one searched, each part scores at least this quantile of its responses on that "
+          "person's own pixels, so a hidden part may lie behind the nearer person instead of "
+          'the whole pose being pulled onto the visible half; 0 = off.', range=(0.0, 1.0),
+          live=True),
 )
 
 
@@ -158,7 +164,8 @@ def detector_settings(p: dict[str, Any]) -> dict[str, Any]:
     """The live settings of the detector stage (`DetectorStage.configure`) from the
     parameters (also used by the pipeline node)."""
     return {'search': SearchConfig(n_levels=p['detector.n_levels'], margin=p['detector.margin'],
-                                   arm_prior=p['detector.arm_prior']),
+                                   arm_prior=p['detector.arm_prior'],
+                                   occluded_quantile=p['detector.occluded_quantile']),
             'scale': ScaleConfig(factors=tuple(p['detector.person_scales']),
                                  warm_up_frames=p['detector.scale_warm_up_frames'],
                                  probe_every=p['detector.scale_probe_every']),

@@ -206,7 +206,6 @@ class SearchWork:
     cells: int = 0
 
 
-
 class OcclusionFloor:
     """The responses of the filter positions a nearer person hides, raised to a floor.
 
