@@ -451,6 +451,10 @@ JOBS: tuple[Job, ...] = (
         ('bench300',), lambda c: [['pose4d', 'bench', str(DATA / 'bench300_bag'), '--json',
                                    str(RESULTS / 'bench_graph300.json'), '--frames', '20',
                                    '--graph', '--load', 'query']]),
+    Job('bench_graph_people2', 'both graphs replaying the two-person demo bag '
+        '(bags/sample_people2, 50 frames) at 30 fps (1x): frames in and out, latency', (),
+        lambda c: [['pose4d', 'bench', 'bags/sample_people2', '--json',
+                    str(RESULTS / 'bench_graph_people2.json'), '--frames', '20', '--graph']]),
 )
 JOB_NAMES = tuple(j.name for j in JOBS)
 

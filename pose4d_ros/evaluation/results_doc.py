@@ -249,7 +249,9 @@ def bench_section(results: Path, jobs: dict) -> list[str]:
     for name, title in (('bench_graph', 'The node graph (demo bag)'),
                         ('bench_graph300', 'The node graph and the pipeline node, 300 frames '
                                            'at 30 fps (1x), the ros2 command line querying '
-                                           'the nodes')):
+                                           'the nodes'),
+                        ('bench_graph_people2', 'The node graph and the pipeline node, the '
+                                                'two-person demo bag at 30 fps (1x)')):
         graph = load(results, name)
         if graph and 'graph' in graph:
             out += [f'## {title}', '', '```', json.dumps(graph['graph'], indent=1), '```', '',
