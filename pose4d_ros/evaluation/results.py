@@ -173,8 +173,8 @@ SWEEPS: dict[str, dict[str, tuple[str, ...]]] = {
     'tree_step': {'2': (), **{str(s): (f'foreground.tree_step={s}',) for s in (3, 4)}},
     # the floor of a part's response where a nearer person hides the searched one
     # (SearchConfig.occluded_quantile; '0': off, the detector before)
-    'occluded': {'0.3': (), **{str(q): (f'search.occluded_quantile={q}',)
-                               for q in (0, 0.2, 0.5)}},
+    'occluded': {'0.5': (), **{str(q): (f'search.occluded_quantile={q}',)
+                               for q in (0, 0.3, 0.7)}},
 }
 
 

@@ -83,7 +83,7 @@ class SearchConfig:
     nms_overlap: float = 0.5
     subcell: bool = True
     arm_prior: float = 1.0
-    occluded_quantile: float = 0.3
+    occluded_quantile: float = 0.5
 
     def __post_init__(self) -> None:
         if not 1 <= self.n_levels <= 9:
