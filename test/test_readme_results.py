@@ -88,4 +88,10 @@ def test_the_cost_of_each_person_past_the_first_is_their_share_of_the_first_s_to
     assert rows[1:] == ['| 1 | 40 | 2.5 | 2.5 | 2.5 | 2.5 | 10.0 |  |',
                         '| 2 | 100 | 4.0 | 4.0 | 4.0 | 4.0 | 16.0 | 0.60 |',
                         '| 3 | 60 | 6.0 | 6.0 | 6.0 | 6.0 | 24.0 | 0.70 |']
+    # no frame with one person: the first's total from the fewest seen, 2 and 3 here
+    # (8 a person past the first, the first 16 - 8 = 8: 1.00)
+    bench = {'people_ms': {'0': group(5, 1.0), '2': group(100, 16.0), '3': group(60, 24.0)}}
+    rows = [line for line in doc.people_cost_section(bench, None) if line.startswith('| ')]
+    assert [r.split(' | ')[0] for r in rows[1:]] == ['| 2', '| 3']
+    assert rows[-1].endswith('| 1.00 |')
     assert doc.people_cost_section({'stages_ms': {}}, None) == []

@@ -260,19 +260,25 @@ def bench_section(results: Path, jobs: dict) -> list[str]:
 
 
 def people_cost_section(bench: dict | None, job: dict | None) -> list[str]:
-    """CPU p50 by stage for the frames with 1, 2 and 3 people tracked (`people_ms`), and what
-    each person past the first costs against the first's total (the mask is shared)."""
+    """CPU p50 by stage for the frames with each number of people tracked (`people_ms`), and
+    what each person past the first costs against the first's total: from the fewest people
+    seen (m) to n, (total_n - total_m) / (n - m) a person, the first's total being total_m less
+    m - 1 such persons (the mask is shared)."""
     if not bench or 'people_ms' not in bench:
         return []
-    groups = bench['people_ms']
+    groups = {int(n): g for n, g in bench['people_ms'].items() if int(n) > 0}
     out = ['## CPU per stage by the number of people tracked (held-out three-person renders)', '',
            '| people | frames | foreground | detector | tracker | ik | total | each past the '
            "first / the first's total |", '|---|---|---|---|---|---|---|---|']
-    one = groups.get('1', {}).get('total', {}).get('p50')
-    for n, g in groups.items():
+    m = min(groups, default=0)
+    base = groups[m]['total']['p50'] if groups else None
+    for n, g in sorted(groups.items()):
         total = g['total']['p50']
-        extra = ('' if n in ('0', '1') or not one or total is None
-                 else f'{(total - one) / (int(n) - 1) / one:.2f}')
+        extra = ''
+        if n > m and base is not None and total is not None:
+            each = (total - base) / (n - m)
+            first = base - (m - 1) * each
+            extra = f'{each / first:.2f}' if first > 0 else ''
         out.append(f"| {n} | {g['frames']} | " + ' | '.join(
             fmt(g[k]['p50']) for k in ('foreground', 'detector', 'tracker', 'ik', 'total'))
             + f' | {extra} |')
