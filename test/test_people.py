@@ -613,3 +613,42 @@ def test_a_held_person_coming_out_partly_seen_is_taken_back(held_continues):
     track = next(t for t in out if t.track_id == far)
     assert (track.source == cj.DETECTED).any() == held_continues
     assert len(out) == 2
+
+
+@pytest.mark.parametrize('emerging_score', [5.0, 3.0])
+def test_a_person_coming_out_from_behind_is_born_from_emerging_score(emerging_score):
+    """A person never seen before comes out from behind a confirmed nearer one, partly seen,
+    scoring 4 (under `birth_score`, over `emerging_score` 3): born after `confirm_frames`
+    frames at 3, never at 5 (the birth score). The same score away from the near person (a
+    region of the room) starts nothing at either."""
+    tr = tracker(emerging_score=emerging_score)
+    for k in range(5):
+        out = tr.step([_scored(person(0.0, z=2.2), 8.0)], k * DT, INTR)
+    assert [t.track_id for t in out] == [1]
+    for k in range(5, 10):  # a low-scoring region of the room, 1.4 m beside the person
+        out = tr.step([_scored(person(0.0, z=2.2), 8.0), _scored(person(1.4, z=3.4), 4.0)],
+                      k * DT, INTR)
+    assert [t.track_id for t in out] == [1]
+    for k in range(10, 15):  # coming out from behind the near person
+        out = tr.step([_scored(person(0.0, z=2.2), 8.0), _scored(person(0.2, z=3.4), 4.0)],
+                      k * DT, INTR)
+    assert sorted(t.track_id for t in out) == ([1, 2] if emerging_score < 5 else [1])
+    if emerging_score < 5:
+        assert tr.born == [] and ids_by_x(out)[2] == pytest.approx(0.2, abs=0.03)
+
+
+@pytest.mark.parametrize('far_x, born', [(1.0, True), (1.3, False)])
+def test_a_region_cut_by_the_image_side_behind_a_person_is_not_born_from_emerging_score(
+        far_x, born):
+    """Behind a near person standing towards the image's right side, a detection scoring 4
+    coming out from behind them is born from `emerging_score` (3) when it lies clear of the
+    side, not when its joints reach the image's edge (a wall's edge or furniture cut by the
+    border scores as a partly seen person does)."""
+    tr = tracker(emerging_score=3.0)
+    for k in range(5):
+        tr.step([_scored(person(0.6, z=2.2), 8.0)], k * DT, INTR)
+    far = _scored(person(far_x, z=3.4), 4.0)
+    assert (far.uv[:, 0].max() > 0.96 * INTR.width) != born
+    for k in range(5, 10):
+        out = tr.step([_scored(person(0.6, z=2.2), 8.0), far], k * DT, INTR)
+    assert len(out) == (2 if born else 1)

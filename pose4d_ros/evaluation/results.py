@@ -80,6 +80,7 @@ SETS: dict[str, DataSet] = {s.name: s for s in (
     DataSet('valid60_people2', 'validation', _synth(201, 's01-s06', 1, 60, 1, '--people', '2')),
     DataSet('valid60_people3', 'validation', _synth(203, 's01-s06', 1, 60, 1, '--people', '3')),
     DataSet('valid30_people2b', 'validation', _synth(99, 's01-s06', 2, 45, 1, '--people', '2')),
+    DataSet('valid60_people3b', 'validation', _synth(205, 's01-s06', 2, 60, 1, '--people', '3')),
     *(DataSet(f'valid60_people2_alone{k}', 'validation',
               _synth(201, 's01-s06', 1, 60, 1, '--people', '2', '--alone', str(k)))
       for k in (1, 2)),
@@ -175,9 +176,15 @@ SWEEPS: dict[str, dict[str, tuple[str, ...]]] = {
     # (SearchConfig.occluded_quantile; '0': off, the detector before)
     'occluded': {'0.5': (), **{str(q): (f'search.occluded_quantile={q}',)
                                for q in (0, 0.3, 0.7)}},
+    # the least score of a detection coming out from behind a nearer person that starts or
+    # grows a tentative track (TrackingConfig.emerging_score; '5': birth_score, the tracker
+    # before)
+    'emerging': {'3': (), **{str(v): (f'tracking.emerging_score={v}',) for v in (5, 4, 2)}},
 }
 
 
+# the several-person validation sets (two and three people, 3960 frames)
+PEOPLE_SETS = ('valid60_people2', 'valid60_people3', 'valid30_people2b', 'valid60_people3b')
 SWEEP_SETS = {'cut_height': ('valid30_near',),
               'person_scale': ('valid30', 'valid30_msr', 'valid60_people2'),
               'floor_below': ('valid30', 'valid30_msr', 'valid30_near'),
@@ -185,7 +192,7 @@ SWEEP_SETS = {'cut_height': ('valid30_near',),
               'bent_top': ('valid30_msr', 'valid60_people2'),
               'hidden': ('valid60_people2', 'valid60_people3', 'valid30_people2b'),
               'tree_step': ('valid30', 'valid30_msr', 'valid60_people2'),
-              'occluded': ('valid60_people2', 'valid60_people3', 'valid30_people2b')}
+              'occluded': PEOPLE_SETS, 'emerging': PEOPLE_SETS}
 # the shipped settings' run on a set, made anyway (the margin sweep's, valid30_msr's own)
 SHIPPED_RUNS = {'valid30': f'margin_{DEFAULT_MARGIN}.json', 'valid30_msr': 'valid30_msr.json'}
 
@@ -386,7 +393,8 @@ JOBS: tuple[Job, ...] = (
         "floor, the several-person tracker and its association's rules, swept on validation "
         'renders; the MSR Action3D validation set',
         ('valid30', 'valid30_near', 'valid60_people2', 'valid60_people2_alone1',
-         'valid60_people2_alone2', 'valid60_people3', 'valid30_people2b', 'valid30_msr'),
+         'valid60_people2_alone2', 'valid60_people3', 'valid30_people2b', 'valid60_people3b',
+         'valid30_msr'),
         _validation, parallel=True),
     Job('colour_net', "the photograph network as the detector's colour unary, its weights "
         'swept on validation: LSPET 8501-9000 (colour alone), valid30 and valid30_msr (RGB-D)',

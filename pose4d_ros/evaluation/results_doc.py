@@ -352,7 +352,10 @@ SWEEP_TITLES = {
                  '(`ForegroundConfig.tree_step`)',
     'occluded': "A part's least response where a nearer person hides the searched one "
                 '(`SearchConfig.occluded_quantile`: that quantile of its responses on the '
-                "person's own pixels; 0: off)"}
+                "person's own pixels; 0: off)",
+    'emerging': 'The least score of a detection coming out from behind a nearer person that '
+                'starts or grows a tentative track (`TrackingConfig.emerging_score`; 5: '
+                '`birth_score`, the tracker before)'}
 
 
 def sweeps_section(v: dict) -> list[str]:
