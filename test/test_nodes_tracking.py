@@ -122,6 +122,48 @@ def test_ik_node(ros, info_pub, tmp_path, use_depth):
     assert len(markers[-1].markers[0].points) == 12
 
 
+def test_ik_node_before_any_camera_info(ros, tmp_path):
+    """Frames that come before the camera's first camera_info (its reader may match after the
+    others') are completed from the limb prior, not refused: every one is answered with its
+    elbows and knees, and none is counted as a bad input."""
+    from diagnostic_msgs.msg import DiagnosticArray
+    from pose4d_msgs.msg import JointArray
+    from sensor_msgs.msg import Image
+
+    from pose4d_ros.nodes import qos
+    from pose4d_ros.nodes.convert import array_to_image, joints_from_msg
+
+    diagnostics = ros.collect(DiagnosticArray, '/diagnostics')
+    node = start('ik', {'ik.use_depth': True}, log_dir=tmp_path)
+    try:
+        pub = ros.node.create_publisher(JointArray, 'pose4d/parts/tracked', qos.OUTPUT_QOS)
+        depth_pub = ros.node.create_publisher(Image, 'pose4d/foreground/depth', qos.OUTPUT_QOS)
+        got = ros.collect(JointArray, 'pose4d/skeleton', qos.OUTPUT_QOS)
+        ros.wait_for_subscribers(pub)
+        ros.wait_for_subscribers(depth_pub)
+        ros.wait_for_publishers('pose4d/skeleton')
+        depth = np.full((INTR.height, INTR.width), 2500, np.uint16)
+        headers = [header_at(k) for k in range(3)]
+        for k, header in enumerate(headers):
+            def send(k=k, header=header) -> None:
+                pub.publish(parts_msg(0, header))
+                depth_pub.publish(array_to_image(depth, '16UC1', header))
+
+            ros.send_until_answered(send, lambda h=header: any(m.header == h for m in got),
+                                    f'the frame at {header.stamp.nanosec} ns')
+        ros.spin_for(1.5)  # the next /diagnostics
+    finally:
+        assert node.stop() == 0, node.output()
+    skeleton = joints_from_msg(got[-1])
+    for name in ('left_elbow', 'right_elbow', 'left_knee', 'right_knee'):
+        i = SKELETON_14.index(name)
+        assert skeleton.source[i] == cj.INFERRED and np.isfinite(skeleton.xyz[i]).all()
+    counts = [int(kv.value) for m in diagnostics for s in m.status for kv in s.values
+              if s.name == 'pose4d: ik' and kv.key == 'bad_inputs']
+    assert counts and counts[-1] == 0, counts[-1:]
+    assert 'camera_info yet' in node.output()
+
+
 def test_a_signal_racing_the_executor_is_a_clean_exit():
     """A SIGINT that shuts the context down while the executor builds its next wait set makes
     rclpy raise RCLError ('the given context is not valid'), not ExternalShutdownException

@@ -195,9 +195,16 @@ class IkNode(Node):
             self.people.reset()
         # a single-person tracker's message of nobody (track 0, nothing located) is nobody
         tracked = [t for t in tracked if t.track_id or (t.source != MISSING).any()]
+        intrinsics = self.camera.intrinsics
+        if extra and intrinsics is None:
+            # not a bad input: the camera's calibration has not come yet (its reader may match
+            # after the others'); the depth image cannot be read without it
+            self.get_logger().info(
+                f'no {self.resolve_topic_name("camera/color/camera_info")} yet: elbows and '
+                'knees from the limb prior, without the depth image', throttle_duration_sec=5.0)
         try:
-            depth = depth_from_msg(extra[0]) if extra else None
-            skeletons = self.people.step(tracked, depth, self.camera.intrinsics)
+            depth = depth_from_msg(extra[0]) if extra and intrinsics is not None else None
+            skeletons = self.people.step(tracked, depth, intrinsics)
         except ValueError as exc:
             self.monitor.bad_input(f'frame at {stamp} ns refused: {exc}')
             return
