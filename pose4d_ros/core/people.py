@@ -155,6 +155,18 @@ class TrackingConfig:
         alone twins unchanged. (Its earlier forms on valid30_people2b: taking any detection in
         the gate 85.6 / 0.894 / 0.945 / 33.3; emerging low-scoring ones and birth-scoring ones
         anywhere 85.8 / 0.902 / 0.949 / 22.2, the other sets as now.)
+    held_own_front : a track held behind a nearer person takes a detection coming out
+        (`held_continues`) only from behind that person (`_Track.behind`, the track it was
+        held behind), not from behind another: a wall's edge behind a third person, in the
+        held track's gate (grown with the time unseen), was taken for the hidden person, a
+        false skeleton for 35 frames (on `valid60_people3d`, one of two new validation sets of
+        36 three-person videos each: s01-s06, seeds 207, `valid60_people3c`, and 209). False:
+        from behind any nearer person (the tracker before). On validation (`pose4d eval DIR --model
+        rgbd_14 --no-single-frame --config tracking.held_own_front=false`; average7 / MOTA /
+        false skeletons per 1000 frames): `valid60_people3d` 86.72 / 0.950 / 16.2 without,
+        87.00 / 0.960 / 0 with; `valid60_people2`, `valid60_people3`, `valid30_people2b`,
+        `valid60_people3b` and `valid60_people3c` the same frames with and without. The sweep
+        `held_front` of `make results`.
     emerging_score : while another track is confirmed, a detection coming out from behind a
         nearer person (its torso pixel in the box of a confirmed track's detection nearer by
         over `torso_std_m`, `_emerging`) starts or grows a tentative track from this score
@@ -201,6 +213,7 @@ class TrackingConfig:
     detector_keep_s: float = 0.0
     confirmed_first: bool = True
     held_continues: bool = True
+    held_own_front: bool = True
     emerging_score: float = 3.0
 
     def __post_init__(self) -> None:
@@ -429,6 +442,7 @@ class _Track:
     last: JointSet | None = None
     held: bool = False  # hidden behind another person: `last` is their last pose, kept
     held_s: float = math.nan  # since when
+    behind: int = 0  # while held: the id of the track of the person hiding them
 
 
 class PeopleTracker:
@@ -509,8 +523,10 @@ class PeopleTracker:
         emerging = self._emerging(detections, points, matched)
         for j, det in enumerate(detections):
             born = self._born(det, j in emerging and _clear_of_sides(det, intrinsics))
-            if j in matched and (self._elsewhere(self.tracks[matched[j]], j in emerging) or (
-                    not born and not self._continues(self.tracks[matched[j]], j in emerging))):
+            out = j in matched and _out_from_behind(self.tracks[matched[j]], emerging.get(j),
+                                                    cfg.held_own_front)
+            if j in matched and (self._elsewhere(self.tracks[matched[j]], out) or (
+                    not born and not self._continues(self.tracks[matched[j]], out))):
                 # a tentative track's detection must be a person's, and so must that of a
                 # track unseen beside another person (`_continues`)
                 del matched[j]
@@ -523,10 +539,11 @@ class PeopleTracker:
         # the tracks seen first: a track unseen behind one of them is held (`_behind`)
         for i in sorted(range(len(self.tracks)), key=lambda i: i not in seen):
             track = self.tracks[i]
-            if i not in seen and track.id and (track.held or self._behind(track, stamp_s)):
+            if i not in seen and track.id and (track.held or (
+                    behind := self._behind(track, stamp_s))):
                 # its last pose kept until seen again (its SLQE then restarts) or ended
                 if not track.held:
-                    track.held, track.held_s = True, stamp_s
+                    track.held, track.held_s, track.behind = True, stamp_s, behind
                 track.last = _held(track.last)
                 continue
             if i in seen and track.held:
@@ -640,43 +657,47 @@ class PeopleTracker:
         they would come out (`held_continues`), whatever its score."""
         return self.config.held_continues and track.held and not emerging
 
-    def _emerging(self, detections: Sequence[JointSet],
-                  points: list[tuple[NDArray, NDArray]], matched: dict[int, int]) -> set[int]:
+    def _emerging(self, detections: Sequence[JointSet], points: list[tuple[NDArray, NDArray]],
+                  matched: dict[int, int]) -> dict[int, set[int]]:
         """The detections whose torso pixel lies in the box of a nearer person matched to a
-        confirmed track (`_in_box`), farther by over `torso_std_m` in 3-D: where a person
-        hidden behind them comes out (a held track's gate, grown with the time unseen, also
-        reaches the room's clutter metres away), and where a tentative track may grow from
+        confirmed track (`_in_box`), farther by over `torso_std_m` in 3-D, each with the ids
+        of those tracks: where a person hidden behind them comes out (a held track takes
+        only a detection coming out from behind the person hiding it, `_out_from_behind`:
+        its gate, grown with the time unseen, also reaches the room's clutter metres away,
+        coming out from behind someone else), and where a tentative track may grow from
         `emerging_score`."""
         cfg = self.config
         if not ((cfg.held_continues and any(t.held for t in self.tracks))
                 or (cfg.emerging_score < cfg.birth_score and len(detections) > 1)):
-            return set()
-        fronts = [(k, detections[k], points[k][0]) for k, i in matched.items()
-                  if self.tracks[i].id and _finite(points[k][0])]
-        out = set()
+            return {}
+        fronts = [(k, self.tracks[i].id, detections[k], points[k][0])
+                  for k, i in matched.items() if self.tracks[i].id and _finite(points[k][0])]
+        out: dict[int, set[int]] = {}
         for j, (point, _) in enumerate(points):
             pixel = torso_px(detections[j])[0]
             if not (_finite(pixel) and _finite(point)):
                 continue
-            if any(k != j and point[2] > q[2] + self.config.torso_std_m
-                   and _in_box(other, pixel) for k, other, q in fronts):
-                out.add(j)
+            ids = {t for k, t, other, q in fronts if k != j and point[2] > q[2] + cfg.torso_std_m
+                   and _in_box(other, pixel)}
+            if ids:
+                out[j] = ids
         return out
 
-    def _behind(self, track: _Track, stamp_s: float) -> bool:
-        """Whether an unseen track's person is hidden behind a person seen this frame: their
-        last torso pixel within that person's box (its located joints, grown by a tenth of
-        its height) and their torso farther by over `torso_std_m` (both in 3-D)."""
+    def _behind(self, track: _Track, stamp_s: float) -> int:
+        """The id of the track of a person seen this frame whom an unseen track's person is
+        hidden behind (0: nobody): their last torso pixel within that person's box (its
+        located joints, grown by a tenth of its height) and their torso farther by over
+        `torso_std_m` (both in 3-D)."""
         if not (_finite(track.pixel) and _finite(track.point)):
-            return False
+            return 0
         for other in self.tracks:
             if other is track or not other.id or other.seen_s != stamp_s or other.last is None \
                     or not _finite(other.point) \
                     or not track.point[2] > other.point[2] + self.config.torso_std_m:
                 continue
             if _in_box(other.last, track.pixel):
-                return True
-        return False
+                return other.id
+        return 0
 
     def _cost(self, detections: Sequence[JointSet], points: list[tuple[NDArray, NDArray]],
               stamp_s: float) -> NDArray[np.float64]:
@@ -732,6 +753,14 @@ class PeopleTracker:
         # the longest tracked: seen in most frames (the first confirmed on a tie)
         primary = sorted(seen or confirmed, key=lambda t: -t.hits)[:1]
         return primary + [t for t in confirmed if t not in primary]
+
+
+def _out_from_behind(track: _Track, fronts: set[int] | None, own_front: bool) -> bool:
+    """Whether a detection coming out from behind the people of the track ids `fronts`
+    (`PeopleTracker._emerging`; None: from behind nobody) comes out where `track`'s person
+    would: with `own_front`, for a track held behind a person, from behind that person only
+    (not seen this frame, nobody comes out from behind them); otherwise from behind anyone."""
+    return bool(fronts) and (not (own_front and track.held) or track.behind in fronts)
 
 
 def _finite(v: NDArray[np.float64]) -> bool:

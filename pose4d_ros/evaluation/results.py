@@ -81,6 +81,8 @@ SETS: dict[str, DataSet] = {s.name: s for s in (
     DataSet('valid60_people3', 'validation', _synth(203, 's01-s06', 1, 60, 1, '--people', '3')),
     DataSet('valid30_people2b', 'validation', _synth(99, 's01-s06', 2, 45, 1, '--people', '2')),
     DataSet('valid60_people3b', 'validation', _synth(205, 's01-s06', 2, 60, 1, '--people', '3')),
+    DataSet('valid60_people3c', 'validation', _synth(207, 's01-s06', 3, 60, 1, '--people', '3')),
+    DataSet('valid60_people3d', 'validation', _synth(209, 's01-s06', 3, 60, 1, '--people', '3')),
     *(DataSet(f'valid60_people2_alone{k}', 'validation',
               _synth(201, 's01-s06', 1, 60, 1, '--people', '2', '--alone', str(k)))
       for k in (1, 2)),
@@ -180,6 +182,9 @@ SWEEPS: dict[str, dict[str, tuple[str, ...]]] = {
     # grows a tentative track (TrackingConfig.emerging_score; '5': birth_score, the tracker
     # before)
     'emerging': {'3': (), **{str(v): (f'tracking.emerging_score={v}',) for v in (5, 4, 2)}},
+    # from behind whom a held track takes a detection (TrackingConfig.held_own_front; 'any':
+    # from behind any nearer person, the tracker before)
+    'held_front': {'own': (), 'any': ('tracking.held_own_front=false',)},
 }
 
 
@@ -192,7 +197,8 @@ SWEEP_SETS = {'cut_height': ('valid30_near',),
               'bent_top': ('valid30_msr', 'valid60_people2'),
               'hidden': ('valid60_people2', 'valid60_people3', 'valid30_people2b'),
               'tree_step': ('valid30', 'valid30_msr', 'valid60_people2'),
-              'occluded': PEOPLE_SETS, 'emerging': PEOPLE_SETS}
+              'occluded': PEOPLE_SETS, 'emerging': PEOPLE_SETS,
+              'held_front': (*PEOPLE_SETS, 'valid60_people3c', 'valid60_people3d')}
 # the shipped settings' run on a set, made anyway (the margin sweep's, valid30_msr's own)
 SHIPPED_RUNS = {'valid30': f'margin_{DEFAULT_MARGIN}.json', 'valid30_msr': 'valid30_msr.json'}
 
@@ -394,6 +400,7 @@ JOBS: tuple[Job, ...] = (
         'renders; the MSR Action3D validation set',
         ('valid30', 'valid30_near', 'valid60_people2', 'valid60_people2_alone1',
          'valid60_people2_alone2', 'valid60_people3', 'valid30_people2b', 'valid60_people3b',
+         'valid60_people3c', 'valid60_people3d',
          'valid30_msr'),
         _validation, parallel=True),
     Job('colour_net', "the photograph network as the detector's colour unary, its weights "

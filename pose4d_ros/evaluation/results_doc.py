@@ -355,7 +355,10 @@ SWEEP_TITLES = {
                 "person's own pixels; 0: off)",
     'emerging': 'The least score of a detection coming out from behind a nearer person that '
                 'starts or grows a tentative track (`TrackingConfig.emerging_score`; 5: '
-                '`birth_score`, the tracker before)'}
+                '`birth_score`, the tracker before)',
+    'held_front': 'From behind whom a person held behind a nearer one is taken back '
+                  '(`TrackingConfig.held_own_front`; own: only from behind the person hiding '
+                  'them; any: from behind any nearer person, the tracker before)'}
 
 
 def sweeps_section(v: dict) -> list[str]:
