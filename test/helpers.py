@@ -99,6 +99,13 @@ def header_at(k: int):
                   frame_id='camera_color_optical_frame')
 
 
+def diagnostic_values(diagnostics: list, stage: str, key: str) -> list[int]:
+    """The values of `key` in stage `stage`'s status (`pose4d: <stage>`) of every
+    DiagnosticArray received, in order."""
+    return [int(kv.value) for m in diagnostics for s in m.status for kv in s.values
+            if s.name == f'pose4d: {stage}' and kv.key == key]
+
+
 def parts_msg(k: int, header, *, missing=()):
     """The 10 parts of `BODY` moved 2 mm right per frame, as a JointArray (rclpy), `missing`
     ones MISSING."""

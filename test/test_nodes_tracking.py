@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 from harness import check_tf, start
-from helpers import INTR, header_at, parts_msg
+from helpers import INTR, diagnostic_values, header_at, parts_msg
 
 from pose4d_ros.core import joints as cj
 from pose4d_ros.core.skeleton import PARTS_10, SKELETON_14
@@ -158,8 +158,7 @@ def test_ik_node_before_any_camera_info(ros, tmp_path):
     for name in ('left_elbow', 'right_elbow', 'left_knee', 'right_knee'):
         i = SKELETON_14.index(name)
         assert skeleton.source[i] == cj.INFERRED and np.isfinite(skeleton.xyz[i]).all()
-    counts = [int(kv.value) for m in diagnostics for s in m.status for kv in s.values
-              if s.name == 'pose4d: ik' and kv.key == 'bad_inputs']
+    counts = diagnostic_values(diagnostics, 'ik', 'bad_inputs')
     assert counts and counts[-1] == 0, counts[-1:]
     assert 'camera_info yet' in node.output()
 

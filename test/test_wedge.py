@@ -15,7 +15,7 @@ import numpy as np
 import pytest
 from fuzz import Target
 from harness import start
-from helpers import header_at
+from helpers import diagnostic_values, header_at
 
 # 'empty' last: a 0-byte sample also costs its publisher the next messages inside Fast DDS (as
 # many as its history holds, 10), which would hide the kinds sent after it
@@ -78,8 +78,7 @@ def test_undeserializable_bytes_leave_the_node_serving(ros, tmp_path, name):
                     f'{target.topics[topic][1]}\n{node.output()}')
         print(f'{name}: valid frames unanswered after each kind of bad bytes: {lost}')
         ros.spin_for(1.5)  # the next /diagnostics
-        counts = [int(kv.value) for m in diagnostics for s in m.status for kv in s.values
-                  if s.name == f'pose4d: {name}' and kv.key == 'bad_inputs']
+        counts = diagnostic_values(diagnostics, name, 'bad_inputs')
         assert counts and counts[-1] == sent, (counts[-1:], sent)
         assert 'bytes that are not a' in node.output()
     finally:

@@ -523,13 +523,13 @@ class PeopleTracker:
         emerging = self._emerging(detections, points, matched)
         for j, det in enumerate(detections):
             born = self._born(det, j in emerging and _clear_of_sides(det, intrinsics))
-            out = j in matched and _out_from_behind(self.tracks[matched[j]], emerging.get(j),
-                                                    cfg.held_own_front)
-            if j in matched and (self._elsewhere(self.tracks[matched[j]], out) or (
-                    not born and not self._continues(self.tracks[matched[j]], out))):
-                # a tentative track's detection must be a person's, and so must that of a
-                # track unseen beside another person (`_continues`)
-                del matched[j]
+            if j in matched:
+                track = self.tracks[matched[j]]
+                out = _out_from_behind(track, emerging.get(j), cfg.held_own_front)
+                if self._elsewhere(track, out) or (not born and not self._continues(track, out)):
+                    # a tentative track's detection must be a person's, and so must that of a
+                    # track unseen beside another person (`_continues`)
+                    del matched[j]
             if j not in matched and (_finite(points[j][0]) or _finite(torso_px(det)[0])) \
                     and (j in trusted or born):
                 stage = self.make()
