@@ -159,6 +159,7 @@ def write_all(results: Path, index: dict, *, readme: Path = Path('README.md'),
               'test60_people2_alone1': 'The same videos, the first person alone',
               'test60_people2_alone2': 'The same videos, the second person alone',
               'test60_people3': 'Held-out three-person renders',
+              'test60_people3b': 'Held-out three-person renders (a second seed)',
               'lspet': 'LSPET photographs 2501-3000',
               'lspet_colour_net': "LSPET photographs 2501-3000: the nodes' model with the "
                                   'photograph network in its colour unary',
