@@ -97,8 +97,10 @@ def predict_kernel(x: NDArray[np.float32], ensemble: NDArray[np.int64],
         for t in range(n_trees):
             k = 0
             while k < n_nodes:
-                # NaN >= threshold is False: missing values go left
-                k = 2 * k + 2 if x[i, feature[e, t, k]] >= threshold[e, t, k] else 2 * k + 1
+                # right when x >= threshold, as a number, not a branch (the trees' branches,
+                # half of them mispredicted, took half the time); NaN >= threshold is False:
+                # missing values go left
+                k = 2 * k + 1 + (x[i, feature[e, t, k]] >= threshold[e, t, k])
             s += leaf[e, t, k - n_nodes]
         out[i] = s
     return out

@@ -159,22 +159,47 @@ def depth_to_metres(depth: NDArray) -> NDArray[np.float32]:
     if depth.ndim != 2:
         raise ValueError(f'depth image must be 2-D, got shape {depth.shape}')
     if depth.dtype == np.uint16:
-        out = depth.astype(np.float32) * np.float32(0.001)
+        scale = np.float32(0.001)
     elif depth.dtype in (np.float32, np.float64):
-        with np.errstate(over='ignore'):  # 1e300 in float64 is inf in float32: no reading
-            out = depth.astype(np.float32, copy=True)
+        scale = np.float32(1.0)
     else:
         raise ValueError(f'depth must be uint16 millimetres or float metres, '
                          f'got dtype {depth.dtype}')
-    out[~((out > 0) & (out <= MAX_DEPTH_M))] = np.nan  # 0, negative, NaN, inf, beyond range
+    out = np.empty(depth.shape, np.float32)
+    _metres(depth, scale, np.float32(MAX_DEPTH_M), out)
     return out
 
 
+@njit(cache=True)
+def _metres(depth: NDArray, scale: np.float32, far: np.float32,
+            out: NDArray[np.float32]) -> None:
+    """`depth_to_metres` in one pass (numpy's took five): each pixel in float32 (1e300 in
+    float64 is inf), times `scale`, NaN unless in (0, far]."""
+    h, w = depth.shape
+    for r in range(h):
+        for c in range(w):
+            z = np.float32(depth[r, c]) * scale
+            out[r, c] = z if z > 0 and z <= far else np.nan
+
+
 def depth_to_millimetres(depth_m: NDArray[np.floating]) -> NDArray[np.uint16]:
-    """Convert float metres (NaN = no reading) to uint16 millimetres (0 = no reading)."""
-    d = np.asarray(depth_m, dtype=np.float64)
-    mm = np.where(np.isfinite(d) & (d > 0), np.rint(d * 1000.0), 0.0)
-    return np.clip(mm, 0, 65535).astype(np.uint16)
+    """Convert float metres (NaN = no reading) to uint16 millimetres (0 = no reading; beyond
+    65.535 m, 65535)."""
+    d = np.asarray(depth_m)
+    if d.dtype not in (np.float32, np.float64):
+        d = d.astype(np.float64)
+    out = np.empty(d.shape, np.uint16)
+    _millimetres(np.ascontiguousarray(d).reshape(-1), out.reshape(-1))
+    return out
+
+
+@njit(cache=True)
+def _millimetres(d: NDArray[np.floating], out: NDArray[np.uint16]) -> None:
+    """`depth_to_millimetres` in one pass: rint(metres * 1000) in float64, clipped."""
+    for i in range(d.size):
+        v = np.float64(d[i])
+        out[i] = np.uint16(min(np.rint(v * 1000.0), 65535.0)) if math.isfinite(v) and v > 0 \
+            else 0
 
 
 def robust_depth(depth_m: NDArray[np.floating], uv: NDArray[np.floating], *,

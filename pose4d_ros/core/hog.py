@@ -203,14 +203,24 @@ def depth_image(depth_m: NDArray[np.floating], encoding: str = 'float', *,
     if not 0 <= near_m < far_m:
         raise ValueError(f'need 0 <= near_m < far_m, got {near_m}, {far_m}')
     d = np.asarray(depth_m, dtype=np.float32)
-    valid = np.isfinite(d) & (d > 0)
     if encoding == 'float':
-        return np.where(valid, np.minimum(d, np.float32(far_m)), np.float32(far_m)).astype(
-            np.float32)
+        out = np.empty(d.shape, np.float32)
+        _far_filled(np.ascontiguousarray(d).reshape(-1), np.float32(far_m), out.reshape(-1))
+        return out
+    valid = np.isfinite(d) & (d > 0)
     if encoding == 'u8':
         scaled = np.clip((d - near_m) * (255.0 / (far_m - near_m)), 0.0, 255.0)
         return np.where(valid, np.rint(scaled), 0.0).astype(np.float32)
     raise ValueError(f"depth encoding must be 'float' or 'u8', got {encoding!r}")
+
+
+@nb.njit(cache=True)
+def _far_filled(d: NDArray[np.float32], far: np.float32, out: NDArray[np.float32]) -> None:
+    """`depth_image`'s 'float' encoding in one pass (numpy's took six): min(z, far), `far`
+    where there is no reading."""
+    for i in range(d.size):
+        z = d[i]
+        out[i] = min(z, far) if math.isfinite(z) and z > 0 else far
 
 
 def pad_features(feat: NDArray[np.float32], pad_y: int, pad_x: int,

@@ -190,5 +190,18 @@ def floor_height(depth_m: NDArray[np.floating], intrinsics: Intrinsics,
     """
     rx, ry = _rays(intrinsics)
     n = np.asarray(plane, dtype=np.float32)
-    along = n[0] * rx + n[1] * ry + n[2]  # n . ray, (H, W) by broadcasting
-    return depth_m * along + n[3]
+    out = np.empty(depth_m.shape, np.result_type(depth_m.dtype, np.float32))
+    _height(depth_m, rx[0], ry[:, 0], n, out)
+    return out
+
+
+@njit(cache=True)
+def _height(depth_m: NDArray[np.floating], rx: NDArray[np.float32], ry: NDArray[np.float32],
+            n: NDArray[np.float32], out: NDArray[np.floating]) -> None:
+    """`floor_height` in one pass (numpy's took five), the same float32 operations in the same
+    order: z (n . ray) + d, n . ray = n_x rx + n_y ry + n_z."""
+    h, w = depth_m.shape
+    for r in range(h):
+        for c in range(w):
+            along = n[0] * rx[c] + n[1] * ry[r] + n[2]
+            out[r, c] = depth_m[r, c] * along + n[3]
