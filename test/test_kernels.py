@@ -128,3 +128,13 @@ def test_tree_ensembles_predict_as_their_branches_say() -> None:
         expect[i] = s
     got = boost.predict_kernel(x, ensemble, base, feature, threshold, leaf)
     assert got.tobytes() == expect.tobytes()
+
+
+def test_kernels_refuse_images_of_another_size() -> None:
+    """What numpy's broadcasting refused, the loops refuse too (instead of reading past an
+    array)."""
+    depth = np.ones((K.height, K.width), np.float32)
+    with pytest.raises(ValueError, match='intrinsics'):
+        floor.floor_height(depth[:, :-1], K, np.array([0, -1, 0, 1.0]))
+    with pytest.raises(ValueError, match='drop'):
+        depth_to_levels(depth, drop=np.zeros((K.height, K.width - 1), bool))

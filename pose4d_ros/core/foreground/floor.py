@@ -188,6 +188,9 @@ def floor_height(depth_m: NDArray[np.floating], intrinsics: Intrinsics,
     -------
     (H, W) float32 metres; NaN where the depth is NaN.
     """
+    if depth_m.shape != (intrinsics.height, intrinsics.width):
+        raise ValueError(f'depth image of shape {depth_m.shape} but the intrinsics are '
+                         f'{intrinsics.width}x{intrinsics.height}')
     rx, ry = _rays(intrinsics)
     n = np.asarray(plane, dtype=np.float32)
     out = np.empty(depth_m.shape, np.result_type(depth_m.dtype, np.float32))

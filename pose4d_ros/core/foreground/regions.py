@@ -35,11 +35,18 @@ def depth_to_levels(depth_m: NDArray[np.floating], *,
     depth_m = np.asarray(depth_m)
     if depth_m.dtype not in (np.float32, np.float64):
         depth_m = depth_m.astype(np.float64)
+    if depth_m.ndim != 2 or (drop is not None and drop.shape != depth_m.shape):
+        raise ValueError(f'depth {depth_m.shape} and drop {None if drop is None else drop.shape}'
+                         ' must be one 2-D shape')
     out = np.empty(depth_m.shape, np.uint8)
     _levels(depth_m, np.float32(config.depth_near_m),
             np.float32(254.0 / (config.depth_far_m - config.depth_near_m)),
-            np.zeros((1, 1), np.bool_) if drop is None else drop, drop is not None, out)
+            _NO_DROP if drop is None else drop, drop is not None, out)
     return out
+
+
+# `_levels` without pixels to drop: its drop argument, never read
+_NO_DROP = np.zeros((1, 1), np.bool_)
 
 
 @njit(cache=True)
