@@ -68,7 +68,9 @@ def _stall(ros, node, exe: str, n_in: int, arrivals: dict) -> dict:
     SIGKILL can match its peers and get no data over shared memory, as in eProsima/Fast-DDS
     #5053 and #5469 (the dead process's port is found a zombie and its segment removed while
     the writers still hold it). That restart is reported here and the stage started once
-    more; a second stall, or stalls in two restarts of one run, fail the test."""
+    more, the stalled process killed only once the new one is up, so that the new one's
+    participant takes other ports; a second stall, or stalls in two restarts of one run, fail
+    the test."""
     topic = UPSTREAM.get(exe)
     return {'exe': exe, 'input': topic,
             'input_frames_meanwhile': len(arrivals[topic]) - n_in if topic else None,
@@ -141,21 +143,27 @@ def test_each_stage_killed_and_restarted_mid_replay(ros, tmp_path):
             assert len(skeletons) == n_dead, f'skeletons published while {exe} was dead'
             topic = OUTPUT[exe]
             n_out = len(arrivals[topic])
+            stalled = None
             for attempt in (1, 2):
                 nodes[exe] = start(exe, replay_params if exe == 'replay' else {},
                                    log_dir=tmp_path)
                 ros.spin_until(lambda e=exe: _up(nodes[e], e) is not None, 60.0,
                                f'{exe} up again')
                 up = _up(nodes[exe], exe)
+                if stalled is not None:  # gone only now: its participant's ports not reused
+                    stalled.proc.send_signal(signal.SIGKILL)
+                    stalled.proc.wait(10)
                 n_in = len(arrivals[UPSTREAM[exe]]) if exe in UPSTREAM else 0
                 if ros.wait(lambda t=topic, n=n_out: len(arrivals[t]) > n, 10.0):
                     break
                 stalls.append(_stall(ros, nodes[exe], exe, n_in, arrivals))
                 print('stalled restart:', stalls[-1])
                 assert attempt == 1, f'the restarted {exe} stalled twice: {stalls}'
-                nodes[exe].proc.send_signal(signal.SIGKILL)
-                nodes[exe].proc.wait(10)
-                ros.spin_for(1.3)
+                stalled = nodes[exe]
+                if exe == 'replay':  # two replays would send every frame twice
+                    stalled.proc.send_signal(signal.SIGKILL)
+                    stalled.proc.wait(10)
+                    stalled = None
             restarted[exe] = up
             first = arrivals[topic][n_out][0]
             n_sk = len(skeletons)
