@@ -151,8 +151,7 @@ def test_each_stage_killed_and_restarted_mid_replay(ros, tmp_path):
                                f'{exe} up again')
                 up = _up(nodes[exe], exe)
                 if stalled is not None:  # gone only now: its participant's ports not reused
-                    stalled.proc.send_signal(signal.SIGKILL)
-                    stalled.proc.wait(10)
+                    stalled.kill()
                 n_in = len(arrivals[UPSTREAM[exe]]) if exe in UPSTREAM else 0
                 if ros.wait(lambda t=topic, n=n_out: len(arrivals[t]) > n, 10.0):
                     break
@@ -161,8 +160,7 @@ def test_each_stage_killed_and_restarted_mid_replay(ros, tmp_path):
                 assert attempt == 1, f'the restarted {exe} stalled twice: {stalls}'
                 stalled = nodes[exe]
                 if exe == 'replay':  # two replays would send every frame twice
-                    stalled.proc.send_signal(signal.SIGKILL)
-                    stalled.proc.wait(10)
+                    stalled.kill()
                     stalled = None
             restarted[exe] = up
             first = arrivals[topic][n_out][0]
