@@ -63,11 +63,12 @@ from pose4d_ros.core.dpm.net_unary import NetUnary, UnaryConfig
 from pose4d_ros.core.dpm.scale import ScaleConfig
 from pose4d_ros.core.files import write_atomic, write_json
 from pose4d_ros.core.foreground import ForegroundConfig
+from pose4d_ros.core.joints import JointSet
 from pose4d_ros.core.people import TrackingConfig
 from pose4d_ros.core.slqe import SlqeConfig
 from pose4d_ros.core.threads import set_blas_threads
 from pose4d_ros.datasets.sources import load_frames, source_kind
-from pose4d_ros.evaluation import draw, overrides, plot
+from pose4d_ros.evaluation import draw, overrides, plot, real
 from pose4d_ros.evaluation.peer_depth import (
     fit_depth_offsets,
     offset_row,
@@ -78,6 +79,7 @@ from pose4d_ros.evaluation.pipeline import (
     Row,
     convnet_rows,
     curve_rows,
+    ms_stats,
     peer_rows,
     pipeline_rows,
     score_rows,
@@ -138,6 +140,13 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument('--fit-peer-depth', type=Path, metavar='OFFSETS.json',
                    help="with --peer: fit the peer's per-joint depth offsets on SOURCE "
                         '(training renders) and write them here; no model is run')
+    p.add_argument('--labels', type=Path, metavar='LABELS.json',
+                   help='a real recording (a folder of frames, or a bag without ground truth): '
+                        "hand labels of every person's box (evaluation.real): people found "
+                        'and ghosts')
+    p.add_argument('--fps', type=float, default=None,
+                   help="a folder of frames: its frame rate (default: its frames.yaml's, else "
+                        '30)')
     p.add_argument('--plot', type=Path, metavar='FILE.png',
                    help='also draw PCK against the threshold (0 to 0.5) per joint group, one '
                         'curve per row, and the 3-D error distribution')
@@ -166,6 +175,13 @@ def run(args: argparse.Namespace) -> int:
     if args.plot is not None and args.plot.suffix.lower() != '.png':
         raise ValueError(f'--plot {args.plot}: the figure is a PNG file (.png)')
     try:
+        if kind == 'frames' or args.labels is not None:
+            result = real_rows(args, models, peer)
+            print(format_real(result))
+            if peer is not None:
+                result['peer'] = peer.description
+            write_json(args.json, result)
+            return 0
         rows, frames, curves = table_rows(args, kind, models, peer, offsets)
     finally:
         if peer is not None:
@@ -201,14 +217,7 @@ def table_rows(args: argparse.Namespace, kind: str, models: dict[str, PartModel 
     settings = overrides.parse(args.config)
     people = None if max_people is None else overrides.apply(TrackingConfig(
         max_people=max_people, birth_score=args.birth_score), settings, 'tracking')
-    unary = None
-    if args.colour_net is not None:
-        net = load_any(args.colour_net)
-        if not isinstance(net, ConvNet):
-            raise ValueError(f'--colour-net {args.colour_net}: not a photograph network')
-        unary = NetUnary(net, overrides.apply(UnaryConfig(), settings, 'unary'))
-    elif 'unary' in settings:
-        raise ValueError('--config unary.*: needs --colour-net')
+    unary = colour_unary(args, settings)
     rows: dict[str, Row] = {}
     used: set[str] = set()
     for given, m in models.items():
@@ -230,16 +239,8 @@ def table_rows(args: argparse.Namespace, kind: str, models: dict[str, PartModel 
                                      scales=args.photo_scales))
             continue
         rows.update(pipeline_rows(frames, m, name=name, sequence=sequence, show=progress,
-                                  single_frame=not args.no_single_frame,
-                                  search=overrides.apply(SearchConfig(
-                                      n_levels=args.levels, margin=args.margin), settings,
-                                      'search'),
-                                  scale=overrides.apply(ScaleConfig(factors=args.person_scales),
-                                                        settings, 'scale'),
-                                  foreground=overrides.apply(ForegroundConfig(), settings,
-                                                             'foreground'),
-                                  slqe=overrides.apply(SlqeConfig(), settings, 'slqe'),
-                                  people=people, unary=unary))
+                                  single_frame=not args.no_single_frame, people=people,
+                                  **stage_configs(args, settings, unary)))
     if peer is not None:
         rows.update(peer_rows(progress(frames, peer.name), peer, sequence=sequence))
         if args.fit_peer_depth is not None:
@@ -257,3 +258,82 @@ def table_rows(args: argparse.Namespace, kind: str, models: dict[str, PartModel 
         for path in draw.draw_rows(rows, frames, args.draw):
             log(f'wrote {path}')
     return score_rows(rows, frames), len(frames), curve_rows(rows, frames, plot.ALPHAS)
+
+
+def colour_unary(args: argparse.Namespace, settings: dict) -> NetUnary | None:
+    """The photograph network as the part models' colour unary (`--colour-net`), or None."""
+    if args.colour_net is None:
+        if 'unary' in settings:
+            raise ValueError('--config unary.*: needs --colour-net')
+        return None
+    net = load_any(args.colour_net)
+    if not isinstance(net, ConvNet):
+        raise ValueError(f'--colour-net {args.colour_net}: not a photograph network')
+    return NetUnary(net, overrides.apply(UnaryConfig(), settings, 'unary'))
+
+
+def stage_configs(args: argparse.Namespace, settings: dict, unary: NetUnary | None) -> dict:
+    """The stages' configurations from the flags and `--config` (`pipeline_rows`' keywords)."""
+    return {'search': overrides.apply(SearchConfig(n_levels=args.levels, margin=args.margin),
+                                      settings, 'search'),
+            'scale': overrides.apply(ScaleConfig(factors=args.person_scales), settings,
+                                     'scale'),
+            'foreground': overrides.apply(ForegroundConfig(), settings, 'foreground'),
+            'slqe': overrides.apply(SlqeConfig(), settings, 'slqe'), 'unary': unary}
+
+
+def real_rows(args: argparse.Namespace, models: dict[str, PartModel | ConvNet],
+              peer: MediaPipePeer | None) -> dict:
+    """A recording without joint labels (a real camera's): every RGB-D model run as the nodes
+    run it (the several-person pipeline), each scored against the peer as the reference and
+    against the hand labels (`--labels`), `evaluation.real`; `--draw` draws every frame."""
+    frames = load_frames([args.source], stride=args.stride, max_frames=args.max_frames,
+                         labelled=False, fps=args.fps)
+    if any(f.depth_m is None for f in frames):
+        raise ValueError(f'{args.source}: a real recording needs depth in every frame')
+    labels = real.read_labels(args.labels) if args.labels is not None else None
+    settings = overrides.parse(args.config)
+    people = overrides.apply(TrackingConfig(
+        max_people=args.max_people or TrackingConfig.max_people, birth_score=args.birth_score),
+        settings, 'tracking')
+    unary = colour_unary(args, settings)
+    reference = (peer_rows(progress(frames, peer.name), peer)[peer.name].preds
+                 if peer is not None else [JointSet.missing(('head',))] * len(frames))
+    out: dict[str, dict] = {}
+    for given, m in models.items():
+        if isinstance(m, ConvNet) or m.channels != 'rgbd':
+            raise ValueError(f'--model {given}: a real RGB-D recording takes RGB-D part models')
+        name = Path(given).stem + (f'+{Path(args.colour_net).stem}' if unary else '')
+        row = pipeline_rows(frames, m, name='rgbd', show=progress, single_frame=False,
+                            people=people, **stage_configs(args, settings, unary))['rgbd_kf_ik']
+        ours = row.people
+        out[name] = {**real.agreement(frames, ours, reference, labels),
+                     'cpu_ms': ms_stats(row.cpu_ms)}
+        if args.draw is not None:
+            real.draw_frames(frames, ours, reference, args.draw / name, labels)
+            log(f'wrote {len(frames)} drawings to {args.draw / name}')
+    if peer is not None and labels is not None:
+        out[peer.name] = {'labels': real.agreement(
+            frames, [() for _ in frames], reference, labels)['labels']}
+    return {'frames': len(frames), 'source': str(args.source), 'real': out}
+
+
+def format_real(result: dict) -> str:
+    """The agreement table of `real_rows`, one line per model."""
+    lines = [f"{result['source']}: {result['frames']} frames (real, no joint labels)",
+             f"{'row':28s} {'agree@0.1':>9s} {'@0.2':>6s} {'joints':>6s} {'people/fr':>9s} "
+             f"{'found':>9s} {'ghosts':>6s} {'cpu p50':>8s}"]
+    for name, t in result['real'].items():
+        lab = t.get('labels')
+        found = f"{lab[name if name in lab['ghosts'] else 'ours']}/{lab['labelled']}" \
+            if lab else '-'
+        ghosts = lab['ghosts'].get(name, lab['ghosts']['ours']) if lab else '-'
+        if 'joints' not in t:  # the peer's people only
+            lines.append(f"{name:28s} {'':>9s} {'':>6s} {'':>6s} {'':>9s} {found:>9s} "
+                         f'{ghosts!s:>6s}')
+            continue
+        ppf = t['people_per_frame'].get('ours', 0)
+        cpu = t['cpu_ms']['p50']
+        lines.append(f"{name:28s} {t['agree@0.1']!s:>9s} {t['agree@0.2']!s:>6s} "
+                     f"{t['joints']:>6d} {ppf:>9.2f} {found:>9s} {ghosts!s:>6s} {cpu!s:>8s}")
+    return '\n'.join(lines)

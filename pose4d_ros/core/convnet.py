@@ -13,13 +13,15 @@ probability there. The mirrored photograph is searched too and the two maps aver
 The input is the whole photograph, padded to a square and resized to `input_px` (LSPET's
 photographs are cut around their person: `crop_transform`); training (`pose4d
 train-convnet`, which needs PyTorch) turns, scales, shifts and mirrors it with the same
-transform. Inference here is plain numpy (convolution as one matrix product per layer,
-batch normalisation folded into the weights), so the nodes and `pose4d eval` need no PyTorch.
+transform. Inference runs in ONNX Runtime on the CPU (`onnx_model` builds the graph from the
+weights when a network is first run, batch normalisation folded into them; one thread, the
+graph optimised), so the nodes and `pose4d eval` need no PyTorch.
 """
 
 from __future__ import annotations
 
 import json
+import threading
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -27,7 +29,6 @@ from typing import Any
 
 import cv2
 import numpy as np
-from numpy.lib.stride_tricks import sliding_window_view
 from numpy.typing import NDArray
 
 from pose4d_ros.core.files import NPZ_ERRORS, read_npz, write_npz
@@ -98,25 +99,82 @@ def cell_targets(uv: NDArray[np.floating], visible: NDArray[np.bool_], cells: in
     return t.astype(np.float32), (np.asarray(visible, dtype=bool) & inside).astype(np.float32)
 
 
-def _conv(x: NDArray[np.float32], w: NDArray[np.float32], b: NDArray[np.float32],
-          stride: int) -> NDArray[np.float32]:
-    """'Same' convolution of (H, W, C) by (k, k, C, O) weights, odd k, one matrix product."""
-    k = w.shape[0]
-    if k > 1:
-        p = k // 2
-        x = np.pad(x, ((p, p), (p, p), (0, 0)))
-        win = sliding_window_view(x, (k, k), axis=(0, 1))[::stride, ::stride]
-        h, ww = win.shape[:2]
-        cols = win.transpose(0, 1, 3, 4, 2).reshape(h * ww, -1)
-    else:
-        x = x[::stride, ::stride]
-        h, ww = x.shape[:2]
-        cols = x.reshape(h * ww, -1)
-    return (cols @ w.reshape(-1, w.shape[-1]) + b).reshape(h, ww, -1)
+ONNX_OPSET = 17
+_SESSION_LOCK = threading.Lock()  # one session per network, however many threads ask
 
 
-def _up2(x: NDArray[np.float32]) -> NDArray[np.float32]:
-    return x.repeat(2, axis=0).repeat(2, axis=1)
+def onnx_model(weights: dict[str, tuple[NDArray[np.float32], NDArray[np.float32]]]) -> Any:
+    """The network as an ONNX model (an `onnx.ModelProto`) of `weights` (`ConvNet.weights`):
+    input `x` (N, 3, H, W) float32 normalised (`normalise`), H and W multiples of 16, output
+    `scores` (N, J, H/4, W/4). 'Same' convolutions (odd k, k // 2 zeros each side, 3x3 and 1x1
+    of stride 2 keeping rows 0, 2, 4, ...), ReLU, residual blocks, nearest-neighbour upsampling
+    by 2 and the 1x1 skips, as `ConvNet` is trained (`training.convnet_torch`)."""
+    import onnx
+    from onnx import TensorProto, helper, numpy_helper
+
+    nodes: list[Any] = []
+    inits: list[Any] = []
+
+    def conv(x: str, name: str, stride: int) -> str:
+        w, b = weights[name]
+        k = int(w.shape[0])
+        inits.append(numpy_helper.from_array(
+            np.ascontiguousarray(np.asarray(w, np.float32).transpose(3, 2, 0, 1)), name + '.w'))
+        inits.append(numpy_helper.from_array(np.asarray(b, np.float32), name + '.b'))
+        nodes.append(helper.make_node('Conv', [x, name + '.w', name + '.b'], [name],
+                                      kernel_shape=[k, k], strides=[stride, stride],
+                                      pads=[k // 2] * 4, name=name))
+        return name
+
+    def op(kind: str, inputs: list[str], out: str, **attrs: Any) -> str:
+        nodes.append(helper.make_node(kind, inputs, [out], name=out, **attrs))
+        return out
+
+    def block(x: str, name: str, stride: int) -> str:
+        y = op('Relu', [conv(x, name + '.c1', stride)], name + '.c1.relu')
+        y = conv(y, name + '.c2', 1)
+        skip = x if name + '.skip' not in weights else conv(x, name + '.skip', stride)
+        return op('Relu', [op('Add', [y, skip], name + '.add')], name + '.out')
+
+    def up2(x: str) -> str:
+        return op('Resize', [x, '', 'up2.scales'], x + '.up2', mode='nearest',
+                  coordinate_transformation_mode='asymmetric', nearest_mode='floor')
+
+    inits.append(numpy_helper.from_array(np.array([1, 1, 2, 2], np.float32), 'up2.scales'))
+    x = op('Relu', [conv('x', 'stem', 2)], 'stem.relu')
+    a = block(block(x, 's2.0', 2), 's2.1', 1)
+    b = block(block(a, 's3.0', 2), 's3.1', 1)
+    c = block(block(block(b, 's4.0', 2), 's4.1', 1), 's4.2', 1)
+    y = block(op('Add', [up2(c), conv(b, 'l3', 1)], 'u3.in'), 'u3', 1)
+    y = block(op('Add', [up2(y), conv(a, 'l2', 1)], 'u2.in'), 'u2', 1)
+    nodes.append(helper.make_node('Identity', [conv(y, 'head', 1)], ['scores'], name='scores'))
+    joints = int(weights['head'][0].shape[-1])
+    graph = helper.make_graph(
+        nodes, 'pose4d_convnet',
+        [helper.make_tensor_value_info('x', TensorProto.FLOAT, ['N', 3, 'H', 'W'])],
+        [helper.make_tensor_value_info('scores', TensorProto.FLOAT,
+                                       ['N', joints, 'H4', 'W4'])], inits)
+    model = helper.make_model(graph, producer_name='pose4d_ros.core.convnet',
+                              opset_imports=[helper.make_opsetid('', ONNX_OPSET)])
+    model.ir_version = 8  # the IR of opset 17: any runtime that reads the opset reads it
+    onnx.checker.check_model(model)
+    return model
+
+
+def inference_session(model: Any) -> Any:
+    """An ONNX Runtime CPU session of `model` (`onnx_model`): one thread (nodes run one after
+    the other on the calling thread), every graph optimisation on (convolutions fused with
+    their ReLU and residual sums, blocked memory layouts)."""
+    import onnxruntime as ort
+
+    opts = ort.SessionOptions()
+    opts.intra_op_num_threads = 1
+    opts.inter_op_num_threads = 1
+    opts.execution_mode = ort.ExecutionMode.ORT_SEQUENTIAL
+    opts.graph_optimization_level = ort.GraphOptimizationLevel.ORT_ENABLE_ALL
+    opts.log_severity_level = 3  # errors only
+    return ort.InferenceSession(model.SerializeToString(), sess_options=opts,
+                                providers=['CPUExecutionProvider'])
 
 
 @dataclass(frozen=True)
@@ -135,6 +193,8 @@ class ConvNet:
     weights: dict[str, tuple[NDArray[np.float32], NDArray[np.float32]]]
     metadata: dict[str, Any] = field(default_factory=dict)
     channels: str = 'rgb'
+    # the ONNX Runtime session, made when the network first runs (`session`)
+    _session: Any = field(default=None, init=False, repr=False, compare=False)
 
     def __post_init__(self) -> None:
         missing = [n for n in layer_names() if n not in self.weights]
@@ -145,23 +205,34 @@ class ConvNet:
         if self.input_px % 32:
             raise ValueError(f'ConvNet: input_px must be a multiple of 32, got {self.input_px}')
 
-    def _block(self, x: NDArray[np.float32], name: str, stride: int) -> NDArray[np.float32]:
-        y = np.maximum(_conv(x, *self.weights[name + '.c1'], stride), 0)
-        y = _conv(y, *self.weights[name + '.c2'], 1)
-        skip = self.weights.get(name + '.skip')
-        return np.maximum(y + (x if skip is None else _conv(x, *skip, stride)), 0)
+    def __getstate__(self) -> dict[str, Any]:
+        return {k: v for k, v in self.__dict__.items() if k != '_session'}  # not picklable
 
-    def forward(self, x: NDArray[np.float32]) -> NDArray[np.float32]:
+    def __setstate__(self, state: dict[str, Any]) -> None:
+        self.__dict__.update(state, _session=None)
+
+    def session(self) -> Any:
+        """The network's ONNX Runtime session (`onnx_model`, `inference_session`), made on the
+        first call."""
+        if self._session is None:
+            with _SESSION_LOCK:
+                if self._session is None:
+                    object.__setattr__(self, '_session',
+                                       inference_session(onnx_model(self.weights)))
+        return self._session
+
+    def forward_batch(self, x: NDArray[np.floating]) -> NDArray[np.float32]:
+        """(N, J, S/4, S/4) scores of N (S, S, 3) normalised inputs (`normalise`), in one run."""
+        x = np.asarray(x, dtype=np.float32)
+        if x.ndim != 4 or x.shape[3] != 3 or x.shape[1] % 16 or x.shape[2] % 16:
+            raise ValueError(f'ConvNet: input must be (N, H, W, 3), H and W multiples of 16, '
+                             f'got {x.shape}')
+        nchw = np.ascontiguousarray(x.transpose(0, 3, 1, 2))
+        return self.session().run(None, {'x': nchw})[0]
+
+    def forward(self, x: NDArray[np.floating]) -> NDArray[np.float32]:
         """(J, S/4, S/4) scores of the (S, S, 3) normalised input (`normalise`)."""
-        w = self.weights
-        x = np.maximum(_conv(np.ascontiguousarray(x, dtype=np.float32), *w['stem'], 2), 0)
-        a = self._block(x, 's2.0', 2)
-        a = self._block(a, 's2.1', 1)
-        b = self._block(self._block(a, 's3.0', 2), 's3.1', 1)
-        c = self._block(self._block(self._block(b, 's4.0', 2), 's4.1', 1), 's4.2', 1)
-        y = self._block(_up2(c) + _conv(b, *w['l3'], 1), 'u3', 1)
-        y = self._block(_up2(y) + _conv(a, *w['l2'], 1), 'u2', 1)
-        return _conv(y, *w['head'], 1).transpose(2, 0, 1)
+        return self.forward_batch(np.asarray(x)[None])[0]
 
     def heat_maps(self, color: NDArray[np.uint8], scales: Sequence[float] = PHOTO_SCALES, *,
                   mirror: bool = True) -> tuple[NDArray[np.float32], NDArray[np.float64]]:
@@ -180,13 +251,16 @@ class ConvNet:
                              f'{tuple(scales)}')
         m = crop_transform(color.shape, self.input_px)
         cells = self.input_px // STRIDE
+        transforms = [crop_transform(color.shape, self.input_px, scale=k) for k in scales]
+        inputs = [normalise(warp(color, mk, self.input_px)) for mk in transforms]
+        if mirror:
+            inputs += [x[:, ::-1] for x in inputs]
+        scores = self.forward_batch(np.stack(inputs))  # every reading in one run
         total, weight = 0.0, 0.0
-        for k in scales:
-            mk = crop_transform(color.shape, self.input_px, scale=k)
-            x = normalise(warp(color, mk, self.input_px))
-            s = self.forward(x)
+        for i, (k, mk) in enumerate(zip(scales, transforms)):
+            s = scores[i]
             if mirror:
-                s = 0.5 * (s + self.forward(x[:, ::-1])[list(self.mirror), :, ::-1])
+                s = 0.5 * (s + scores[len(scales) + i][list(self.mirror), :, ::-1])
             w = np.ones((cells, cells), np.float32)
             if k != 1.0:
                 a = _cell_map(m, mk)

@@ -1,4 +1,5 @@
-"""One opener for every source of frames: `open_source` (CAD-60 directory, rosbag2, LSPET),
+"""One opener for every source of frames: `open_source` (CAD-60 directory, rosbag2, LSPET, a
+folder of RGB-D frames with its `camera_info.yaml`),
 and `load_frames`, all the frames of several sources in memory.
 
 Every source yields `frame.Frame`s; adding a source means writing one generator of them (like
@@ -13,7 +14,7 @@ from pathlib import Path
 
 import numpy as np
 
-from pose4d_ros.datasets import cad60, cad60_bag, lspet
+from pose4d_ros.datasets import cad60, cad60_bag, frames_dir, lspet
 from pose4d_ros.datasets.frame import Frame
 from pose4d_ros.util.progress import progress
 
@@ -44,7 +45,8 @@ def parse_ranges(text: str) -> list[tuple[int, int]]:
 def source_kind(path: str | Path) -> str:
     """'lspet' for an LSPET root (joints.mat + images/), 'cad60' for a CAD-60 root (dataN/
     directories, or one dataN directory), 'bag' for a rosbag2 (e.g. made by
-    `pose4d cad60-to-bag`)."""
+    `pose4d cad60-to-bag`), 'frames' for a folder of RGB-D frames with `camera_info.yaml`
+    (`datasets.frames_dir`: a real camera's recording)."""
     p = Path(path)
     if not p.exists():
         raise OSError(f'{p}: no such file or directory')
@@ -55,19 +57,23 @@ def source_kind(path: str | Path) -> str:
     if p.is_dir() and (any(p.glob('data*/activityLabel.txt'))
                        or (p / 'activityLabel.txt').is_file()):
         return 'cad60'
+    if frames_dir.is_frames_dir(p):
+        return 'frames'
     raise ValueError(f'{p}: neither an LSPET root (joints.mat, images/), a CAD-60 directory '
-                     '(dataN/ with activityLabel.txt) nor a rosbag2 (metadata.yaml)')
+                     '(dataN/ with activityLabel.txt), a rosbag2 (metadata.yaml) nor a folder '
+                     'of RGB-D frames (camera_info.yaml with color/ and depth/)')
 
 
 def open_source(path: str | Path, *, frame_range: tuple[int, int] | None = None,
-                stride: int = 1) -> Iterator[Frame]:
+                stride: int = 1, fps: float | None = None) -> Iterator[Frame]:
     """The frames of a source (see `source_kind`), in order.
 
     Parameters
     ----------
-    path : an LSPET root, a CAD-60 directory or a rosbag2.
+    path : an LSPET root, a CAD-60 directory, a rosbag2 or a folder of frames.
     frame_range : LSPET: image numbers (A, B), inclusive (required for LSPET).
     stride : keep every `stride`-th frame (of each video, for CAD-60).
+    fps : a folder of frames: its frame rate (default: its `frames.yaml`, else 30).
     """
     if stride < 1:
         raise ValueError(f'stride must be >= 1, got {stride}')
@@ -78,20 +84,23 @@ def open_source(path: str | Path, *, frame_range: tuple[int, int] | None = None,
         if frame_range is None:
             raise ValueError(f'{path}: an LSPET source needs --range A-B (e.g. 1-2500)')
         frames = lspet.read_frames(path, *frame_range)
+    elif kind == 'frames':
+        frames = frames_dir.read_frames(path, fps=fps)
     else:
         frames = cad60_bag.read_frames(path)
     return itertools.islice(frames, 0, None, stride)
 
 
 def load_frames(sources: list[str], *, frame_range: str | None = None, stride: int = 1,
-                max_frames: int | None = None, labelled: bool = True) -> list[Frame]:
+                max_frames: int | None = None, labelled: bool = True,
+                fps: float | None = None) -> list[Frame]:
     """All frames of the sources (an LSPET source uses `frame_range`); `max_frames` keeps an
     evenly spread subset (deterministic). With `labelled`, a frame without ground truth is an
     error."""
     rng_ = parse_range(frame_range)
     frames: list[Frame] = []
     for src in sources:
-        it = open_source(src, frame_range=rng_, stride=stride)
+        it = open_source(src, frame_range=rng_, stride=stride, fps=fps)
         with progress(it, f'reading {Path(src).name}') as bar:  # closed on a damaged file too
             frames.extend(bar)
     if max_frames is not None and len(frames) > max_frames:

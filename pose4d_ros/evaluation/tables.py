@@ -76,7 +76,9 @@ def clean_row(table: dict[str, dict[str, float]]) -> dict[str, dict[str, float |
 
 
 def default_models(kind: str) -> list[str]:
-    return ['lspet_convnet'] if kind == 'lspet' else ['rgbd_14', 'rgb_10']
+    """The models `pose4d eval` runs on a source of `kind` (`datasets.sources.source_kind`):
+    the nodes' `rgbd_14` alone on a real recording (a folder of frames)."""
+    return {'lspet': ['lspet_convnet'], 'frames': ['rgbd_14']}.get(kind, ['rgbd_14', 'rgb_10'])
 
 
 def load_any(name: str) -> PartModel | ConvNet:
