@@ -1,0 +1,172 @@
+"""Real recordings: a folder of RGB-D frames with its camera_info.yaml (`datasets.frames_dir`),
+and their scoring against a reference and hand labels (`evaluation.real`, `pose4d eval`)."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import cv2
+import numpy as np
+import pytest
+
+from pose4d_ros.cli.main import main as pose4d_main
+from pose4d_ros.core.joints import JointSet
+from pose4d_ros.datasets import frames_dir
+from pose4d_ros.datasets.frame import Frame
+from pose4d_ros.datasets.sources import load_frames, source_kind
+from pose4d_ros.evaluation import real
+from pose4d_ros.peer import NAMES as PEER_NAMES
+
+REPO = Path(__file__).resolve().parents[1]
+CAMERA_INFO = """image_width: 64
+image_height: 48
+camera_name: test
+camera_matrix:
+  rows: 3
+  cols: 3
+  data: [60.0, 0.0, 31.5, 0.0, 61.0, 23.5, 0.0, 0.0, 1.0]
+distortion_model: plumb_bob
+distortion_coefficients:
+  rows: 1
+  cols: 5
+  data: [{d}, 0.0, 0.0, 0.0, 0.0]
+"""
+
+
+def _write_sequence(root: Path, n: int = 3, *, distortion: float = 0.0) -> None:
+    (root / 'color').mkdir(parents=True)
+    (root / 'depth').mkdir()
+    (root / 'camera_info.yaml').write_text(CAMERA_INFO.format(d=distortion))
+    for k in range(n):
+        bgr = np.zeros((48, 64, 3), np.uint8)
+        bgr[:, :, 2] = 10 * k  # red in RGB
+        cv2.imwrite(str(root / 'color' / f'{k + 1:04d}.png'), bgr)
+        depth = np.full((48, 64), 2000 + k, np.uint16)
+        depth[0, 0] = 0
+        cv2.imwrite(str(root / 'depth' / f'{k + 1:04d}.png'), depth)
+
+
+def test_a_folder_of_frames_reads_in_order_with_its_camera(tmp_path: Path) -> None:
+    root = tmp_path / 'walk'
+    _write_sequence(root)
+    assert source_kind(root) == 'frames'
+    frames = load_frames([str(root)], labelled=False, fps=10)
+    assert [f.key for f in frames] == ['walk/0001', 'walk/0002', 'walk/0003']
+    assert [f.stamp_ns - frames[0].stamp_ns for f in frames] == [0, 100_000_000, 200_000_000]
+    assert {f.video for f in frames} == {'walk'}
+    f = frames[2]
+    assert f.color.shape == (48, 64, 3) and f.color[0, 0, 0] == 20  # RGB, not BGR
+    assert np.isnan(f.depth_m[0, 0]) and f.depth_m[1, 1] == pytest.approx(2.002)
+    k = f.intrinsics
+    assert (k.fx, k.fy, k.cx, k.cy, k.width, k.height) == (60.0, 61.0, 31.5, 23.5, 64, 48)
+    assert f.truth is None
+
+
+def test_separate_frames_are_each_a_video_of_their_own(tmp_path: Path) -> None:
+    root = tmp_path / 'masked'
+    _write_sequence(root, 2)
+    for k in (1, 2):  # color_NN.png / depth_NN.png beside camera_info.yaml
+        (root / 'color' / f'{k:04d}.png').rename(root / f'color_{k:02d}.png')
+        (root / 'depth' / f'{k:04d}.png').rename(root / f'depth_{k:02d}.png')
+    (root / 'color').rmdir()
+    frames = list(frames_dir.read_frames(root))
+    assert [f.video for f in frames] == ['01', '02']
+    assert frames[1].stamp_ns - frames[0].stamp_ns == 10**9
+
+
+@pytest.mark.parametrize('damage, message', [
+    (lambda root: (root / 'depth' / '0002.png').unlink(), '0002.png: no depth image'),
+    (lambda root: (root / 'camera_info.yaml').write_text('image_width: [1\n'),
+     'camera_info.yaml: not a readable camera calibration file'),
+    (lambda root: (root / 'camera_info.yaml').write_text(CAMERA_INFO.format(d=0.1)),
+     'must be rectified'),
+    (lambda root: (root / 'camera_info.yaml').write_text(
+        CAMERA_INFO.format(d=0).replace('image_width: 64', 'image_width: 80')),
+     'camera_info is for 80x48 but the colour image'),
+])
+def test_a_damaged_folder_is_refused_naming_the_file(tmp_path: Path, damage, message) -> None:
+    root = tmp_path / 'walk'
+    _write_sequence(root)
+    damage(root)
+    with pytest.raises(ValueError, match=message):
+        list(frames_dir.read_frames(root))
+
+
+def _person(uv: np.ndarray, names=PEER_NAMES, track_id: int = 0) -> JointSet:
+    return JointSet(tuple(names), uv, confidence=np.ones(len(names), np.float32),
+                    track_id=track_id)
+
+
+def _standing(x: float, height: float = 100.0) -> np.ndarray:
+    """A standing person's joints (`PEER_NAMES`) at column x, head at row 10."""
+    rows = {'head': 0.0, 'shoulder': 0.2, 'elbow': 0.35, 'wrist': 0.5, 'hip': 0.5,
+            'knee': 0.75, 'ankle': 1.0}
+    uv = []
+    for n in PEER_NAMES:
+        side = -1 if n.startswith('left') else (1 if n.startswith('right') else 0)
+        uv.append((x + 10 * side, 10 + height * rows[n.split('_')[-1]]))
+    return np.array(uv, np.float64)
+
+
+def test_agreement_counts_joints_within_the_share_of_height(tmp_path: Path) -> None:
+    frame = Frame(0, np.zeros((200, 200, 3), np.uint8), np.ones((200, 200), np.float32),
+                  None, None, key='walk/0001')
+    ref = _person(_standing(50))  # chain head-shoulders-hips-knees-ankles: 100 px
+    ours = _standing(50)
+    ours[:4] += (15, 0)  # 4 of 13 joints 15 px off: beyond 0.1 x 100 px, within 0.2
+    ghost = _person(_standing(150), track_id=2)
+    table = real.agreement([frame], [(ghost, _person(ours, track_id=1))], [ref])
+    assert table['joints'] == 13 and table['scored_frames'] == 1
+    assert table['agree@0.1'] == pytest.approx(100 * 9 / 13, abs=0.1)
+    assert table['agree@0.2'] == 100.0
+    assert 'labels' not in table
+    labels = {'0001': [real.PersonLabel(box=(35, 5, 65, 115), head=(50, 10), feet=(50, 110))]}
+    table = real.agreement([frame], [(ghost, _person(ours, track_id=1))], [ref], labels)
+    lab = table['labels']
+    assert (lab['labelled'], lab['ours'], lab['reference']) == (1, 1, 1)
+    assert lab['ghosts'] == {'ours': 1, 'reference': 0} and lab['ghost_frames'] == ['walk/0001']
+    # an unconfident reference joint is not scored; a reference with no person scores nothing
+    arms = np.isin(np.arange(13), [2, 3, 5, 6])  # elbows and wrists
+    weak = JointSet(ref.names, ref.uv, confidence=np.where(arms, 0.1, 0.9))
+    assert real.agreement([frame], [(_person(ours),)], [weak])['joints'] == 9
+    headless = JointSet(ref.names, ref.uv, confidence=np.where(np.arange(13) == 0, 0.1, 0.9))
+    assert real.agreement([frame], [(_person(ours),)], [headless])['no_height'] == 1
+    none = JointSet.missing(PEER_NAMES)
+    assert real.agreement([frame], [(_person(ours),)], [none])['scored_frames'] == 0
+
+
+def test_labels_are_read_and_checked(tmp_path: Path) -> None:
+    good = {'source': 'x', 'frames': {'0001': [], '0002': [
+        {'box': [1, 2, 30, 40], 'visible': 'partial', 'seated': True, 'head': [5, 6],
+         'feet': None}]}}
+    path = tmp_path / 'labels.json'
+    path.write_text(json.dumps(good))
+    labels = real.read_labels(path)
+    assert labels['0001'] == [] and labels['0002'][0].seated
+    assert labels['0002'][0].height_px is None
+    good['frames']['0002'][0]['box'] = [30, 2, 1, 40]
+    path.write_text(json.dumps(good))
+    with pytest.raises(ValueError, match='frame 0002: box'):
+        real.read_labels(path)
+
+
+def test_eval_on_a_folder_without_labels_writes_people_and_drawings(tmp_path: Path) -> None:
+    root = tmp_path / 'walk'
+    _write_sequence(root)
+    out = tmp_path / 'real.json'
+    assert pose4d_main(['eval', str(root), '--json', str(out), '--fps', '10',
+                        '--draw', str(tmp_path / 'draw')]) == 0
+    result = json.loads(out.read_text())
+    row = result['real']['rgbd_14']
+    assert result['frames'] == 3 and row['people_per_frame']['ours'] == 0.0  # a flat wall
+    assert len(list((tmp_path / 'draw' / 'rgbd_14').glob('*.jpg'))) == 3
+
+
+@pytest.mark.parametrize('folder', ['lab_walk', 'outdoor4', 'kinect2_masked'])
+def test_hand_labels_cover_every_frame_of_the_real_folders(shared_data: Path, folder) -> None:
+    path = REPO / 'labels' / 'real' / f'{folder}.json'
+    labels = real.read_labels(path)
+    frames = frames_dir._pairs(shared_data / 'real' / folder)[1]
+    assert sorted(labels) == sorted(name for name, _, _ in frames)
+    assert sum(map(len, labels.values())) > 0
