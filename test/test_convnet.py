@@ -1,6 +1,7 @@
-"""The photograph joint network (core.convnet): its numpy layers, transforms, targets, decoding,
-file format, the PyTorch twin it is trained as (when PyTorch is installed) and the shipped
-model on real LSPET photographs (when ../shared/data is here)."""
+"""The photograph joint network (core.convnet): its ONNX Runtime graph against a numpy
+reference of the same layers, transforms, targets, decoding, file format, the PyTorch twin it
+is trained as (when PyTorch is installed) and the shipped model on real LSPET photographs (when
+../shared/data is here)."""
 
 from __future__ import annotations
 
@@ -10,6 +11,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 from helpers import MIRROR, NAMES, random_net
+from numpy.lib.stride_tricks import sliding_window_view
 from numpy.testing import assert_allclose, assert_array_equal
 
 from pose4d_ros.core import convnet as cn
@@ -18,9 +20,55 @@ from pose4d_ros.core.metrics import reference_size
 from pose4d_ros.models import model_path
 
 
+def numpy_conv(x: np.ndarray, w: np.ndarray, b: np.ndarray, stride: int) -> np.ndarray:
+    """'Same' convolution of (H, W, C) by (k, k, C, O) weights, odd k, one matrix product (the
+    numpy inference the network ran before ONNX Runtime: the reference here)."""
+    k = w.shape[0]
+    if k > 1:
+        p = k // 2
+        x = np.pad(x, ((p, p), (p, p), (0, 0)))
+        win = sliding_window_view(x, (k, k), axis=(0, 1))[::stride, ::stride]
+        h, ww = win.shape[:2]
+        cols = win.transpose(0, 1, 3, 4, 2).reshape(h * ww, -1)
+    else:
+        x = x[::stride, ::stride]
+        h, ww = x.shape[:2]
+        cols = x.reshape(h * ww, -1)
+    return (cols @ w.reshape(-1, w.shape[-1]) + b).reshape(h, ww, -1)
+
+
+def numpy_forward(net: ConvNet, x: np.ndarray) -> np.ndarray:
+    """(J, H/4, W/4) scores of the (H, W, 3) normalised input, in numpy: the layers as
+    `training.convnet_torch` trains them (the reference of `ConvNet.forward`)."""
+    w = net.weights
+
+    def block(x: np.ndarray, name: str, stride: int) -> np.ndarray:
+        y = np.maximum(numpy_conv(x, *w[name + '.c1'], stride), 0)
+        y = numpy_conv(y, *w[name + '.c2'], 1)
+        skip = w.get(name + '.skip')
+        return np.maximum(y + (x if skip is None else numpy_conv(x, *skip, stride)), 0)
+
+    def up2(x: np.ndarray) -> np.ndarray:
+        return x.repeat(2, axis=0).repeat(2, axis=1)
+
+    x = np.maximum(numpy_conv(np.ascontiguousarray(x, dtype=np.float32), *w['stem'], 2), 0)
+    a = block(block(x, 's2.0', 2), 's2.1', 1)
+    b = block(block(a, 's3.0', 2), 's3.1', 1)
+    c = block(block(block(b, 's4.0', 2), 's4.1', 1), 's4.2', 1)
+    y = block(up2(c) + numpy_conv(b, *w['l3'], 1), 'u3', 1)
+    y = block(up2(y) + numpy_conv(a, *w['l2'], 1), 'u2', 1)
+    return numpy_conv(y, *w['head'], 1).transpose(2, 0, 1)
+
+
+def assert_same_scores(ours: np.ndarray, reference: np.ndarray) -> None:
+    """float32 sums in another order: within a millionth of the scores' range."""
+    assert ours.shape == reference.shape and ours.dtype == np.float32
+    assert np.abs(ours - reference).max() <= 2e-6 * np.abs(reference).max() + 1e-6
+
+
 @pytest.mark.parametrize('stride', [1, 2])
 @pytest.mark.parametrize('k', [1, 3])
-def test_convolution_is_the_direct_sum(stride: int, k: int) -> None:
+def test_the_reference_convolution_is_the_direct_sum(stride: int, k: int) -> None:
     rng = np.random.default_rng(0)
     x = rng.normal(size=(9, 8, 3)).astype(np.float32)
     w = rng.normal(size=(k, k, 3, 5)).astype(np.float32)
@@ -30,7 +78,49 @@ def test_convolution_is_the_direct_sum(stride: int, k: int) -> None:
     rows, cols = range(0, 9, stride), range(0, 8, stride)
     direct = np.array([[np.einsum('ijc,ijco->o', xp[r:r + k, c:c + k], w) + b for c in cols]
                        for r in rows])
-    assert_allclose(cn._conv(x, w, b, stride), direct, rtol=1e-4, atol=1e-5)
+    assert_allclose(numpy_conv(x, w, b, stride), direct, rtol=1e-4, atol=1e-5)
+
+
+@pytest.mark.parametrize('shape', [(64, 64), (96, 160)])
+def test_onnx_runtime_computes_what_the_numpy_layers_do(shape: tuple[int, int]) -> None:
+    net = random_net(width=8, seed=3)
+    rng = np.random.default_rng(4)
+    xs = cn.normalise(rng.integers(0, 256, (3, *shape, 3)))
+    reference = np.stack([numpy_forward(net, x) for x in xs])
+    assert reference.shape == (3, 14, shape[0] // 4, shape[1] // 4)
+    assert_same_scores(net.forward_batch(xs), reference)  # a batch
+    assert_same_scores(net.forward(xs[1]), reference[1])  # one input, another size: same session
+    assert_same_scores(net.forward(xs[2][:, ::-1]), numpy_forward(net, xs[2][:, ::-1]))
+
+
+def test_the_shipped_model_runs_in_onnx_runtime_as_in_numpy() -> None:
+    net = cn.load_convnet(model_path('lspet_convnet'))
+    rng = np.random.default_rng(5)
+    for px in (128, 96):  # its own input and a smaller reading (`UnaryConfig.input_px`)
+        x = cn.normalise(rng.integers(0, 256, (px, px, 3)))
+        assert_same_scores(net.forward(x), numpy_forward(net, x))
+
+
+def test_one_session_a_network_made_when_it_first_runs() -> None:
+    import copy
+    import pickle
+    from dataclasses import replace
+
+    net = random_net()
+    assert net._session is None and 'session' not in repr(net)
+    x = cn.normalise(np.random.default_rng(6).integers(0, 256, (64, 64, 3)))
+    scores = net.forward(x)
+    session = net._session
+    assert session is not None and net.session() is session
+    net.forward(x[:32])
+    assert net._session is session
+    # copies and pickles leave the session behind, and make their own when run
+    for other in (pickle.loads(pickle.dumps(net)), copy.deepcopy(net),
+                  replace(net, input_px=96)):
+        assert other._session is None
+        assert_array_equal(other.forward(x), scores)
+    with pytest.raises(ValueError, match=r'multiples of 16, got \(1, 60, 64, 3\)'):
+        net.forward(x[:60])
 
 
 def test_crop_transform_centres_scales_turns_and_mirrors() -> None:
@@ -113,7 +203,7 @@ def test_file_round_trip_and_errors_name_the_file(tmp_path: Path) -> None:
     assert header['format'] == cn.FORMAT
 
 
-def test_the_pytorch_twin_computes_what_numpy_does() -> None:
+def test_the_pytorch_twin_computes_what_onnx_runtime_does() -> None:
     """In this Python if it has PyTorch, else in the training venv (`make test` builds it)."""
     import importlib.util
     import os
@@ -152,6 +242,21 @@ def test_the_shipped_model_finds_people_in_held_out_photographs(shared_data: Pat
     hit = (np.linalg.norm(pred - truth, axis=2) <= 0.2 * size[:, None]) & visible
     # 40 held-out photographs: the HOG mixture of parts places about a third within 0.2
     assert hit.sum() / visible.sum() > 0.5
+
+
+def test_the_shipped_model_places_the_joints_it_placed_in_numpy(shared_data: Path,
+                                                               monkeypatch) -> None:
+    from pose4d_ros.datasets import lspet
+
+    net = cn.load_convnet(model_path('lspet_convnet'))
+    frames = list(lspet.read_frames(shared_data / 'lspet', 2501, 2503))
+    found = [net.detect(f.color) for f in frames]
+    monkeypatch.setattr(ConvNet, 'forward_batch',
+                        lambda self, xs: np.stack([numpy_forward(self, x) for x in xs]))
+    for f, (uv, prob) in zip(frames, found, strict=True):
+        uv_numpy, prob_numpy = net.detect(f.color)
+        assert_allclose(uv, uv_numpy, atol=0.01)  # photograph pixels
+        assert_allclose(prob, prob_numpy, rtol=1e-4)
 
 
 @pytest.mark.parametrize('k', [0.8, 1.25])

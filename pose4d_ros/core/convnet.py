@@ -1,4 +1,4 @@
-"""A small convolutional joint model for RGB photographs: each joint's heat map, in numpy.
+"""A small convolutional joint model for RGB photographs: each joint's heat map.
 
 The HOG mixture of parts (`core.dpm`) places about a third of LSPET's joints within PCK@0.2 on
 real photographs, and about 40 % on the photographs it was trained on: HOG templates cannot
@@ -257,7 +257,7 @@ class ConvNet:
             inputs += [x[:, ::-1] for x in inputs]
         scores = self.forward_batch(np.stack(inputs))  # every reading in one run
         total, weight = 0.0, 0.0
-        for i, (k, mk) in enumerate(zip(scales, transforms)):
+        for i, (k, mk) in enumerate(zip(scales, transforms, strict=True)):
             s = scores[i]
             if mirror:
                 s = 0.5 * (s + scores[len(scales) + i][list(self.mirror), :, ::-1])
