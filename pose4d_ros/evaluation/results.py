@@ -39,6 +39,10 @@ STAMP = '.pose4d_command'
 UTKINECT = '../shared/data/utkinect'
 MSRACTION3D = '../shared/data/msraction3d'
 LSPET = '../shared/data/lspet'
+REAL = '../shared/data/real'
+# Real development recordings (no joint labels: MediaPipe the reference, our hand labels for
+# people and ghosts): never test data, they are looked at after every change. Folder: options.
+REAL_SETS = {'lab_walk': ('--fps', '10'), 'outdoor4': (), 'kinect2_masked': ()}
 
 
 @dataclass(frozen=True)
@@ -443,6 +447,11 @@ JOBS: tuple[Job, ...] = (
     Job('colour_net_test', "the held-out RGB-D sets with the photograph network in the "
         "detector's colour unary at the weights chosen on validation (not the nodes' default)",
         COLOUR_NET_TESTS, _colour_net_test),
+    Job('real', 'real RGB-D recordings (development data: Xtion lab walk, Kinect v2 outdoors '
+        'and masked): agreement with MediaPipe, people found and ghosts against hand labels',
+        (), lambda c: [_eval(c, f'{REAL}/{name}', RESULTS / f'real_{name}.json', *options,
+                             '--labels', f'labels/real/{name}.json')
+                       for name, options in REAL_SETS.items()], needs='real'),
     Job('bench', 'CPU per stage on the demo bag, and MediaPipe in the same run; again on '
         "the nodes' several-person path", (),
         lambda c: [['pose4d', 'bench', 'bags/sample', '--json', str(RESULTS / name),
@@ -620,6 +629,8 @@ def _missing(job: Job, ctx: Context) -> str:
         return f'needs MediaPipe: no {peer_python()} (`make peer`)'
     if job.needs == 'lspet' and not (Path(ctx.lspet) / 'joints.mat').exists():
         return f'no LSPET at {ctx.lspet}'
+    if job.needs == 'real' and not Path(REAL).is_dir():
+        return f'no real recordings at {REAL}'
     for motion, path, what in (('utkinect', ctx.utkinect, 'UTKinect'),
                                ('msraction3d', ctx.msraction3d, 'MSR Action3D')):
         if any(SETS[s].motion == motion for s in job.sets) and not Path(path).is_dir():

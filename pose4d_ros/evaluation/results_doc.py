@@ -45,7 +45,8 @@ def summary(results: Path) -> str:
     """The README's summary block (between the markers, exclusive)."""
     tables = {s: load(results, s) for s, _ in SUMMARY_SETS}
     sets = [(s, t) for s, t in SUMMARY_SETS if tables[s] is not None]
-    lines = ['PCK@0.1 average7 / 3-D within 10 cm (%), held-out sets (`docs/results/*.json`):',
+    lines = ['PCK@0.1 average7 / 3-D within 10 cm (%), held-out **rendered** sets (synthetic '
+             'people posed by real Kinect motion, `docs/results/*.json`):',
              '', '| row | ' + ' | '.join(f'{t} ({tables[s]["frames"]})' for s, t in sets)
              + ' |', '|---|' + '---|' * len(sets)]
     for key, what in SUMMARY_ROWS:
@@ -62,7 +63,29 @@ def summary(results: Path) -> str:
         if several and 'ratio_to_peer' in several:
             lines[-1] += (f" As the nodes run them (every person region searched): "
                           f"{several['ratio_to_peer']:.3f}.")
+    lines += real_summary(results)
     return '\n'.join(lines)
+
+
+REAL_SUMMARY = ('**Real** recordings (development data, no joint labels, '
+                '`docs/results/real_*.json`):')
+
+
+def real_summary(results: Path) -> list[str]:
+    """The README's line on real recordings: per recording, the nodes' model's agreement
+    with MediaPipe@0.1, people found and ghosts against the hand labels."""
+    parts = []
+    for path in sorted(results.glob('real_*.json')):
+        data = json.loads(path.read_text())
+        name, t = next((k, v) for k, v in data['real'].items() if k != 'mediapipe')
+        lab = t.get('labels', {})
+        peer = data['real'].get('mediapipe', {}).get('labels', {})
+        parts.append(f"{path.stem[len('real_'):]} ({t['frames']} frames, `{name}`): "
+                     f"{fmt(t['agree@0.1'])} % of MediaPipe's joints agreed within 0.1 x "
+                     f"height, {lab.get('ours', '-')} of {lab.get('labelled', '-')} labelled "
+                     f"people found (MediaPipe {peer.get('reference', '-')}), "
+                     f"{lab.get('ghosts', {}).get('ours', '-')} ghosts")
+    return ['', REAL_SUMMARY + ' ' + '; '.join(parts) + '.'] if parts else []
 
 
 def update_readme(readme: Path, results: Path) -> bool:
@@ -176,11 +199,45 @@ def write_all(results: Path, index: dict, *, readme: Path = Path('README.md'),
                 'colour_net_test' if stem.startswith('colour_net_') else stem))
             if stem == 'test30' and (results / 'pck_test30.png').exists():
                 lines += ['![PCK curves on test30](results/pck_test30.png)', '']
+    lines += real_section(results, jobs.get('real'))
     lines += bench_section(results, jobs)
     lines += validation_section(results, jobs)
     lines += colour_net_section(results, jobs)
     write_atomic(out, ('\n'.join(lines).rstrip() + '\n').encode())
     update_readme(readme, results)
+
+
+def real_section(results: Path, job: dict | None) -> list[str]:
+    """Real recordings (`evaluation.real`): each model's agreement with MediaPipe, people found
+    and ghosts against the hand labels; development data, never a test table."""
+    found = sorted(results.glob('real_*.json'))
+    if not found:
+        return []
+    lines = ['## Real recordings (development data, not test)', '',
+             'Real RGB-D frames (`../shared/data/real/`, no joint labels). `agree@0.1` / '
+             "`@0.2`: MediaPipe's confident joints (the one person it finds a frame) where ours "
+             "lie within 0.1 / 0.2 x the person's height (`evaluation.real`); `found`: "
+             'hand-labelled people (`labels/real/`) with a skeleton on them, ours and '
+             "MediaPipe's; `ghosts`: skeletons on no labelled person.", '',
+             '| recording | row | frames | agree@0.1 | agree@0.2 | skeletons a frame | '
+             'found (ours / MediaPipe / labelled) | ghosts (ours / MediaPipe) | CPU ms p50 |',
+             '|---|---|---|---|---|---|---|---|---|']
+    for path in found:
+        data = json.loads(path.read_text())
+        peer = data['real'].get('mediapipe', {}).get('labels', {})
+        for name, t in data['real'].items():
+            if name == 'mediapipe':
+                continue
+            lab = t.get('labels', {})
+            lines.append(
+                f"| {path.stem[len('real_'):]} | `{name}` | {t['frames']} | "
+                f"{fmt(t['agree@0.1'])} | {fmt(t['agree@0.2'])} | "
+                f"{t['people_per_frame'].get('ours', 0):.2f} | "
+                f"{lab.get('ours', '-')} / {peer.get('reference', '-')} / "
+                f"{lab.get('labelled', '-')} | {lab.get('ghosts', {}).get('ours', '-')} / "
+                f"{peer.get('ghosts', {}).get('reference', '-')} | "
+                f"{fmt((t.get('cpu_ms') or {}).get('p50'))} |")
+    return lines + [''] + commands(job)
 
 
 def colour_net_section(results: Path, jobs: dict) -> list[str]:
