@@ -170,3 +170,82 @@ def test_hand_labels_cover_every_frame_of_the_real_folders(shared_data: Path, fo
     frames = frames_dir._pairs(shared_data / 'real' / folder)[1]
     assert sorted(labels) == sorted(name for name, _, _ in frames)
     assert sum(map(len, labels.values())) > 0
+
+
+def _camera_bag(path: Path, ros1: bool, n: int = 3) -> None:
+    """A camera's recording as a driver writes it: its own topic names, bgr8 colour, 32FC1
+    registered depth stamped 5 ms after the colour, camera_info, and a mono16 IR stream."""
+    import numpy as np
+    from rosbags.typesys import Stores, get_typestore
+
+    store = get_typestore(Stores.ROS1_NOETIC if ros1 else Stores.ROS2_JAZZY)
+    t = store.types
+    k = [60.0, 0.0, 31.5, 0.0, 61.0, 23.5, 0.0, 0.0, 1.0]
+
+    def header(ns: int):
+        stamp = t['builtin_interfaces/msg/Time'](sec=ns // 10**9, nanosec=ns % 10**9)
+        extra = {'seq': 0} if ros1 else {}
+        return t['std_msgs/msg/Header'](stamp=stamp, frame_id='xtion_rgb_optical_frame',
+                                         **extra)
+
+    def image(ns: int, arr: np.ndarray, encoding: str):
+        return t['sensor_msgs/msg/Image'](
+            header=header(ns), height=arr.shape[0], width=arr.shape[1], encoding=encoding,
+            is_bigendian=0, step=arr.strides[0], data=arr.reshape(-1).view(np.uint8))
+
+    roi = t['sensor_msgs/msg/RegionOfInterest'](x_offset=0, y_offset=0, height=0, width=0,
+                                                do_rectify=False)
+    calib = ({'D': np.zeros(5), 'K': np.array(k), 'R': np.eye(3).ravel(),
+              'P': np.zeros(12)} if ros1 else
+             {'d': np.zeros(5), 'k': np.array(k), 'r': np.eye(3).ravel(), 'p': np.zeros(12)})
+    msgs = []
+    for i in range(n):
+        ns = 1_700_000_000 * 10**9 + i * 33_333_333
+        bgr = np.zeros((48, 64, 3), np.uint8)
+        bgr[:, :, 0] = 50 + i  # blue
+        depth = np.full((48, 64), 1.5 + i, np.float32)
+        info = t['sensor_msgs/msg/CameraInfo'](
+            header=header(ns), height=48, width=64, distortion_model='plumb_bob', binning_x=0,
+            binning_y=0, roi=roi, **calib)
+        msgs += [('/xtion/rgb/camera_info', info, ns), ('/xtion/rgb/image_raw',
+                                                         image(ns, bgr, 'bgr8'), ns),
+                 ('/xtion/depth_registered/image_raw',
+                  image(ns + 5_000_000, depth, '32FC1'), ns + 5_000_000),
+                 ('/xtion/ir/image', image(ns, np.zeros((48, 64), np.uint16), 'mono16'), ns)]
+    if ros1:
+        from rosbags.rosbag1 import Writer
+        serialize = store.serialize_ros1
+    else:
+        from rosbags.rosbag2 import Writer
+        serialize = store.serialize_cdr
+    with (Writer(path) if ros1 else Writer(path, version=8)) as writer:
+        conns = {}
+        for topic, msg, ns in msgs:
+            if topic not in conns:
+                conns[topic] = writer.add_connection(topic, msg.__msgtype__, typestore=store)
+            writer.write(conns[topic], ns, serialize(msg, msg.__msgtype__))
+
+
+@pytest.mark.parametrize('ros1', [True, False], ids=['ros1', 'rosbag2'])
+def test_a_cameras_recording_is_read_with_its_topics_picked(tmp_path: Path, ros1) -> None:
+    from pose4d_ros.datasets import camera_bag
+
+    path = tmp_path / ('xtion.bag' if ros1 else 'xtion')
+    _camera_bag(path, ros1)
+    assert source_kind(path) == 'bag'
+    # the depth is the registered one, not the IR stream (mono16 like a depth image)
+    assert camera_bag.pick_topics(path) == ('/xtion/rgb/image_raw',
+                                            '/xtion/depth_registered/image_raw',
+                                            '/xtion/rgb/camera_info')
+    frames = load_frames([str(path)], labelled=False)
+    assert len(frames) == 3
+    f = frames[1]
+    assert f.color[0, 0, 2] == 51 and f.depth_m[0, 0] == pytest.approx(2.5)  # bgr8 -> RGB
+    assert (f.intrinsics.fx, f.intrinsics.cy, f.intrinsics.width) == (60.0, 23.5, 64)
+    assert f.stamp_ns == 1_700_000_000 * 10**9 + 33_333_333  # the colour image's stamp
+    with pytest.raises(ValueError, match="no sensor_msgs/msg/Image topic '/nope'"):
+        camera_bag.pick_topics(path, color_topic='/nope')
+    out = tmp_path / 'real.json'
+    assert pose4d_main(['eval', str(path), '--json', str(out),
+                        '--depth-topic', '/xtion/depth_registered/image_raw']) == 0
+    assert json.loads(out.read_text())['real']['rgbd_14']['frames'] == 3

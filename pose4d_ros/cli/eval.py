@@ -144,6 +144,11 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
                    help='a real recording (a folder of frames, or a bag without ground truth): '
                         "hand labels of every person's box (evaluation.real): people found "
                         'and ghosts')
+    for name, what in (('color', 'colour image'), ('depth', 'depth image (registered to the '
+                                                    'colour image)'), ('info', 'camera_info')):
+        p.add_argument(f'--{name}-topic', metavar='TOPIC',
+                       help=f"a camera's recording (rosbag2 or ROS 1 .bag): its {what} topic "
+                            '(default: picked by message type and encoding)')
     p.add_argument('--fps', type=float, default=None,
                    help="a folder of frames: its frame rate (default: its frames.yaml's, else "
                         '30)')
@@ -165,8 +170,10 @@ def run(args: argparse.Namespace) -> int:
     if (args.peer_depth or args.fit_peer_depth) and not args.peer:
         raise ValueError('--peer-depth and --fit-peer-depth need --peer')
     offsets = read_offsets(args.peer_depth) if args.peer_depth else None
+    real_recording = kind == 'frames' or args.labels is not None or _unlabelled_bag(args, kind)
     models = ({} if args.fit_peer_depth else
-              {m: load_any(m) for m in (args.model or default_models(kind))})
+              {m: load_any(m) for m in (args.model or default_models(
+                  'frames' if real_recording else kind))})
     if not valid_scales(args.photo_scales):
         raise ValueError(f'--photo-scales {args.photo_scales}: must include 1 and lie within '
                          f'0.25..4')
@@ -175,7 +182,7 @@ def run(args: argparse.Namespace) -> int:
     if args.plot is not None and args.plot.suffix.lower() != '.png':
         raise ValueError(f'--plot {args.plot}: the figure is a PNG file (.png)')
     try:
-        if kind == 'frames' or args.labels is not None:
+        if real_recording:
             result = real_rows(args, models, peer)
             print(format_real(result))
             if peer is not None:
@@ -288,7 +295,9 @@ def real_rows(args: argparse.Namespace, models: dict[str, PartModel | ConvNet],
     run it (the several-person pipeline), each scored against the peer as the reference and
     against the hand labels (`--labels`), `evaluation.real`; `--draw` draws every frame."""
     frames = load_frames([args.source], stride=args.stride, max_frames=args.max_frames,
-                         labelled=False, fps=args.fps)
+                         labelled=False, fps=args.fps, topics={
+                             'color_topic': args.color_topic, 'depth_topic': args.depth_topic,
+                             'info_topic': args.info_topic})
     if any(f.depth_m is None for f in frames):
         raise ValueError(f'{args.source}: a real recording needs depth in every frame')
     labels = real.read_labels(args.labels) if args.labels is not None else None
@@ -325,9 +334,9 @@ def format_real(result: dict) -> str:
              f"{'found':>9s} {'ghosts':>6s} {'cpu p50':>8s}"]
     for name, t in result['real'].items():
         lab = t.get('labels')
-        found = f"{lab[name if name in lab['ghosts'] else 'ours']}/{lab['labelled']}" \
-            if lab else '-'
-        ghosts = lab['ghosts'].get(name, lab['ghosts']['ours']) if lab else '-'
+        who = 'ours' if 'joints' in t else 'reference'
+        found = f"{lab[who]}/{lab['labelled']}" if lab else '-'
+        ghosts = lab['ghosts'][who] if lab else '-'
         if 'joints' not in t:  # the peer's people only
             lines.append(f"{name:28s} {'':>9s} {'':>6s} {'':>6s} {'':>9s} {found:>9s} "
                          f'{ghosts!s:>6s}')
@@ -337,3 +346,15 @@ def format_real(result: dict) -> str:
         lines.append(f"{name:28s} {t['agree@0.1']!s:>9s} {t['agree@0.2']!s:>6s} "
                      f"{t['joints']:>6d} {ppf:>9.2f} {found:>9s} {ghosts!s:>6s} {cpu!s:>8s}")
     return '\n'.join(lines)
+
+
+def _unlabelled_bag(args: argparse.Namespace, kind: str) -> bool:
+    """A bag that is a camera's recording (no ground truth topic, or its topics named)."""
+    from pose4d_ros.datasets import bag, cad60_bag
+
+    if kind != 'bag':
+        return False
+    if args.color_topic or args.depth_topic or args.info_topic or Path(args.source).is_file():
+        return True
+    return cad60_bag.SKELETON_TOPIC not in bag.topics(args.source) and \
+        cad60_bag.SKELETONS_TOPIC not in bag.topics(args.source)

@@ -18,11 +18,13 @@ import shutil
 import sqlite3
 import sys
 from collections.abc import Iterable, Iterator
+from contextlib import contextmanager
 from dataclasses import dataclass
 from functools import cache
 from pathlib import Path
 from typing import Any
 
+from rosbags.highlevel import AnyReader
 from rosbags.interfaces import (
     Qos,
     QosDurability,
@@ -222,6 +224,25 @@ def _open_reader(path: str | Path) -> Reader:
     except Exception as exc:  # rosbags, mcap, sqlite3: their own words for a damaged file
         raise ValueError(f'cannot read bag: {bag_damage.describe(path)}') from exc
     return reader
+
+
+@contextmanager
+def any_reader(path: str | Path) -> Iterator[AnyReader]:
+    """An open reader of a rosbag2 (directory) or a ROS 1 bag (.bag file) of any camera's
+    recording, closed at the end of the `with`; messages deserialised by `reader.deserialize`
+    (types from the bag, else Jazzy's). ValueError naming the bag when it cannot be read."""
+    path = Path(path)
+    if not path.exists():
+        raise FileNotFoundError(f'{path}: no such bag')
+    try:
+        reader = AnyReader([path], default_typestore=get_typestore(Stores.ROS2_JAZZY))
+        reader.open()
+    except Exception as exc:  # rosbags' own words for what it cannot read
+        raise ValueError(f'{path}: cannot read the bag ({exc})') from exc
+    try:
+        yield reader
+    finally:
+        reader.close()
 
 
 def topics(path: str | Path) -> dict[str, TopicInfo]:

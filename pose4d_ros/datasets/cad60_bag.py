@@ -51,6 +51,7 @@ SKELETON_TOPIC = '/cad60/skeleton'
 SKELETONS_TOPIC = '/cad60/skeletons'
 MASK_TOPIC = '/cad60/mask'
 FRAME_ID = 'camera_color_optical_frame'
+CAMERA_TOPICS = (COLOR_TOPIC, DEPTH_TOPIC, INFO_TOPIC)
 
 
 @dataclass(frozen=True)
@@ -169,7 +170,7 @@ def read_frames(path: str | Path) -> Iterator[Frame]:
     a message of every topic at its stamp is skipped.
     """
     infos = bag.topics(path)
-    for topic in (COLOR_TOPIC, DEPTH_TOPIC, INFO_TOPIC):
+    for topic in CAMERA_TOPICS:
         if topic not in infos:
             raise ValueError(f'{path}: no {topic} topic (has {", ".join(sorted(infos))})')
     topics = [COLOR_TOPIC, DEPTH_TOPIC, INFO_TOPIC]

@@ -14,7 +14,7 @@ from pathlib import Path
 
 import numpy as np
 
-from pose4d_ros.datasets import cad60, cad60_bag, frames_dir, lspet
+from pose4d_ros.datasets import bag, cad60, cad60_bag, camera_bag, frames_dir, lspet
 from pose4d_ros.datasets.frame import Frame
 from pose4d_ros.util.progress import progress
 
@@ -45,12 +45,13 @@ def parse_ranges(text: str) -> list[tuple[int, int]]:
 def source_kind(path: str | Path) -> str:
     """'lspet' for an LSPET root (joints.mat + images/), 'cad60' for a CAD-60 root (dataN/
     directories, or one dataN directory), 'bag' for a rosbag2 (e.g. made by
-    `pose4d cad60-to-bag`), 'frames' for a folder of RGB-D frames with `camera_info.yaml`
+    `pose4d cad60-to-bag`, or any camera's recording, ROS 1 .bag files too), 'frames' for a
+    folder of RGB-D frames with `camera_info.yaml`
     (`datasets.frames_dir`: a real camera's recording)."""
     p = Path(path)
     if not p.exists():
         raise OSError(f'{p}: no such file or directory')
-    if (p / 'metadata.yaml').is_file():
+    if (p / 'metadata.yaml').is_file() or (p.is_file() and p.suffix == '.bag'):
         return 'bag'
     if (p / 'joints.mat').is_file() and (p / 'images').is_dir():
         return 'lspet'
@@ -65,7 +66,8 @@ def source_kind(path: str | Path) -> str:
 
 
 def open_source(path: str | Path, *, frame_range: tuple[int, int] | None = None,
-                stride: int = 1, fps: float | None = None) -> Iterator[Frame]:
+                stride: int = 1, fps: float | None = None,
+                topics: dict[str, str | None] | None = None) -> Iterator[Frame]:
     """The frames of a source (see `source_kind`), in order.
 
     Parameters
@@ -74,6 +76,8 @@ def open_source(path: str | Path, *, frame_range: tuple[int, int] | None = None,
     frame_range : LSPET: image numbers (A, B), inclusive (required for LSPET).
     stride : keep every `stride`-th frame (of each video, for CAD-60).
     fps : a folder of frames: its frame rate (default: its `frames.yaml`, else 30).
+    topics : a camera's recording: `camera_bag.read_frames`' color_topic, depth_topic,
+        info_topic (None: picked by type and encoding).
     """
     if stride < 1:
         raise ValueError(f'stride must be >= 1, got {stride}')
@@ -86,21 +90,25 @@ def open_source(path: str | Path, *, frame_range: tuple[int, int] | None = None,
         frames = lspet.read_frames(path, *frame_range)
     elif kind == 'frames':
         frames = frames_dir.read_frames(path, fps=fps)
+    elif Path(path).is_dir() and not any(topics.values() if topics else ()) and all(
+            t in bag.topics(path) for t in cad60_bag.CAMERA_TOPICS):
+        frames = cad60_bag.read_frames(path)  # our own topics, with ground truth if any
     else:
-        frames = cad60_bag.read_frames(path)
+        frames = camera_bag.read_frames(path, **(topics or {}))
     return itertools.islice(frames, 0, None, stride)
 
 
 def load_frames(sources: list[str], *, frame_range: str | None = None, stride: int = 1,
                 max_frames: int | None = None, labelled: bool = True,
-                fps: float | None = None) -> list[Frame]:
+                fps: float | None = None, topics: dict[str, str | None] | None = None
+                ) -> list[Frame]:
     """All frames of the sources (an LSPET source uses `frame_range`); `max_frames` keeps an
     evenly spread subset (deterministic). With `labelled`, a frame without ground truth is an
     error."""
     rng_ = parse_range(frame_range)
     frames: list[Frame] = []
     for src in sources:
-        it = open_source(src, frame_range=rng_, stride=stride, fps=fps)
+        it = open_source(src, frame_range=rng_, stride=stride, fps=fps, topics=topics)
         with progress(it, f'reading {Path(src).name}') as bar:  # closed on a damaged file too
             frames.extend(bar)
     if max_frames is not None and len(frames) > max_frames:
