@@ -123,6 +123,10 @@ def test_a_strong_network_term_moves_a_part_to_its_peak_and_leaves_unknown_parts
     (moved,) = strong.poses_from_levels([level], net_maps=NetMaps(values, transform))
     assert np.abs(moved.uv[1] - target).max() <= STRIDE
     assert_allclose(moved.uv[[0, 2]], base.uv[[0, 2]])
+    # the score handed on: the part model's at the moved pose, on the scale of its maxima
+    c = UnaryConfig()
+    assert moved.score == pytest.approx(c.score_scale * moved.part_scores.sum() + c.score_offset)
+    assert moved.part_scores.sum() < base.score  # pulled off the model's maximum
     # hog_weight 0 on a colour model: the network alone places 'b', the others keep the tree's
     only = Detector(m, SearchConfig(subcell=False), replace(
         unary, config=UnaryConfig(weight=1.0, hog_weight=0.0)))
@@ -132,7 +136,8 @@ def test_a_strong_network_term_moves_a_part_to_its_peak_and_leaves_unknown_parts
 
 @pytest.mark.parametrize('field, value, words', [
     ('weight', -1.0, 'weight must be >= 0'), ('hog_weight', float('nan'), 'hog_weight'),
-    ('floor', 0.0, 'floor must be a log-probability < 0'), ('scales', (1.3,), 'include 1')])
+    ('floor', 0.0, 'floor must be a log-probability < 0'), ('scales', (1.3,), 'include 1'),
+    ('score_scale', 0.0, 'score_scale must be > 0')])
 def test_bad_settings_are_refused_with_the_rule(field: str, value: object, words: str) -> None:
     with pytest.raises(ValueError, match=words):
         UnaryConfig(**{field: value})

@@ -72,7 +72,11 @@ def test_separate_frames_are_each_a_video_of_their_own(tmp_path: Path) -> None:
     (root / 'color').rmdir()
     frames = list(frames_dir.read_frames(root))
     assert [f.video for f in frames] == ['01', '02']
-    assert frames[1].stamp_ns - frames[0].stamp_ns == 10**9
+    assert frames[1].stamp_ns - frames[0].stamp_ns > 10**9  # a gap: the tracker starts anew
+    held = list(frames_dir.read_frames(root, hold=3, fps=10))  # a still camera's stream
+    assert [f.key for f in held] == ['masked/01'] * 3 + ['masked/02'] * 3
+    assert np.diff([f.stamp_ns for f in held[:3]]).tolist() == [100_000_000] * 2
+    assert held[3].stamp_ns - held[2].stamp_ns > 10**9
 
 
 @pytest.mark.parametrize('damage, message', [

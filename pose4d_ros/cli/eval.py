@@ -149,6 +149,9 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
         p.add_argument(f'--{name}-topic', metavar='TOPIC',
                        help=f"a camera's recording (rosbag2 or ROS 1 .bag): its {what} topic "
                             '(default: picked by message type and encoding)')
+    p.add_argument('--hold', type=int, default=1, metavar='N',
+                   help='a folder of separate frames: each held N frames at --fps (default 30), '
+                        "a still camera's stream: what the tracker confirms over frames")
     p.add_argument('--fps', type=float, default=None,
                    help="a folder of frames: its frame rate (default: its frames.yaml's, else "
                         '30)')
@@ -297,7 +300,7 @@ def real_rows(args: argparse.Namespace, models: dict[str, PartModel | ConvNet],
     frames = load_frames([args.source], stride=args.stride, max_frames=args.max_frames,
                          labelled=False, fps=args.fps, topics={
                              'color_topic': args.color_topic, 'depth_topic': args.depth_topic,
-                             'info_topic': args.info_topic})
+                             'info_topic': args.info_topic}, hold=args.hold)
     if any(f.depth_m is None for f in frames):
         raise ValueError(f'{args.source}: a real recording needs depth in every frame')
     labels = real.read_labels(args.labels) if args.labels is not None else None

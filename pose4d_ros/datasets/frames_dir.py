@@ -148,19 +148,29 @@ def frames_fps(root: Path) -> float:
     return float(fps)
 
 
-def read_frames(root: str | Path, *, fps: float | None = None) -> Iterator[Frame]:
+def read_frames(root: str | Path, *, fps: float | None = None, hold: int = 1
+                ) -> Iterator[Frame]:
     """The frames of a folder (see the module's layouts), with no ground truth; `Frame.key` is
-    '<folder>/<name>' (the hand labels' key, `evaluation.real`)."""
+    '<folder>/<name>' (the hand labels' key, `evaluation.real`). `hold`: separate frames are
+    each held this many frames at `fps` (default 30), a still camera's stream of a still scene,
+    each its own video (a tracker confirms people over frames; a single frame shows only what
+    it trusts at once)."""
     root = Path(root)
+    if hold < 1:
+        raise ValueError(f'hold must be >= 1 frame, got {hold}')
     intrinsics = read_camera_info(root / CAMERA_INFO)
     sequence, pairs = _pairs(root)
     if not pairs:
         raise ValueError(f'{root}: no colour frames (color/NAME.png|jpg, color.png or '
                          'color_NAME.png)')
-    step_ns = round(1e9 / (fps or frames_fps(root))) if sequence else 10**9
+    step_ns = round(1e9 / (fps or frames_fps(root)))
+    if sequence:
+        hold = 1
     for k, (name, c, d) in enumerate(pairs):
         color, depth = read_color(c), read_depth(d)
         intrinsics.check_size(color.shape, f'colour image {c}')
         intrinsics.check_size(depth.shape, f'depth image {d}')
-        yield Frame(T0_NS + k * step_ns, color, depth, intrinsics, None,
-                    key=f'{root.name}/{name}', video=root.name if sequence else name)
+        start = T0_NS + k * (step_ns if sequence else hold * step_ns + 10**9)
+        for i in range(hold):
+            yield Frame(start + i * step_ns, color, depth, intrinsics, None,
+                        key=f'{root.name}/{name}', video=root.name if sequence else name)

@@ -67,7 +67,8 @@ def source_kind(path: str | Path) -> str:
 
 def open_source(path: str | Path, *, frame_range: tuple[int, int] | None = None,
                 stride: int = 1, fps: float | None = None,
-                topics: dict[str, str | None] | None = None) -> Iterator[Frame]:
+                topics: dict[str, str | None] | None = None, hold: int = 1
+                ) -> Iterator[Frame]:
     """The frames of a source (see `source_kind`), in order.
 
     Parameters
@@ -78,6 +79,7 @@ def open_source(path: str | Path, *, frame_range: tuple[int, int] | None = None,
     fps : a folder of frames: its frame rate (default: its `frames.yaml`, else 30).
     topics : a camera's recording: `camera_bag.read_frames`' color_topic, depth_topic,
         info_topic (None: picked by type and encoding).
+    hold : a folder of separate frames: each held this many frames (`frames_dir`).
     """
     if stride < 1:
         raise ValueError(f'stride must be >= 1, got {stride}')
@@ -89,7 +91,7 @@ def open_source(path: str | Path, *, frame_range: tuple[int, int] | None = None,
             raise ValueError(f'{path}: an LSPET source needs --range A-B (e.g. 1-2500)')
         frames = lspet.read_frames(path, *frame_range)
     elif kind == 'frames':
-        frames = frames_dir.read_frames(path, fps=fps)
+        frames = frames_dir.read_frames(path, fps=fps, hold=hold)
     elif Path(path).is_dir() and not any(topics.values() if topics else ()) and all(
             t in bag.topics(path) for t in cad60_bag.CAMERA_TOPICS):
         frames = cad60_bag.read_frames(path)  # our own topics, with ground truth if any
@@ -100,15 +102,16 @@ def open_source(path: str | Path, *, frame_range: tuple[int, int] | None = None,
 
 def load_frames(sources: list[str], *, frame_range: str | None = None, stride: int = 1,
                 max_frames: int | None = None, labelled: bool = True,
-                fps: float | None = None, topics: dict[str, str | None] | None = None
-                ) -> list[Frame]:
+                fps: float | None = None, topics: dict[str, str | None] | None = None,
+                hold: int = 1) -> list[Frame]:
     """All frames of the sources (an LSPET source uses `frame_range`); `max_frames` keeps an
     evenly spread subset (deterministic). With `labelled`, a frame without ground truth is an
     error."""
     rng_ = parse_range(frame_range)
     frames: list[Frame] = []
     for src in sources:
-        it = open_source(src, frame_range=rng_, stride=stride, fps=fps, topics=topics)
+        it = open_source(src, frame_range=rng_, stride=stride, fps=fps, topics=topics,
+                         hold=hold)
         with progress(it, f'reading {Path(src).name}') as bar:  # closed on a damaged file too
             frames.extend(bar)
     if max_frames is not None and len(frames) > max_frames:

@@ -112,7 +112,9 @@ class Pose:
     uv : (P, 2) float64 pixel (u, v) of each part's centre in the full colour image.
     part_scores : (P,) float64 each part's share of the score (filter + spring + bias).
     confidence : (P,) float64 in [0, 1] (the model's logistic calibration).
-    score : whole-pose score (the sum of `part_scores`).
+    score : whole-pose score (the sum of `part_scores`; with the photograph network in the
+        unary, that sum brought onto the scale of the model's own maxima,
+        `NetUnary.calibrated`).
     search_score : the score the search ranked the pose by: `score` plus, with the photograph
         network in the colour unary (`core.dpm.net_unary`), the network's term at the parts'
         cells (which `score`, `part_scores` and `confidence` leave out, so that they keep the
@@ -547,13 +549,17 @@ class Detector:
                 search = float(loc.sum())
                 loc = loc - res.unary[np.arange(m.n_parts), parts[j, :, 1], parts[j, :, 2]]
             total = float(loc.sum())
+            # the pose's score for what comes after (`Pose.score`: the tracker's thresholds):
+            # with the network in the unary, the part model's score at the pose the network
+            # chose, brought onto the scale of the model's own maxima (`UnaryConfig`)
+            score = total if res.unary is None else self.unary.calibrated(total)
             if m.calibration is not None:
                 c = m.calibration.astype(np.float64)
                 conf = _sigmoid(c[:, 0] * loc + c[:, 1] * total + c[:, 2])
             else:
                 conf = _sigmoid(loc)
-            f = flags + (('low_score',) if total < self.config.low_score else ())
-            out.append(Pose(m.part_names, np.stack([u, v], axis=1), loc, conf, total,
+            f = flags + (('low_score',) if score < self.config.low_score else ())
+            out.append(Pose(m.part_names, np.stack([u, v], axis=1), loc, conf, score,
                             res.level.scale, parts[j, :, 0].copy(), f, search))
         return out
 
