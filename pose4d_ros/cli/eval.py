@@ -320,7 +320,11 @@ def real_rows(args: argparse.Namespace, models: dict[str, PartModel | ConvNet],
                             people=people, **stage_configs(args, settings, unary))['rgbd_kf_ik']
         ours = row.people
         out[name] = {**real.agreement(frames, ours, reference, labels),
-                     'cpu_ms': ms_stats(row.cpu_ms)}
+                     'cpu_ms': ms_stats(row.cpu_ms),
+                     # the same scores at the stages before: where the pipeline loses joints
+                     'stages': {stage: _stage_summary(real.agreement(frames, people, reference,
+                                                                     labels))
+                                for stage, people in row.stages.items()}}
         if args.draw is not None:
             real.draw_frames(frames, ours, reference, args.draw / name, labels)
             log(f'wrote {len(frames)} drawings to {args.draw / name}')
@@ -348,6 +352,11 @@ def format_real(result: dict) -> str:
         cpu = t['cpu_ms']['p50']
         lines.append(f"{name:28s} {t['agree@0.1']!s:>9s} {t['agree@0.2']!s:>6s} "
                      f"{t['joints']:>6d} {ppf:>9.2f} {found:>9s} {ghosts!s:>6s} {cpu!s:>8s}")
+        for stage, s in t.get('stages', {}).items():  # the stages before the skeletons
+            found = f"{s['found']}/{lab['labelled']}" if lab else '-'
+            lines.append(f"{'  ' + stage:28s} {s['agree@0.1']!s:>9s} {s['agree@0.2']!s:>6s} "
+                         f"{'':>6s} {s['people_per_frame'].get('ours', 0):>9.2f} {found:>9s} "
+                         f"{s.get('ghosts', '-')!s:>6s}")
     return '\n'.join(lines)
 
 
@@ -361,3 +370,12 @@ def _unlabelled_bag(args: argparse.Namespace, kind: str) -> bool:
         return True
     return cad60_bag.SKELETON_TOPIC not in bag.topics(args.source) and \
         cad60_bag.SKELETONS_TOPIC not in bag.topics(args.source)
+
+
+def _stage_summary(table: dict) -> dict:
+    """An agreement table's headline figures (`evaluation.real.agreement`), for a stage."""
+    keep = ('agree@0.1', 'agree@0.2', 'agree@0.1_by_group', 'people_per_frame')
+    out = {k: table[k] for k in keep}
+    if 'labels' in table:
+        out['found'], out['ghosts'] = table['labels']['ours'], table['labels']['ghosts']['ours']
+    return out

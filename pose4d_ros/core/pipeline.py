@@ -34,7 +34,9 @@ STAGES = ('foreground', 'detector', 'tracker', 'ik')
 class FrameResult:
     """Everything one frame produced, stage by stage (the foreground and the masked images are
     None for a frame without depth), and each stage's time per name of `STAGES`: `cpu_s`,
-    seconds of this process's CPU (`time.process_time`), and `wall_s`."""
+    seconds of this process's CPU (`time.process_time`), and `wall_s`. Several people: every
+    person's skeleton (`people`), each candidate's detection (`detections`, scored or not) and
+    each confirmed track's tracked parts (`tracks`)."""
 
     foreground: ForegroundResult | None
     color_masked: NDArray[np.uint8]
@@ -49,6 +51,8 @@ class FrameResult:
     candidates: int = 0
     born: tuple[int, ...] = ()
     ended: tuple[int, ...] = ()
+    detections: tuple[JointSet, ...] = ()
+    tracks: tuple[JointSet, ...] = ()
 
 
 class FramePipeline:
@@ -144,7 +148,8 @@ class FramePipeline:
             tracked[0] if tracked else JointSet.missing(self.tracker.tree.names),
             skeletons[0] if skeletons else JointSet.missing(SKELETON_14), cpu_s, wall_s,
             people=tuple(skeletons), foregrounds=tuple(found), candidates=n,
-            born=tuple(multi.tracker.born), ended=tuple(multi.tracker.ended))
+            born=tuple(multi.tracker.born), ended=tuple(multi.tracker.ended),
+            detections=tuple(parts), tracks=tuple(tracked))
 
     def _lap(self, clock: list[tuple[float, float]]) -> list[tuple[float, float]]:
         """`clock` with the times (CPU, wall) at a boundary between stages appended; with

@@ -70,6 +70,9 @@ class Row:
     cpu_ms: list[float] = field(default_factory=list)
     people: list[tuple[JointSet, ...]] = field(default_factory=list)
     cells: list[int] = field(default_factory=list)
+    # a several-person `_kf_ik` row: each frame's detections (those the part model scored)
+    # and confirmed tracks, the stages before the skeletons (`evaluation.real`)
+    stages: dict[str, list[tuple[JointSet, ...]]] = field(default_factory=dict)
 
     def add(self, pred: JointSet, cpu_s: float,
             people: tuple[JointSet, ...] | None = None, cells: int | None = None) -> None:
@@ -146,6 +149,11 @@ def _pass(frames: Iterable[Frame], model: PartModel, suffixes: tuple[str, ...],
         for s, pred in zip(suffixes, (out.parts, out.tracked, out.skeleton), strict=False):
             rows[s].add(pred, sum(out.cpu_s[stage] for stage in ROW_STAGES[s]),
                         out.people if people is not None and s == '_kf_ik' else None, cells)
+        if people is not None and '_kf_ik' in rows:
+            stages = rows['_kf_ik'].stages
+            stages.setdefault('detected', []).append(
+                tuple(d for d in out.detections if np.isfinite(d.score)))
+            stages.setdefault('tracked', []).append(out.tracks)
     return rows
 
 

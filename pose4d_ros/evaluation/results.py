@@ -42,7 +42,11 @@ LSPET = '../shared/data/lspet'
 REAL = '../shared/data/real'
 # Real development recordings (no joint labels: MediaPipe the reference, our hand labels for
 # people and ghosts): never test data, they are looked at after every change. Folder: options.
-REAL_SETS = {'lab_walk': ('--fps', '10'), 'outdoor4': (), 'kinect2_masked': ()}
+# Separate frames are held 20 frames each (a still camera's stream, as a tracker sees it).
+REAL_SETS = {'lab_walk': ('--fps', '10'), 'outdoor4': ('--hold', '20'),
+             'kinect2_masked': ('--hold', '20')}
+# each as the nodes run by default, and with the photograph network in the colour unary
+REAL_VARIANTS = {'': (), '_net': ('--colour-net', 'lspet_convnet')}
 
 
 @dataclass(frozen=True)
@@ -449,9 +453,10 @@ JOBS: tuple[Job, ...] = (
         COLOUR_NET_TESTS, _colour_net_test),
     Job('real', 'real RGB-D recordings (development data: Xtion lab walk, Kinect v2 outdoors '
         'and masked): agreement with MediaPipe, people found and ghosts against hand labels',
-        (), lambda c: [_eval(c, f'{REAL}/{name}', RESULTS / f'real_{name}.json', *options,
-                             '--labels', f'labels/real/{name}.json')
-                       for name, options in REAL_SETS.items()], needs='real'),
+        (), lambda c: [_eval(c, f'{REAL}/{name}', RESULTS / f'real_{name}{suffix}.json',
+                             *options, *variant, '--labels', f'labels/real/{name}.json')
+                       for name, options in REAL_SETS.items()
+                       for suffix, variant in REAL_VARIANTS.items()], needs='real'),
     Job('bench', 'CPU per stage on the demo bag, and MediaPipe in the same run; again on '
         "the nodes' several-person path", (),
         lambda c: [['pose4d', 'bench', 'bags/sample', '--json', str(RESULTS / name),
