@@ -592,6 +592,26 @@ def test_a_held_person_is_not_taken_for_clutter_scoring_high(held_continues):
     assert len(out) == 2 and sorted(t.track_id for t in out) == sorted({1, 2})
 
 
+def test_a_walker_passing_a_held_person_is_confirmed_though_the_held_track_is_nearer():
+    """Someone walking by (scoring over `birth_score`) in the gate of a track held behind a
+    nearer person, away from where the held person would come out: the held track refuses
+    the detection, which then goes to the walker's own young track, confirmed at its second
+    frame (before, the held track took it in the assignment frame after frame and refused it:
+    a new tentative track each frame, the walker never confirmed; seen on real recordings)."""
+    tr = tracker()
+    far = _held_far(tr)
+    ids = set()
+    for k in range(19, 23):
+        walker = _scored(person(1.2 + 0.04 * (k - 19), z=3.5), 6.5)
+        i_far = next(i for i, t in enumerate(tr.tracks) if t.id == far)
+        assert tr._cost([walker], [torso(walker)], k * DT)[i_far, 0] < 16  # in its gate
+        out = tr.step([_scored(person(0.0, z=2.2), 8.0), walker], k * DT, INTR)
+        assert next(t for t in tr.tracks if t.id == far).held  # still held, untouched
+        ids |= {t.track_id for t in out if torso(t)[0][0] > 1.0}
+    assert len(ids) == 1 and ids.pop() not in (1, 2)  # one new id, from the second frame
+    assert len([t for t in tr.tracks if not t.id]) == 0
+
+
 @pytest.mark.parametrize('held_continues', [True, False])
 def test_a_held_person_coming_out_partly_seen_is_taken_back(held_continues):
     """The far person is held behind the near one for 10 frames, then comes out partly

@@ -517,19 +517,24 @@ class PeopleTracker:
         self.ended = [t.id for t in ended if t.id]
         self.tracks = [t for t in self.tracks if t not in ended]
         points = [torso(d) for d in detections]
-        pairs = self._assign(self._cost(detections, points, stamp_s))
-        matched = {j: i for i, j in pairs}
-        trusted = self._trusted(detections, matched)
-        emerging = self._emerging(detections, points, matched)
+        cost = self._cost(detections, points, stamp_s)
+        matched, trusted, emerging, refused = self._match(detections, points, cost, intrinsics)
+        while refused:
+            # a pair the track refuses takes no part: the detection goes to the next track
+            # that fits, a tentative one among them (a person held behind another, offered the
+            # detection of someone walking by, would else take it from that person's young
+            # track frame after frame and refuse it: the person never confirmed); each round
+            # removes a pair, so this ends
+            cost[tuple(np.array(refused).T)] = np.nan
+            matched, trusted, emerging, refused = self._match(detections, points, cost,
+                                                              intrinsics)
         for j, det in enumerate(detections):
             born = self._born(det, j in emerging and _clear_of_sides(det, intrinsics))
-            if j in matched:
-                track = self.tracks[matched[j]]
-                out = _out_from_behind(track, emerging.get(j), cfg.held_own_front)
-                if self._elsewhere(track, out) or (not born and not self._continues(track, out)):
-                    # a tentative track's detection must be a person's, and so must that of a
-                    # track unseen beside another person (`_continues`)
-                    del matched[j]
+            if j in matched and self._refuses(self.tracks[matched[j]], born,
+                                              emerging.get(j)):
+                # a tentative track's detection must be a person's, and so must that of a
+                # track unseen beside another person (`_continues`)
+                del matched[j]
             if j not in matched and (_finite(points[j][0]) or _finite(torso_px(det)[0])) \
                     and (j in trusted or born):
                 stage = self.make()
@@ -575,6 +580,28 @@ class PeopleTracker:
         # a pose held too long is mostly where nobody is: kept, not published
         return [t.last for t in self._ordered(stamp_s)
                 if not (t.held and stamp_s - t.held_s > cfg.max_held_s)]
+
+    def _match(self, detections: Sequence[JointSet], points: list[tuple[NDArray, NDArray]],
+               cost: NDArray[np.float64], intrinsics: Intrinsics | None
+               ) -> tuple[dict[int, int], set[int], dict[int, set[int]], list[tuple[int, int]]]:
+        """The assignment on `cost` ({detection: track}), the detections trusted at once,
+        those emerging from behind a nearer person, and the pairs (track, detection) whose
+        track refuses the detection (`_refuses`)."""
+        matched = {j: i for i, j in self._assign(cost)}
+        trusted = self._trusted(detections, matched)
+        emerging = self._emerging(detections, points, matched)
+        refused = [(i, j) for j, i in matched.items() if self._refuses(
+            self.tracks[i], self._born(detections[j], j in emerging and _clear_of_sides(
+                detections[j], intrinsics)), emerging.get(j))]
+        return matched, trusted, emerging, refused
+
+    def _refuses(self, track: _Track, born: bool, fronts: set[int] | None) -> bool:
+        """Whether `track` refuses a detection assigned to it (`born`: it may start a track;
+        `fronts`: the ids of the people it comes out from behind): a held track one away
+        from where its person would come out (`_elsewhere`), a tentative track or one
+        unseen beside another person one that could not start a track (`_continues`)."""
+        out = _out_from_behind(track, fronts, self.config.held_own_front)
+        return self._elsewhere(track, out) or (not born and not self._continues(track, out))
 
     def _assign(self, cost: NDArray[np.float64]) -> list[tuple[int, int]]:
         """`assign` for the confirmed tracks first, then for the tentative ones on the
