@@ -37,12 +37,12 @@ def twin_difference() -> float:
     mirror = tuple(range(14))
     ours = ConvNet(names, mirror, 64, export_weights(net)).forward(x)
     if ours.shape != expected.shape:
-        raise ValueError(f'numpy output {ours.shape}, PyTorch output {expected.shape}')
+        raise ValueError(f'onnxruntime output {ours.shape}, PyTorch output {expected.shape}')
     return float(np.abs(ours - expected).max())
 
 
 if __name__ == '__main__':
     diff = twin_difference()
-    print(f'largest difference between the PyTorch and numpy networks: {diff:.2e} '
+    print(f'largest difference between the PyTorch and onnxruntime networks: {diff:.2e} '
           f'(tolerance {TOLERANCE:.0e})')
     sys.exit(0 if diff <= TOLERANCE else 1)
