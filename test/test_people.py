@@ -442,19 +442,25 @@ def test_an_unseen_track_beside_another_is_taken_back_only_by_a_persons_detectio
 def test_with_nobody_tracked_every_sure_detection_is_confirmed_at_once():
     """No track yet: detections scoring at least `trust_score` are confirmed at their first
     frame, and a better region (first) scoring under it (a chair) is not; without a sure one,
-    the foreground's best region is trusted as the single-person tracker trusts it."""
+    the foreground's best region is trusted as the single-person tracker trusts it, if it
+    could start a track at all (`birth_score`: a desk in an empty room is no one to trust)."""
     tr = tracker(trust_score=7.0, birth_score=5.0, confirm_frames=2)
     out = tr.step([_scored(person(-1.0), 4.5), _scored(person(0.0), 10.0),
                    _scored(person(1.0), 8.0)], 0.0, INTR)
     assert sorted(ids_by_x(out).values()) == [0.0, 1.0]
     assert tr.tracks and all(t.id for t in tr.tracks)  # the chair started no track
     alone = tracker(trust_score=7.0)
-    out = alone.step([_scored(person(-1.0), 4.5), _scored(person(0.0), 6.0)], 0.0, INTR)
+    out = alone.step([_scored(person(-1.0), 5.5), _scored(person(0.0), 6.0)], 0.0, INTR)
     assert list(ids_by_x(out).values()) == [-1.0]
     # the default trusts the first region only (what the single-person tracker does)
-    out = tracker(trust_score=np.inf).step([_scored(person(-1.0), 4.5),
+    out = tracker(trust_score=np.inf).step([_scored(person(-1.0), 5.5),
                                             _scored(person(0.0), 10.0)], 0.0, INTR)
     assert list(ids_by_x(out).values()) == [-1.0]
+    # ... unless it scores under the birth score: then nobody is published at once
+    empty = tracker(trust_score=7.0, birth_score=5.0)
+    assert empty.step([_scored(person(-1.0), 4.5), _scored(person(0.0), 6.0)], 0.0, INTR) == []
+    assert empty.step([_scored(person(-1.0), 4.5), _scored(person(0.0), 6.0)], DT,
+                      INTR)[0].track_id == 1  # the second region, confirmed at its 2nd frame
 
 
 def test_the_second_look_runs_where_someone_may_be_hidden(monkeypatch):
