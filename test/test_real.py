@@ -140,6 +140,25 @@ def test_agreement_counts_joints_within_the_share_of_height(tmp_path: Path) -> N
     assert real.agreement([frame], [(_person(ours),)], [none])['scored_frames'] == 0
 
 
+def test_bone_steadiness_is_zero_for_rigid_bones_and_grows_with_jitter() -> None:
+    from pose4d_ros.core.skeleton import SKELETON_14
+
+    rng = np.random.default_rng(0)
+    base = rng.normal(size=(14, 3)) * 0.3 + (0, 0, 2.5)
+    frames = [Frame(k, np.zeros((4, 4, 3), np.uint8), None, None, None, video='v')
+              for k in range(10)]
+
+    def skeleton(xyz: np.ndarray) -> JointSet:
+        return JointSet(SKELETON_14, np.zeros((14, 2)), xyz, track_id=1)
+
+    rigid = real.bone_steadiness(frames, [(skeleton(base + 0.01 * k),) for k in range(10)])
+    assert rigid == {'mad_rel': 0.0, 'within': 100.0, 'lengths': 80}  # 8 bones x 10 frames
+    shaky = real.bone_steadiness(frames, [(skeleton(base + rng.normal(size=(14, 3)) * 0.1),)
+                                          for _ in range(10)])
+    assert shaky['mad_rel'] > 0.05 and shaky['within'] < 100.0
+    assert real.bone_steadiness(frames[:2], [(), ()])['mad_rel'] is None  # too few to judge
+
+
 def test_labels_are_read_and_checked(tmp_path: Path) -> None:
     good = {'source': 'x', 'frames': {'0001': [], '0002': [
         {'box': [1, 2, 30, 40], 'visible': 'partial', 'seated': True, 'head': [5, 6],

@@ -321,6 +321,7 @@ def real_rows(args: argparse.Namespace, models: dict[str, PartModel | ConvNet],
         ours = row.people
         out[name] = {**real.agreement(frames, ours, reference, labels),
                      'cpu_ms': ms_stats(row.cpu_ms),
+                     'bones_3d': real.bone_steadiness(frames, ours),
                      # the same scores at the stages before: where the pipeline loses joints
                      'stages': {stage: _stage_summary(real.agreement(frames, people, reference,
                                                                      labels))
@@ -328,9 +329,12 @@ def real_rows(args: argparse.Namespace, models: dict[str, PartModel | ConvNet],
         if args.draw is not None:
             real.draw_frames(frames, ours, reference, args.draw / name, labels)
             log(f'wrote {len(frames)} drawings to {args.draw / name}')
-    if peer is not None and labels is not None:
-        out[peer.name] = {'labels': real.agreement(
-            frames, [() for _ in frames], reference, labels)['labels']}
+    if peer is not None:
+        out[peer.name] = {'bones_3d': real.bone_steadiness(
+            frames, [(r,) if real.present(r).any() else () for r in reference])}
+        if labels is not None:
+            out[peer.name]['labels'] = real.agreement(frames, [() for _ in frames], reference,
+                                                      labels)['labels']
     return {'frames': len(frames), 'source': str(args.source), 'real': out}
 
 
@@ -338,20 +342,24 @@ def format_real(result: dict) -> str:
     """The agreement table of `real_rows`, one line per model."""
     lines = [f"{result['source']}: {result['frames']} frames (real, no joint labels)",
              f"{'row':28s} {'agree@0.1':>9s} {'@0.2':>6s} {'joints':>6s} {'people/fr':>9s} "
-             f"{'found':>9s} {'ghosts':>6s} {'cpu p50':>8s}"]
+             f"{'found':>9s} {'ghosts':>6s} {'cpu p50':>8s} {'bones 3-D: dev':>14s} "
+             f"{'within':>6s}"]
     for name, t in result['real'].items():
         lab = t.get('labels')
         who = 'ours' if 'joints' in t else 'reference'
         found = f"{lab[who]}/{lab['labelled']}" if lab else '-'
         ghosts = lab['ghosts'][who] if lab else '-'
+        bones = t.get('bones_3d', {})
+        steady = f"{bones.get('mad_rel')!s:>14s} {bones.get('within')!s:>6s}"
         if 'joints' not in t:  # the peer's people only
             lines.append(f"{name:28s} {'':>9s} {'':>6s} {'':>6s} {'':>9s} {found:>9s} "
-                         f'{ghosts!s:>6s}')
+                         f"{ghosts!s:>6s} {'':>8s} {steady}")
             continue
         ppf = t['people_per_frame'].get('ours', 0)
         cpu = t['cpu_ms']['p50']
         lines.append(f"{name:28s} {t['agree@0.1']!s:>9s} {t['agree@0.2']!s:>6s} "
-                     f"{t['joints']:>6d} {ppf:>9.2f} {found:>9s} {ghosts!s:>6s} {cpu!s:>8s}")
+                     f"{t['joints']:>6d} {ppf:>9.2f} {found:>9s} {ghosts!s:>6s} {cpu!s:>8s} "
+                     f'{steady}')
         for stage, s in t.get('stages', {}).items():  # the stages before the skeletons
             found = f"{s['found']}/{lab['labelled']}" if lab else '-'
             lines.append(f"{'  ' + stage:28s} {s['agree@0.1']!s:>9s} {s['agree@0.2']!s:>6s} "

@@ -17,6 +17,16 @@ the same colour frames) and, where hand labels exist, people found and ghosts.
   a ghost. A labelled person is found when a skeleton is on them (one skeleton finds one
   person: the nearest box centre). The same for the reference's one skeleton.
 
+- **3-D steadiness** (`bone_steadiness`): with no 3-D truth, how steady each person's limb
+  bones are in 3-D over their track (upper arms, forearms, thighs, shins: a real bone keeps
+  its length): the median over bones and tracks of the bones' median absolute deviation from
+  their median length, relative to it, and the share of lengths within 25 % of the track's
+  median. MediaPipe's joints are lifted as its peer row lifts them (the depth at the pixel),
+  its one person a frame taken as one track per video (MediaPipe may switch between people
+  within it, which counts against it). Steadiness is not accuracy: the IK completes our
+  elbows and knees on each person's learned bone lengths, so ours is steadier by design where
+  it infers them; a skeleton can be steady and wrong.
+
 Hand labels are JSON: {"source": ..., "frames": {name: [{"box": [x0, y0, x1, y1],
 "visible": "full" | "partial", "seated": bool, "head": [u, v] | null, "feet": [u, v] |
 null}, ...]}}, a frame's name being its `Frame.key` after the folder ('lab_walk/0001' ->
@@ -37,7 +47,7 @@ from numpy.typing import NDArray
 from pose4d_ros.core import joints as cj
 from pose4d_ros.core.draw import draw_people, draw_skeleton
 from pose4d_ros.core.joints import JointSet
-from pose4d_ros.core.skeleton import JOINT_GROUPS, SKELETON_14, limb_bones
+from pose4d_ros.core.skeleton import JOINT_GROUPS, LIMBS, SKELETON_14, limb_bones
 from pose4d_ros.datasets.frame import Frame
 
 MIN_REFERENCE_CONFIDENCE = 0.5
@@ -255,6 +265,41 @@ def agreement(frames: Sequence[Frame], ours: Sequence[Sequence[JointSet]],
     if labels is not None:
         table['labels'] = {**found, 'ghosts': ghosts, 'ghost_frames': ghost_frames}
     return table
+
+
+# the bones whose 3-D length `bone_steadiness` follows: (root, middle) and (middle, end) of
+# every limb
+STEADY_BONES = tuple(pair for root, middle, end in LIMBS.values()
+                     for pair in ((root, middle), (middle, end)))
+STEADY_SHARE = 0.25
+
+
+def bone_steadiness(frames: Sequence[Frame], people: Sequence[Sequence[JointSet]]) -> dict:
+    """How steady the people's limb bones are in 3-D over their tracks (module docstring):
+    `mad_rel` the median relative deviation of a bone's length from its track's median,
+    `within` the share of lengths within `STEADY_SHARE` of it (%), `lengths` how many were
+    measured. A skeleton's track is its `track_id` within its video (0: one track a video)."""
+    lengths: dict[tuple[str, int, tuple[str, str]], list[float]] = {}
+    for frame, skeletons in zip(frames, people, strict=True):
+        for p in skeletons:
+            ok = present(p) & np.isfinite(p.xyz).all(axis=1)
+            for a, b in STEADY_BONES:
+                i, j = p.get(a), p.get(b)
+                if i is not None and j is not None and ok[i] and ok[j]:
+                    lengths.setdefault((frame.video, int(p.track_id), (a, b)), []).append(
+                        float(np.linalg.norm(p.xyz[i] - p.xyz[j])))
+    rel, within, n = [], [], 0
+    for values in lengths.values():
+        v = np.asarray(values)
+        if len(v) < 3 or not np.median(v) > 0:
+            continue
+        m = float(np.median(v))
+        rel.append(float(np.median(np.abs(v - m))) / m)
+        within.extend(np.abs(v - m) <= STEADY_SHARE * m)
+        n += len(v)
+    return {'mad_rel': round(float(np.median(rel)), 4) if rel else None,
+            'within': round(100 * float(np.mean(within)), 1) if within else None,
+            'lengths': n}
 
 
 def draw_frames(frames: Sequence[Frame], ours: Sequence[Sequence[JointSet]],

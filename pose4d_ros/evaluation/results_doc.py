@@ -224,13 +224,17 @@ def real_section(results: Path, job: dict | None) -> list[str]:
              "`@0.2`: MediaPipe's confident joints (the one person it finds a frame) where ours "
              "lie within 0.1 / 0.2 x the person's height (`evaluation.real`); `found`: "
              'hand-labelled people (`labels/real/`) with a skeleton on them, ours and '
-             "MediaPipe's; `ghosts`: skeletons on no labelled person.", '',
-             '| recording | row | frames | agree@0.1 | agree@0.2 | skeletons a frame | '
-             'found (ours / MediaPipe / labelled) | ghosts (ours / MediaPipe) | CPU ms p50 |',
-             '|---|---|---|---|---|---|---|---|---|']
+             "MediaPipe's; `ghosts`: skeletons on no labelled person; `bones 3-D`: the median "
+             "relative deviation of a limb bone's 3-D length from its track's median (a "
+             "steadiness, not an accuracy: the IK holds each person's learned bone lengths).",
+             '', '| recording | row | frames | agree@0.1 | agree@0.2 | skeletons a frame | '
+             'found (ours / MediaPipe / labelled) | ghosts (ours / MediaPipe) | CPU ms p50 | '
+             'bones 3-D (ours / MediaPipe) |',
+             '|---|---|---|---|---|---|---|---|---|---|']
     for path in found:
         data = json.loads(path.read_text())
         peer = data['real'].get('mediapipe', {}).get('labels', {})
+        peer_bones = data['real'].get('mediapipe', {}).get('bones_3d', {}).get('mad_rel', '-')
         for name, t in data['real'].items():
             if name == 'mediapipe':
                 continue
@@ -242,13 +246,14 @@ def real_section(results: Path, job: dict | None) -> list[str]:
                 f"{lab.get('ours', '-')} / {peer.get('reference', '-')} / "
                 f"{lab.get('labelled', '-')} | {lab.get('ghosts', {}).get('ours', '-')} / "
                 f"{peer.get('ghosts', {}).get('reference', '-')} | "
-                f"{fmt((t.get('cpu_ms') or {}).get('p50'))} |")
+                f"{fmt((t.get('cpu_ms') or {}).get('p50'))} | "
+                f"{t.get('bones_3d', {}).get('mad_rel', '-')} / {peer_bones} |")
             for stage, st in t.get('stages', {}).items():  # where the joints are lost
                 lines.append(
                     f"| | {stage} (before the skeletons) | | {fmt(st['agree@0.1'])} | "
                     f"{fmt(st['agree@0.2'])} | {st['people_per_frame'].get('ours', 0):.2f} | "
                     f"{st.get('found', '-')} / - / {lab.get('labelled', '-')} | "
-                    f"{st.get('ghosts', '-')} / - | |")
+                    f"{st.get('ghosts', '-')} / - | | |")
     return lines + [''] + commands(job)
 
 
