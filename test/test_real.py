@@ -266,9 +266,94 @@ def test_a_cameras_recording_is_read_with_its_topics_picked(tmp_path: Path, ros1
     assert f.color[0, 0, 2] == 51 and f.depth_m[0, 0] == pytest.approx(2.5)  # bgr8 -> RGB
     assert (f.intrinsics.fx, f.intrinsics.cy, f.intrinsics.width) == (60.0, 23.5, 64)
     assert f.stamp_ns == 1_700_000_000 * 10**9 + 33_333_333  # the colour image's stamp
-    with pytest.raises(ValueError, match="no sensor_msgs/msg/Image topic '/nope'"):
+    with pytest.raises(ValueError, match="no sensor_msgs/msg/Image or sensor_msgs/msg/"
+                                         "CompressedImage topic '/nope'"):
         camera_bag.pick_topics(path, color_topic='/nope')
     out = tmp_path / 'real.json'
     assert pose4d_main(['eval', str(path), '--json', str(out),
                         '--depth-topic', '/xtion/depth_registered/image_raw']) == 0
     assert json.loads(out.read_text())['real']['rgbd_14']['frames'] == 3
+
+
+def _compressed_bag(path: Path, ros1: bool, depth_format: str, n: int = 2) -> None:
+    """A camera recorded through image_transport's codecs: JPEG colour on
+    `.../image_raw/compressed`, `compressedDepth` PNG depth (16UC1 millimetres, or 32FC1 as
+    quantised inverse depth) on `.../image_raw/compressedDepth`, and camera_info."""
+    import struct
+
+    from rosbags.typesys import Stores, get_typestore
+
+    store = get_typestore(Stores.ROS1_NOETIC if ros1 else Stores.ROS2_JAZZY)
+    t = store.types
+
+    def header(ns: int):
+        stamp = t['builtin_interfaces/msg/Time'](sec=ns // 10**9, nanosec=ns % 10**9)
+        return t['std_msgs/msg/Header'](stamp=stamp, frame_id='cam', **({'seq': 0} if ros1
+                                                                         else {}))
+
+    roi = t['sensor_msgs/msg/RegionOfInterest'](x_offset=0, y_offset=0, height=0, width=0,
+                                                do_rectify=False)
+    k = np.array([60.0, 0.0, 31.5, 0.0, 61.0, 23.5, 0.0, 0.0, 1.0])
+    calib = ({'D': np.zeros(5), 'K': k, 'R': np.eye(3).ravel(), 'P': np.zeros(12)} if ros1
+             else {'d': np.zeros(5), 'k': k, 'r': np.eye(3).ravel(), 'p': np.zeros(12)})
+    a, b = 100.0 * 101.0, 1.0 - 100.0 * 101.0 / 10.0  # quantisation 100, 10 m far
+    msgs = []
+    for i in range(n):
+        ns = 1_700_000_000 * 10**9 + i * 33_333_333
+        bgr = np.zeros((48, 64, 3), np.uint8)
+        bgr[:, :32] = (200, 40, 10)  # blue on the left
+        ok, jpg = cv2.imencode('.jpg', bgr, [cv2.IMWRITE_JPEG_QUALITY, 95])
+        metres = np.full((48, 64), 1.5 + i, np.float32)
+        metres[0, 0] = np.nan
+        if depth_format.startswith('16UC1'):
+            png_of = np.nan_to_num(metres * 1000).astype(np.uint16)
+            head = struct.pack('<iff', 1, 0.0, 0.0)
+        else:
+            png_of = np.where(np.isfinite(metres), a / metres + b, 0).astype(np.uint16)
+            head = struct.pack('<iff', 0, a, b)
+        ok2, png = cv2.imencode('.png', png_of)
+        assert ok and ok2
+        image = t['sensor_msgs/msg/CompressedImage']
+        info = t['sensor_msgs/msg/CameraInfo'](
+            header=header(ns), height=48, width=64, distortion_model='plumb_bob', binning_x=0,
+            binning_y=0, roi=roi, **calib)
+        msgs += [('/cam/color/camera_info', info, ns),
+                 ('/cam/color/image_raw/compressed', image(
+                     header=header(ns), format='bgr8; jpeg compressed bgr8',
+                     data=np.frombuffer(jpg.tobytes(), np.uint8)), ns),
+                 ('/cam/aligned_depth_to_color/image_raw/compressedDepth', image(
+                     header=header(ns), format=depth_format,
+                     data=np.frombuffer(head + png.tobytes(), np.uint8)), ns)]
+    if ros1:
+        from rosbags.rosbag1 import Writer
+        serialize = store.serialize_ros1
+    else:
+        from rosbags.rosbag2 import Writer
+        serialize = store.serialize_cdr
+    with (Writer(path) if ros1 else Writer(path, version=8)) as writer:
+        conns = {}
+        for topic, msg, ns in msgs:
+            if topic not in conns:
+                conns[topic] = writer.add_connection(topic, msg.__msgtype__, typestore=store)
+            writer.write(conns[topic], ns, serialize(msg, msg.__msgtype__))
+
+
+@pytest.mark.parametrize('ros1, depth_format', [
+    (True, '16UC1; compressedDepth png'), (False, '32FC1; compressedDepth png')],
+    ids=['ros1-16UC1', 'rosbag2-32FC1'])
+def test_a_recording_through_image_transports_codecs_is_read(tmp_path: Path, ros1,
+                                                             depth_format) -> None:
+    from pose4d_ros.datasets import camera_bag
+
+    path = tmp_path / ('cam.bag' if ros1 else 'cam')
+    _compressed_bag(path, ros1, depth_format)
+    assert camera_bag.pick_topics(path) == (
+        '/cam/color/image_raw/compressed', '/cam/aligned_depth_to_color/image_raw/compressedDepth',
+        '/cam/color/camera_info')
+    frames = load_frames([str(path)], labelled=False)
+    assert len(frames) == 2
+    f = frames[1]
+    assert np.abs(f.color[10, 5].astype(int) - (10, 40, 200)).max() <= 6  # JPEG, BGR -> RGB
+    assert np.isnan(f.depth_m[0, 0])
+    # 32FC1's inverse-depth quantisation: within a few millimetres at 2.5 m
+    assert f.depth_m[20, 20] == pytest.approx(2.5, abs=0.005)

@@ -6,6 +6,9 @@ bag readers) carry the same fields, so this module reads both without importing 
 - `sensor_msgs/Image` -> numpy (`decode`): row stride (`step`) and endianness honoured; colour
   as RGB uint8; depth per REP-118: `16UC1`/`mono16` millimetres or `32FC1` metres, 0/NaN = no
   reading, returned in the core's convention (float32 metres, NaN = no reading);
+- `sensor_msgs/CompressedImage` (image_transport's `compressed` and `compressedDepth`, as
+  robots record their cameras) -> the same arrays (`color_from_compressed`,
+  `depth_from_compressed`);
 - `sensor_msgs/CameraInfo` -> `core.camera.Intrinsics`;
 - `pose4d_msgs/JointArray` -> `core.joints.JointSet`; `pose4d_msgs/SkeletonArray` -> a tuple
   of them; both also straight from their serialised bytes (`cdr_header`, `skeletons_from_cdr`,
@@ -21,6 +24,7 @@ from __future__ import annotations
 import struct
 from typing import Any
 
+import cv2
 import numpy as np
 from numpy.typing import NDArray
 
@@ -91,6 +95,59 @@ def color_from_msg(msg: Any) -> NDArray[np.uint8]:
     if enc in ('mono8', '8UC1'):
         return np.repeat(img[..., None], 3, axis=2)
     raise ValueError(f'colour image has a depth encoding {enc!r}')
+
+
+# compressed_depth_image_transport's header before the PNG: the format (int32: 0 = inverse
+# depth, 1 = as is) and the two quantisation parameters of inverse depth (float32 a, b)
+COMPRESSED_DEPTH_HEADER = struct.Struct('<iff')
+
+
+def is_compressed_depth(msg: Any) -> bool:
+    """Whether a CompressedImage is image_transport's `compressedDepth` (its format says so)."""
+    return 'compresseddepth' in str(msg.format).lower()
+
+
+def _imdecode(data: Any, flags: int, what: str) -> NDArray:
+    img = cv2.imdecode(np.frombuffer(bytes(data), np.uint8), flags)
+    if img is None:
+        raise ValueError(f'{what}: its bytes do not decode as an image')
+    return img
+
+
+def color_from_compressed(msg: Any) -> NDArray[np.uint8]:
+    """A `compressed` CompressedImage (JPEG or PNG; format 'bgr8; jpeg compressed bgr8',
+    'rgb8; jpeg compressed bgr8' or plain 'jpeg') as (H, W, 3) uint8 RGB: the codec holds
+    BGR whatever the raw image's encoding was."""
+    if is_compressed_depth(msg):
+        raise ValueError(f'colour image is a compressedDepth image ({msg.format!r})')
+    img = _imdecode(msg.data, cv2.IMREAD_COLOR, f'compressed image ({msg.format!r})')
+    return np.ascontiguousarray(img[:, :, ::-1])
+
+
+def depth_from_compressed(msg: Any) -> NDArray[np.float32]:
+    """A `compressedDepth` CompressedImage ('16UC1; compressedDepth png': millimetres;
+    '32FC1; compressedDepth png': metres quantised as inverse depth, a / (v - b)) as (H, W)
+    float32 metres, NaN = no reading."""
+    fmt = str(msg.format)
+    if not is_compressed_depth(msg):
+        raise ValueError(f'depth image must be compressedDepth, got format {fmt!r}')
+    data = bytes(msg.data)
+    if len(data) <= COMPRESSED_DEPTH_HEADER.size:
+        raise ValueError(f'compressedDepth image of {len(data)} bytes holds no image')
+    kind, a, b = COMPRESSED_DEPTH_HEADER.unpack_from(data)
+    img = _imdecode(data[COMPRESSED_DEPTH_HEADER.size:], cv2.IMREAD_UNCHANGED,
+                    f'compressedDepth image ({fmt!r})')
+    if img.dtype != np.uint16 or img.ndim != 2:
+        raise ValueError(f'compressedDepth image ({fmt!r}) must hold 16-bit single-channel '
+                         f'pixels, got {img.dtype} {img.shape}')
+    if fmt.split(';')[0].strip().upper() == '32FC1':
+        if kind != 0:
+            raise ValueError(f'32FC1 compressedDepth must be inverse depth (0), got {kind}')
+        v = img.astype(np.float32)
+        with np.errstate(divide='ignore'):
+            depth = np.where(img > 0, np.float32(a) / (v - np.float32(b)), np.float32(np.nan))
+        return depth_to_metres(depth.astype(np.float32))
+    return depth_to_metres(img)
 
 
 def depth_from_msg(msg: Any) -> NDArray[np.float32]:
