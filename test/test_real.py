@@ -195,6 +195,22 @@ def test_hand_labels_cover_every_frame_of_the_real_folders(shared_data: Path, fo
     assert sum(map(len, labels.values())) > 0
 
 
+def _write(path: Path, ros1: bool, store, msgs: list) -> None:
+    """(topic, message, ns) in order into a ROS 1 bag or a rosbag2, as a recorder writes them."""
+    if ros1:
+        from rosbags.rosbag1 import Writer
+        serialize = store.serialize_ros1
+    else:
+        from rosbags.rosbag2 import Writer
+        serialize = store.serialize_cdr
+    with (Writer(path) if ros1 else Writer(path, version=8)) as writer:
+        conns = {}
+        for topic, msg, ns in msgs:
+            if topic not in conns:
+                conns[topic] = writer.add_connection(topic, msg.__msgtype__, typestore=store)
+            writer.write(conns[topic], ns, serialize(msg, msg.__msgtype__))
+
+
 def _camera_bag(path: Path, ros1: bool, n: int = 3) -> None:
     """A camera's recording as a driver writes it: its own topic names, bgr8 colour, 32FC1
     registered depth stamped 5 ms after the colour, camera_info, and a mono16 IR stream."""
@@ -235,18 +251,7 @@ def _camera_bag(path: Path, ros1: bool, n: int = 3) -> None:
                  ('/xtion/depth_registered/image_raw',
                   image(ns + 5_000_000, depth, '32FC1'), ns + 5_000_000),
                  ('/xtion/ir/image', image(ns, np.zeros((48, 64), np.uint16), 'mono16'), ns)]
-    if ros1:
-        from rosbags.rosbag1 import Writer
-        serialize = store.serialize_ros1
-    else:
-        from rosbags.rosbag2 import Writer
-        serialize = store.serialize_cdr
-    with (Writer(path) if ros1 else Writer(path, version=8)) as writer:
-        conns = {}
-        for topic, msg, ns in msgs:
-            if topic not in conns:
-                conns[topic] = writer.add_connection(topic, msg.__msgtype__, typestore=store)
-            writer.write(conns[topic], ns, serialize(msg, msg.__msgtype__))
+    _write(path, ros1, store, msgs)
 
 
 @pytest.mark.parametrize('ros1', [True, False], ids=['ros1', 'rosbag2'])
@@ -324,18 +329,7 @@ def _compressed_bag(path: Path, ros1: bool, depth_format: str, n: int = 2) -> No
                  ('/cam/aligned_depth_to_color/image_raw/compressedDepth', image(
                      header=header(ns), format=depth_format,
                      data=np.frombuffer(head + png.tobytes(), np.uint8)), ns)]
-    if ros1:
-        from rosbags.rosbag1 import Writer
-        serialize = store.serialize_ros1
-    else:
-        from rosbags.rosbag2 import Writer
-        serialize = store.serialize_cdr
-    with (Writer(path) if ros1 else Writer(path, version=8)) as writer:
-        conns = {}
-        for topic, msg, ns in msgs:
-            if topic not in conns:
-                conns[topic] = writer.add_connection(topic, msg.__msgtype__, typestore=store)
-            writer.write(conns[topic], ns, serialize(msg, msg.__msgtype__))
+    _write(path, ros1, store, msgs)
 
 
 @pytest.mark.parametrize('ros1, depth_format', [
