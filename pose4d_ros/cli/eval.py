@@ -376,8 +376,8 @@ def _unlabelled_bag(args: argparse.Namespace, kind: str) -> bool:
         return False
     if args.color_topic or args.depth_topic or args.info_topic or Path(args.source).is_file():
         return True
-    return cad60_bag.SKELETON_TOPIC not in bag.topics(args.source) and \
-        cad60_bag.SKELETONS_TOPIC not in bag.topics(args.source)
+    topics = bag.topics(args.source)
+    return cad60_bag.SKELETON_TOPIC not in topics and cad60_bag.SKELETONS_TOPIC not in topics
 
 
 def _stage_summary(table: dict) -> dict:

@@ -528,13 +528,9 @@ class PeopleTracker:
             cost[tuple(np.array(refused).T)] = np.nan
             matched, trusted, emerging, refused = self._match(detections, points, cost,
                                                               intrinsics)
+        # no pair left is refused (`_match`): each detection is its track's, or may start one
         for j, det in enumerate(detections):
             born = self._born(det, j in emerging and _clear_of_sides(det, intrinsics))
-            if j in matched and self._refuses(self.tracks[matched[j]], born,
-                                              emerging.get(j)):
-                # a tentative track's detection must be a person's, and so must that of a
-                # track unseen beside another person (`_continues`)
-                del matched[j]
             if j not in matched and (_finite(points[j][0]) or _finite(torso_px(det)[0])) \
                     and (j in trusted or born):
                 stage = self.make()

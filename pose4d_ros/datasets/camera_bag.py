@@ -19,7 +19,6 @@ from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
-from pose4d_ros.core.camera import Intrinsics
 from pose4d_ros.core.sync import StampSync
 from pose4d_ros.datasets.bag import any_reader
 from pose4d_ros.datasets.frame import Frame
@@ -28,6 +27,7 @@ from pose4d_ros.datasets.messages import (
     color_from_msg,
     depth_from_compressed,
     depth_from_msg,
+    intrinsics_from_msg,
     is_compressed_depth,
     stamp_to_ns,
 )
@@ -98,15 +98,6 @@ def pick_topics(path: str | Path, *, color_topic: str | None = None,
     return color, depth, info_topic
 
 
-def _intrinsics(msg: Any) -> Intrinsics:
-    """CameraInfo's K as intrinsics (ROS 2 `k`, ROS 1 `K`)."""
-    k = [float(v) for v in (msg.k if hasattr(msg, 'k') else msg.K)]
-    if k[0] <= 0 or k[4] <= 0:
-        raise ValueError(f'camera_info K has non-positive focal length (fx={k[0]}, '
-                         f'fy={k[4]}); is the camera calibrated?')
-    return Intrinsics(k[0], k[4], k[2], k[5], int(msg.width), int(msg.height))
-
-
 def read_frames(path: str | Path, *, color_topic: str | None = None,
                 depth_topic: str | None = None, info_topic: str | None = None,
                 slop_ns: int = DEFAULT_SLOP_NS) -> Iterator[Frame]:
@@ -122,7 +113,7 @@ def read_frames(path: str | Path, *, color_topic: str | None = None,
         for conn, _, raw in reader.messages(connections=wanted):
             msg = reader.deserialize(raw, conn.msgtype)
             if conn.topic == info:
-                intrinsics = _intrinsics(msg)
+                intrinsics = intrinsics_from_msg(msg)
                 continue
             stamp = stamp_to_ns(msg.header.stamp)
             for pivot, (c, d) in sync.push(0 if conn.topic == color else 1, stamp, msg):

@@ -159,8 +159,9 @@ def depth_from_msg(msg: Any) -> NDArray[np.float32]:
 
 
 def intrinsics_from_msg(msg: Any) -> Intrinsics:
-    """Pinhole intrinsics from CameraInfo's K (rectified images assumed)."""
-    k = msg.k
+    """Pinhole intrinsics from CameraInfo's K (ROS 2 `k`, ROS 1 `K`; rectified images
+    assumed)."""
+    k = msg.k if hasattr(msg, 'k') else msg.K
     if k[0] <= 0 or k[4] <= 0:
         raise ValueError(f'camera_info K has non-positive focal length (fx={k[0]}, fy={k[4]}); '
                          'is the camera calibrated?')

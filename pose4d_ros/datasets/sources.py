@@ -92,8 +92,8 @@ def open_source(path: str | Path, *, frame_range: tuple[int, int] | None = None,
         frames = lspet.read_frames(path, *frame_range)
     elif kind == 'frames':
         frames = frames_dir.read_frames(path, fps=fps, hold=hold)
-    elif Path(path).is_dir() and not any(topics.values() if topics else ()) and all(
-            t in bag.topics(path) for t in cad60_bag.CAMERA_TOPICS):
+    elif Path(path).is_dir() and not any(topics.values() if topics else ()) and set(
+            cad60_bag.CAMERA_TOPICS) <= set(bag.topics(path)):
         frames = cad60_bag.read_frames(path)  # our own topics, with ground truth if any
     else:
         frames = camera_bag.read_frames(path, **(topics or {}))

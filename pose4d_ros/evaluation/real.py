@@ -46,6 +46,7 @@ from numpy.typing import NDArray
 
 from pose4d_ros.core import joints as cj
 from pose4d_ros.core.draw import draw_people, draw_skeleton
+from pose4d_ros.core.files import write_atomic
 from pose4d_ros.core.joints import JointSet
 from pose4d_ros.core.skeleton import JOINT_GROUPS, LIMBS, SKELETON_14, limb_bones
 from pose4d_ros.datasets.frame import Frame
@@ -331,9 +332,7 @@ def draw_frames(frames: Sequence[Frame], ours: Sequence[Sequence[JointSet]],
                                [cv2.IMWRITE_JPEG_QUALITY, 85])
         if not ok:
             raise ValueError(f'{path}: could not encode')
-        tmp = path.with_name('.' + path.name + '.tmp')
-        tmp.write_bytes(jpg.tobytes())
-        tmp.replace(path)
+        write_atomic(path, jpg.tobytes())
         paths.append(path)
     return paths
 
