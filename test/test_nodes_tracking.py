@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import time
+
 import numpy as np
 import pytest
 from harness import check_tf, start
@@ -55,6 +57,53 @@ def test_tracker_node(ros, info_pub, tmp_path):
     i = PARTS_10.index('left_wrist')
     assert last.source[i] == cj.TRACKED and np.isfinite(last.xyz[i]).all()
     assert (last.source[np.arange(10) != i] == cj.DETECTED).all()
+
+
+def test_tracker_node_ends_the_track_of_a_person_the_depth_sees_through(ros, info_pub,
+                                                                         tmp_path):
+    """Ten frames of a person, then one without their parts: with the camera's depth showing
+    a wall 2.5 m behind where they were, the tracker publishes nobody (the track ended,
+    `core.people.free_space`); the depth image of the frame before still showed them."""
+    from pose4d_msgs.msg import JointArray
+    from sensor_msgs.msg import Image
+
+    from pose4d_ros.nodes import qos
+    from pose4d_ros.nodes.convert import array_to_image, intrinsics_to_msg, joints_from_msg
+
+    node = start('tracker', {}, log_dir=tmp_path)
+    try:
+        pub = ros.node.create_publisher(JointArray, 'pose4d/parts', qos.OUTPUT_QOS)
+        depth_pub = ros.node.create_publisher(Image, 'camera/depth/image_raw', qos.OUTPUT_QOS)
+        got = ros.collect(JointArray, 'pose4d/parts/tracked', qos.OUTPUT_QOS)
+        for p in (pub, info_pub, depth_pub):
+            ros.wait_for_subscribers(p)
+        ros.wait_for_publishers('pose4d/parts/tracked')
+        sent = [header_at(k) for k in range(12)]
+        person = np.full((INTR.height, INTR.width), 5000, np.uint16)
+        person[40:230, 120:200] = 2500  # the person 2.5 m away, a wall at 5 m
+        wall = np.full((INTR.height, INTR.width), 5000, np.uint16)
+
+        def send(k: int, depth: np.ndarray, missing=()) -> None:
+            info_pub.publish(intrinsics_to_msg(INTR, sent[k]))
+            depth_pub.publish(array_to_image(depth, '16UC1', sent[k]))
+            time.sleep(0.05)  # the depth first: the tracker never waits for it
+            pub.publish(parts_msg(k, sent[k], missing=missing))
+
+        ros.send_until_answered(lambda: send(0, person), lambda: any(
+            np.isfinite(joints_from_msg(m).xyz).all() for m in got), 'the first frame')
+        for k in range(1, 12):
+            send(k, person if k < 11 else wall, missing=PARTS_10.names if k >= 10 else ())
+            ros.spin_until(lambda h=sent[k]: any(m.header == h for m in got), 10,
+                           f'frame {k} tracked')
+    finally:
+        assert node.stop() == 0, node.output()
+    by_stamp = {(m.header.stamp.sec, m.header.stamp.nanosec): joints_from_msg(m) for m in got}
+    at = [by_stamp[(h.stamp.sec, h.stamp.nanosec)] for h in sent]
+    assert at[9].track_id == 1 and (at[9].source == cj.DETECTED).all()
+    # unseen, the depth still showing them: predicted
+    assert at[10].track_id == 1 and (at[10].source == cj.TRACKED).all()
+    # unseen, the depth reading the wall where they were: nobody
+    assert at[11].track_id == 0 and (at[11].source == cj.MISSING).all()
 
 
 @pytest.mark.parametrize('use_depth', [False, True])

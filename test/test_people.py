@@ -705,3 +705,53 @@ def test_a_held_person_is_not_taken_for_what_comes_out_from_behind_someone_else(
     out = tr.step([_scored(person(0.0, z=2.2), 8.0), _scored(side, 8.0),
                    _scored(person(0.35, z=3.4), 2.0)], 26 * DT, INTR)
     assert (next(t for t in out if t.track_id == far).source == cj.DETECTED).any()
+
+
+def _wall(z: float | None = None, person_at: tuple[float, float] | None = None
+          ) -> np.ndarray:
+    """A depth image of a wall `z` metres away (None: no reading anywhere), with a person's
+    box at (x, z) in front of it."""
+    depth = np.full((INTR.height, INTR.width), np.nan if z is None else z, np.float32)
+    if person_at is not None:
+        x, pz = person_at
+        u0, v0 = project(np.array([[x - 0.3, -0.8, pz]]), INTR)[0].astype(int)
+        u1, v1 = project(np.array([[x + 0.3, 0.9, pz]]), INTR)[0].astype(int)
+        depth[max(v0, 0):v1, max(u0, 0):u1] = pz
+    return depth
+
+
+@pytest.mark.parametrize('held', [False, True])
+def test_an_unseen_person_whose_place_the_camera_sees_through_has_left(held):
+    """The far person stops being detected. In the open (walked off): while the depth image
+    shows them (a reading at their place) or shows nothing (no readings), their track lives
+    on; once it reads the wall 3 m behind their place, the track ends at once, where it would
+    else be published for `max_unseen_s` (every unseen frame a ghost). Behind the near person
+    (held), the depth reads the near person where they would be: they may be there, and live."""
+    far_x = 0.1 if held else 1.0
+    for depth, lives in ((_wall(6.5, (far_x, 3.4)), True), (_wall(None), True),
+                         (_wall(6.5), held)):
+        tr = tracker()
+        for k in range(10):
+            out = tr.step([person(0.0, z=2.2), person(far_x, z=3.4)], k * DT, INTR,
+                          _wall(6.5, (far_x, 3.4)))
+        far = max(out, key=lambda t: torso(t)[0][2]).track_id
+        depth = depth.copy()
+        depth[_wall(None, (0.0, 2.2)) == 2.2] = 2.2  # the near person, always seen
+        out = tr.step([person(0.0, z=2.2)], 10 * DT, INTR, depth)
+        assert (far in [t.track_id for t in out]) == lives
+        assert tr.ended == ([] if lives else [far])
+    # off by config: the tracker before
+    tr = tracker(free_space_m=0.0)
+    for k in range(10):
+        out = tr.step([person(0.0, z=2.2), person(far_x, z=3.4)], k * DT, INTR, _wall(6.5))
+    assert len(tr.step([person(0.0, z=2.2)], 10 * DT, INTR, _wall(6.5))) == 2
+
+
+def test_an_unseen_person_predicted_out_of_the_image_has_left():
+    tr = tracker()
+    for k in range(10):  # walking right at 3 m/s, towards the image's right side
+        tr.step([person(0.1 * k)], k * DT, INTR, _wall(6.5, (0.1 * k, 2.5)))
+    out = tr.step([], 10 * DT, INTR, _wall(6.5, (0.9, 2.5)))
+    assert [t.track_id for t in out] == [1]  # predicted at 1.0 m: still in the image
+    # far beyond the side 0.5 s later; the depth there unknown, no reading is needed
+    assert tr.step([], 25 * DT, INTR, _wall(None)) == [] and tr.ended == [1]

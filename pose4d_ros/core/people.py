@@ -184,6 +184,20 @@ class TrackingConfig:
         89.20 / 0.965 / 0; `valid60_people3` 87.13 / 0.971 / 0 at both; 2 as 3; 3 and 3.5
         without the side rule 37.5 and 56.9 false skeletons per 1000 frames on
         `valid60_people3b` and `valid60_people3`. The sweep `emerging` of `make results`.
+    free_space_m, free_share : an unseen confirmed track (in the open or held behind someone)
+        ends when the depth image shows nobody where it puts the person (`free_space`): at
+        least `free_share` of the readings in a torso-sized square around its torso point lie
+        over `free_space_m` beyond it, or the point projects outside the image (0: off, the
+        tracker before; also off without a depth image). On real recordings a person who
+        walked off was predicted on for `max_unseen_s` (out through the image's side, or held
+        where they had stood for `max_hidden_s`), a ghost skeleton every frame. On the real
+        development recording lab_walk (`pose4d eval ../shared/data/real/lab_walk --fps 10
+        --labels labels/real/lab_walk.json [--colour-net lspet_convnet] --config
+        tracking.free_space_m=M`; ghosts, labelled people found of 228): off 276, 160 (with the
+        network 94, 159); 0.75 m with a share of 0.9 174, 154 (82, 152); 1.5 m and 0.9 209,
+        167 (78, 157), shipped: the farthest, the surest the person is gone. Validation renders
+        (`valid60_people2`, `valid60_people3b`, `valid60_people3d`, `valid30_people2b`): the
+        same to the digit with it as without.
 
     `confirm_frames`, `birth_score` and `trust_score`, and the foreground's second look, were
     chosen on validation renders (training subjects s01-s06, seed 201: `valid60_people2`, two
@@ -215,6 +229,8 @@ class TrackingConfig:
     held_continues: bool = True
     held_own_front: bool = True
     emerging_score: float = 3.0
+    free_space_m: float = 1.5
+    free_share: float = 0.9
 
     def __post_init__(self) -> None:
         if self.max_people < 1 or self.confirm_frames < 1 or self.quiet_frames < 0:
@@ -229,6 +245,9 @@ class TrackingConfig:
             raise ValueError(f'detector_keep_s must be >= 0, got {self.detector_keep_s}')
         if math.isnan(self.trust_score):
             raise ValueError('trust_score must be a number (inf: only the best region), got nan')
+        if not (self.free_space_m >= 0 and 0 < self.free_share <= 1):
+            raise ValueError(f'need free_space_m >= 0 and 0 < free_share <= 1, got '
+                             f'{self.free_space_m} and {self.free_share}')
         if math.isnan(self.emerging_score):
             raise ValueError('emerging_score must be a number (inf: birth_score only), got nan')
 
@@ -496,9 +515,11 @@ class PeopleTracker:
         self.born, self.ended = [], []
 
     def step(self, detections: Sequence[JointSet], stamp_s: float,
-             intrinsics: Intrinsics | None) -> list[JointSet]:
+             intrinsics: Intrinsics | None,
+             depth_m: NDArray[np.floating] | None = None) -> list[JointSet]:
         """Track one frame: the tracked parts of every confirmed track (its `track_id` set),
-        primary first, then by id."""
+        primary first, then by id. `depth_m` (the camera's depth, metres, NaN = no reading):
+        an unseen track whose person the depth image shows is not there ends (`free_space`)."""
         cfg = self.config
         # every detection checked before anything changes: a frame with one the SLQE would
         # refuse is refused whole (ValueError), and the tracks are untouched
@@ -537,6 +558,7 @@ class PeopleTracker:
                 self.tracks.append(_Track(stage, names=stage.check(det, intrinsics).names))
                 matched[j] = len(self.tracks) - 1
         seen = {i: j for j, i in matched.items()}
+        gone: list[_Track] = []
         # the tracks seen first: a track unseen behind one of them is held (`_behind`)
         for i in sorted(range(len(self.tracks)), key=lambda i: i not in seen):
             track = self.tracks[i]
@@ -546,6 +568,8 @@ class PeopleTracker:
                 if not track.held:
                     track.held, track.held_s, track.behind = True, stamp_s, behind
                 track.last = _held(track.last)
+                if self._left(track.last, depth_m, intrinsics):
+                    gone.append(track)
                 continue
             if i in seen and track.held:
                 track.stage.reset()
@@ -564,6 +588,9 @@ class PeopleTracker:
             if hidden is not None:
                 out = _kept(out, track.last, hidden)
             track.names = out.names
+            if i not in seen and track.id and self._left(out, depth_m, intrinsics):
+                gone.append(track)
+                continue
             if i in seen:
                 self._seen(track, out, stamp_s)
                 if not track.id and (track.hits >= cfg.confirm_frames or seen[i] in trusted):
@@ -572,10 +599,19 @@ class PeopleTracker:
             track.last = _with_track_id(out, track.id)
         # a tentative track must be matched every frame (confirmed ones end at the next step
         # once unseen over `max_unseen_s`)
-        self.tracks = [t for t in self.tracks if t.id or t.seen_s == stamp_s]
+        self.tracks = [t for t in self.tracks
+                       if (t.id or t.seen_s == stamp_s) and t not in gone]
+        self.ended += [t.id for t in gone]
         # a pose held too long is mostly where nobody is: kept, not published
         return [t.last for t in self._ordered(stamp_s)
                 if not (t.held and stamp_s - t.held_s > cfg.max_held_s)]
+
+    def _left(self, joints: JointSet | None, depth_m: NDArray[np.floating] | None,
+              intrinsics: Intrinsics | None) -> bool:
+        """Whether an unseen track's person has left: the depth image shows free space where
+        `joints` put them (`free_space`; never without depth or with `free_space_m` 0)."""
+        return (joints is not None and depth_m is not None and self.config.free_space_m > 0
+                and free_space(joints, depth_m, intrinsics, self.config))
 
     def _match(self, detections: Sequence[JointSet], points: list[tuple[NDArray, NDArray]],
                cost: NDArray[np.float64], intrinsics: Intrinsics | None
@@ -778,6 +814,30 @@ class PeopleTracker:
         # the longest tracked: seen in most frames (the first confirmed on a tie)
         primary = sorted(seen or confirmed, key=lambda t: -t.hits)[:1]
         return primary + [t for t in confirmed if t not in primary]
+
+
+def free_space(joints: JointSet, depth_m: NDArray[np.floating], intrinsics: Intrinsics | None,
+               config: TrackingConfig) -> bool:
+    """Whether the depth image shows that nobody is where `joints` (an unseen track's
+    prediction) puts a person: its torso point projects outside the image, or at least
+    `free_share` of the depth readings in a square of the torso's size (0.3 m) around it lie
+    over `free_space_m` beyond it (the camera sees through where the person would be). A person
+    hidden behind something nearer, or in a hole of the depth image, is not free space."""
+    point, _ = torso(joints)
+    if intrinsics is None or not _finite(point) or point[2] <= 0:
+        return False
+    u, v = project(point[None], intrinsics)[0]
+    h, w = depth_m.shape
+    if not (0 <= u < w and 0 <= v < h):
+        return True
+    r = max(int(0.15 * intrinsics.fx / point[2]), 1)
+    x, y = int(u), int(v)
+    window = depth_m[max(y - r, 0):y + r + 1, max(x - r, 0):x + r + 1]
+    readings = window[np.isfinite(window)]
+    if readings.size < 0.25 * window.size:
+        return False
+    return bool(np.count_nonzero(readings > point[2] + config.free_space_m)
+                >= config.free_share * readings.size)
 
 
 def _out_from_behind(track: _Track, fronts: set[int] | None, own_front: bool) -> bool:

@@ -136,7 +136,7 @@ class FramePipeline:
         parts = multi.detector.step(color, np.asarray(depth_m, np.float32), intrinsics, found,
                                     stamp_s=stamp_s)
         self._lap(clock)
-        tracked = multi.tracker.step(parts, stamp_s, intrinsics)
+        tracked = multi.tracker.step(parts, stamp_s, intrinsics, depth_m)
         self._lap(clock)
         skeletons = multi.ik.step(tracked, depth_mm, intrinsics)
         self._lap(clock)

@@ -35,7 +35,7 @@ from rclpy.node import Node
 from rclpy.serialization import deserialize_message
 from rclpy.signals import SignalHandlerOptions
 from rclpy.subscription import Subscription
-from sensor_msgs.msg import CameraInfo
+from sensor_msgs.msg import CameraInfo, Image
 from std_msgs.msg import Header
 
 from pose4d_ros.core.camera import Intrinsics
@@ -43,7 +43,7 @@ from pose4d_ros.core.sync import TIME_JUMP_S, StampJumps, StampSync
 from pose4d_ros.core.threads import set_blas_threads
 from pose4d_ros.datasets import messages
 from pose4d_ros.nodes import qos
-from pose4d_ros.nodes.convert import intrinsics_from_msg, stamp_to_ns
+from pose4d_ros.nodes.convert import depth_from_msg, intrinsics_from_msg, stamp_to_ns
 from pose4d_ros.nodes.params import ParameterError
 
 DIAGNOSTICS_TOPIC = '/diagnostics'
@@ -425,6 +425,44 @@ class LatestIntrinsics:
         except ValueError as exc:
             self._read = None
             self._monitor.bad_input(f'camera_info refused: {exc}')
+
+
+class RecentDepth:
+    """The camera's depth images of the last few stamps, for a stage that uses the one of its
+    frame's stamp when it has come but never waits for it (the tracker's free-space check):
+    `at(stamp_ns)` is that image in metres (the nearest stamp within `slop_ns`), or None.
+
+    Only the stamps are read as the images arrive (`messages.cdr_header`); an image is
+    deserialised when it is used."""
+
+    KEEP = 8
+
+    def __init__(self, node: Node, monitor: StageMonitor, topic: str, *,
+                 slop_ns: int = 0) -> None:
+        self._recent: deque[tuple[int, bytes]] = deque(maxlen=self.KEEP)
+        self._slop_ns = slop_ns
+        self._monitor = monitor
+        self._name = node.resolve_topic_name(topic)
+        subscribe(node, Image, topic, self._recent.append, qos.SENSOR_QOS, monitor,
+                  decode=lambda data: (_stamp_ns(data), data))
+
+    def at(self, stamp_ns: int) -> np.ndarray | None:
+        recent = list(self._recent)
+        if not recent:
+            return None
+        near, data = min(recent, key=lambda item: abs(item[0] - stamp_ns))
+        if abs(near - stamp_ns) > self._slop_ns:
+            return None
+        try:
+            return depth_from_msg(deserialize_message(data, Image))
+        except ValueError as exc:
+            self._monitor.bad_input(f'{self._name} at {near} ns refused: {exc}')
+            return None
+
+
+def _stamp_ns(data: bytes) -> int:
+    sec, nanosec, _, _ = messages.cdr_header(data)
+    return sec * 1_000_000_000 + nanosec
 
 
 class PeopleInputs:

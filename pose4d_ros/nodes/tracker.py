@@ -11,6 +11,10 @@ Subscriptions
     detector that publishes only one person, pose4d/parts (pose4d_msgs/JointArray, the
     detector's 10 or 14 parts, DETECTED or MISSING)
     camera/color/camera_info (sensor_msgs/CameraInfo; the latest, for 3-D positions)
+    camera/depth/image_raw (sensor_msgs/Image, 16UC1 or 32FC1, registered to colour; only
+    when tracker.free_space_m > 0: the image of a frame's stamp, `tracker.depth_slop_s`, if it
+    has come, never waited for: an unseen person whose place the camera sees through has
+    left, `core.people.free_space`)
 Publications (with the input header)
     pose4d/parts/tracked/people (pose4d_msgs/SkeletonArray: every confirmed track's parts,
     DETECTED / TRACKED / MISSING, track_id set; the primary person first; empty: nobody)
@@ -20,7 +24,8 @@ Publications (with the input header)
 Parameters (config/tracker.yaml)
     tracker.kind, tracker.coupling, tracker.process_noise, tracker.measurement_noise_px,
     tracker.gate_chi2, tracker.max_missed_frames, tracker.max_dt_s, tracker.depth_std_m,
-    tracker.confirm_frames, tracker.max_unseen_s, tracker.max_hidden_s, tracker.max_held_s
+    tracker.confirm_frames, tracker.max_unseen_s, tracker.max_hidden_s, tracker.max_held_s,
+    tracker.free_space_m, tracker.depth_slop_s
 """
 
 from __future__ import annotations
@@ -38,7 +43,13 @@ from pose4d_ros.core.people import PeopleTracker, TrackingConfig
 from pose4d_ros.core.slqe import CvConfig, SlqeConfig
 from pose4d_ros.core.stages import TrackerStage
 from pose4d_ros.nodes import qos
-from pose4d_ros.nodes.common import LatestIntrinsics, PeopleInputs, StageMonitor, run
+from pose4d_ros.nodes.common import (
+    LatestIntrinsics,
+    PeopleInputs,
+    RecentDepth,
+    StageMonitor,
+    run,
+)
 from pose4d_ros.nodes.convert import joints_to_cdr, skeletons_to_cdr, stamp_to_ns
 from pose4d_ros.nodes.params import NodeParams, Param
 
@@ -75,6 +86,13 @@ PARAMS = (
     Param('tracker.max_held_s', 0.0, 'A person hidden behind another is published at their '
           'last pose this long at most, seconds (then kept unpublished till seen again or '
           'ended); 0: till then.', range=(0.0, 60.0), live=True),
+    Param('tracker.free_space_m', TrackingConfig.free_space_m, 'An unseen person ends '
+          'their track when the depth image reads this far beyond their predicted torso '
+          '(nobody there); 0 = off, no depth subscription.', range=(0.0, 100.0),
+          restart='it decides at start-up whether depth is subscribed to'),
+    Param('tracker.depth_slop_s', 0.0, 'Largest stamp difference between detected parts and '
+          'the camera depth, seconds (0 = exact).', range=(0.0, 1.0),
+          restart='the pairing of parts and depth is set up at start-up'),
     Param('tracker.depth_std_m', TrackerStage.DEPTH_STD_M,
           "Standard deviation of a tracked part's depth in its "
           'covariance, metres.', range=(0.0, 10.0), live=True),
@@ -111,7 +129,8 @@ def people_config(p: dict[str, Any]) -> TrackingConfig:
                           confirm_frames=p['tracker.confirm_frames'],
                           max_unseen_s=p['tracker.max_unseen_s'],
                           max_hidden_s=p['tracker.max_hidden_s'],
-                          max_held_s=p['tracker.max_held_s'] or math.inf)
+                          max_held_s=p['tracker.max_held_s'] or math.inf,
+                          free_space_m=p['tracker.free_space_m'])
 
 
 class TrackerNode(Node):
@@ -130,6 +149,9 @@ class TrackerNode(Node):
         self.pub_people = self.create_publisher(SkeletonArray, 'pose4d/parts/tracked/people',
                                                 qos.OUTPUT_QOS)
         self.pub = self.create_publisher(JointArray, 'pose4d/parts/tracked', qos.OUTPUT_QOS)
+        self.depth = (RecentDepth(self, self.monitor, 'camera/depth/image_raw',
+                                  slop_ns=int(p['tracker.depth_slop_s'] * 1e9))
+                      if p['tracker.free_space_m'] > 0 else None)
         self.inputs = PeopleInputs(self, 'pose4d/parts/people', 'pose4d/parts', [],
                                    self.process, self.monitor)
         self.get_logger().info(
@@ -153,8 +175,11 @@ class TrackerNode(Node):
         stamp = stamp_to_ns(header.stamp)
         if self.monitor.time_jumped(stamp):
             self.people.reset()
+        intrinsics = self.camera.intrinsics
         try:
-            tracked = self.people.step(detections, stamp * 1e-9, self.camera.intrinsics)
+            depth = (self.depth.at(stamp) if self.depth is not None and intrinsics is not None
+                     else None)
+            tracked = self.people.step(detections, stamp * 1e-9, intrinsics, depth)
         except ValueError as exc:
             self.monitor.bad_input(f'pose4d/parts frame at {stamp} ns refused: {exc}')
             return
