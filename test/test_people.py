@@ -513,7 +513,7 @@ def test_joints_on_a_nearer_persons_body_keep_their_last_estimate():
     """A far person half behind a near one: the far person's detected joints that lie on the
     near person's body (within `occluded_width_m` of one of their bones in the image) keep
     the track's last estimate (TRACKED); the others follow the detection."""
-    from pose4d_ros.core.people import _near_segment
+    from pose4d_ros.core.people.tracker import _near_segment
     from pose4d_ros.core.skeleton import tree_for
 
     tr = tracker()

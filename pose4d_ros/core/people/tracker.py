@@ -1,0 +1,508 @@
+"""One SLQE per person with stable ids (`PeopleTracker`): detections assigned to tracks each
+frame, tracks born, confirmed, held behind a nearer person and ended (`free_space`: where the
+depth image sees through an unseen person's place), the primary person first (the design: the
+package's docstring, `core.people`)."""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+
+import numpy as np
+from numpy.typing import NDArray
+
+from pose4d_ros.core import joints as cj
+from pose4d_ros.core.camera import Intrinsics, project
+from pose4d_ros.core.joints import JointSet
+from pose4d_ros.core.people.assignment import _mahalanobis2_all, assign, torso, torso_px
+from pose4d_ros.core.people.config import TrackingConfig
+from pose4d_ros.core.skeleton import tree_for
+
+
+@dataclass
+class _Track:
+    stage: object
+    id: int = 0  # 0 while tentative
+    hits: int = 0
+    seen_s: float = -math.inf
+    point: NDArray[np.float64] = field(default_factory=lambda: np.full(3, np.nan))
+    cov: NDArray[np.float64] = field(default_factory=lambda: np.zeros((3, 3)))
+    pixel: NDArray[np.float64] = field(default_factory=lambda: np.full(2, np.nan))
+    size_px: float = math.nan
+    velocity: NDArray[np.float64] = field(default_factory=lambda: np.zeros(3))
+    names: tuple[str, ...] = ()
+    last: JointSet | None = None
+    held: bool = False  # hidden behind another person: `last` is their last pose, kept
+    held_s: float = math.nan  # since when
+    behind: int = 0  # while held: the id of the track of the person hiding them
+
+
+class PeopleTracker:
+    """One SLQE per person (`core.pipeline.TrackerStage`), detections assigned to tracks each
+    frame (module docstring).
+
+    Parameters
+    ----------
+    make : a new TrackerStage for a new track.
+    config : `TrackingConfig`.
+
+    Attributes
+    ----------
+    born, ended : ids of the tracks confirmed and ended by the last `step`.
+    next_id : the id the next confirmed track gets (ids are never reused).
+    """
+
+    def __init__(self, make: Callable[[], object], config: TrackingConfig | None = None) -> None:
+        self.make = make
+        self.config = config or TrackingConfig()
+        self.tracks: list[_Track] = []
+        self.last_s: float | None = None
+        self._previous_s: float | None = None
+        self._spare: object | None = None
+        self.next_id = 1
+        self.born: list[int] = []
+        self.ended: list[int] = []
+
+    def reset(self) -> None:
+        """End every track (ids still count on)."""
+        self.ended = [t.id for t in self.tracks if t.id]
+        self.tracks = []
+        self.last_s = None
+
+    def warm_up(self, intrinsics: Intrinsics) -> None:
+        """Track two people for a few frames (the first frames' paths run once), then forget
+        them: ids start at 1."""
+        from pose4d_ros.core.skeleton import PARTS_10
+
+        base = np.array([[0.0, -0.7 + 0.17 * k, 2.8] for k in range(len(PARTS_10))])
+        for k in range(4):
+            people = []
+            for dx in (-0.6, 0.6):
+                xyz = base + [dx, 0.0, 0.0]
+                people.append(JointSet(PARTS_10.names, project(xyz, intrinsics), xyz,
+                                       source=np.full(len(xyz), cj.DETECTED, np.uint8),
+                                       confidence=np.full(len(xyz), 0.9), score=10.0))
+            self.step(people, k / 30, intrinsics)
+        self.reset()
+        self.next_id = 1
+        self.born, self.ended = [], []
+
+    def step(self, detections: Sequence[JointSet], stamp_s: float,
+             intrinsics: Intrinsics | None,
+             depth_m: NDArray[np.floating] | None = None) -> list[JointSet]:
+        """Track one frame: the tracked parts of every confirmed track (its `track_id` set),
+        primary first, then by id. `depth_m` (the camera's depth, metres, NaN = no reading):
+        an unseen track whose person the depth image shows is not there ends (`free_space`)."""
+        cfg = self.config
+        # every detection checked before anything changes: a frame with one the SLQE would
+        # refuse is refused whole (ValueError), and the tracks are untouched
+        checker = self.tracks[0].stage if self.tracks else self._checker()
+        for det in detections:
+            checker.check(det, intrinsics)
+        self.born, self.ended = [], []
+        # a gap in the stream (no frame for over `max_gap_s`: a new video, a paused camera)
+        # ends every track, as the SLQE restarts after one; a track unseen longer than
+        # `max_unseen_s` (`max_hidden_s` held behind another) while frames came has ended and
+        # is matched no more
+        gap = self.last_s is not None and not 0.0 <= stamp_s - self.last_s <= cfg.max_gap_s
+        self._previous_s, self.last_s = self.last_s, stamp_s
+        ended = [t for t in self.tracks if gap or stamp_s - t.seen_s > (
+            cfg.max_hidden_s if t.held else cfg.max_unseen_s)]
+        self.ended = [t.id for t in ended if t.id]
+        self.tracks = [t for t in self.tracks if t not in ended]
+        points = [torso(d) for d in detections]
+        cost = self._cost(detections, points, stamp_s)
+        matched, trusted, emerging, refused = self._match(detections, points, cost, intrinsics)
+        while refused:
+            # a pair the track refuses takes no part: the detection goes to the next track
+            # that fits, a tentative one among them (a person held behind another, offered the
+            # detection of someone walking by, would else take it from that person's young
+            # track frame after frame and refuse it: the person never confirmed); each round
+            # removes a pair, so this ends
+            cost[tuple(np.array(refused).T)] = np.nan
+            matched, trusted, emerging, refused = self._match(detections, points, cost,
+                                                              intrinsics)
+        # no pair left is refused (`_match`): each detection is its track's, or may start one
+        for j, det in enumerate(detections):
+            born = self._born(det, j in emerging and _clear_of_sides(det, intrinsics))
+            if j not in matched and (_finite(points[j][0]) or _finite(torso_px(det)[0])) \
+                    and (j in trusted or born):
+                stage = self.make()
+                self.tracks.append(_Track(stage, names=stage.check(det, intrinsics).names))
+                matched[j] = len(self.tracks) - 1
+        seen = {i: j for j, i in matched.items()}
+        gone: list[_Track] = []
+        # the tracks seen first: a track unseen behind one of them is held (`_behind`)
+        for i in sorted(range(len(self.tracks)), key=lambda i: i not in seen):
+            track = self.tracks[i]
+            if i not in seen and track.id and (track.held or (
+                    behind := self._behind(track, stamp_s))):
+                # its last pose kept until seen again (its SLQE then restarts) or ended
+                if not track.held:
+                    track.held, track.held_s, track.behind = True, stamp_s, behind
+                track.last = _held(track.last)
+                if self._left(track.last, depth_m, intrinsics):
+                    gone.append(track)
+                continue
+            if i in seen and track.held:
+                track.stage.reset()
+                track.held = False
+            det = detections[seen[i]] if i in seen else JointSet.missing(track.names)
+            hidden = None
+            if i in seen and track.id and cfg.hold_occluded and track.last is not None:
+                hidden = self._hidden(det, points[seen[i]][0], [
+                    (detections[j], points[j][0]) for j in seen.values() if j != seen[i]],
+                    intrinsics)
+            if hidden is not None:
+                # the joints on a nearer person's body: their last estimates kept
+                det = _without(det, hidden)
+            # checked above (`_without` and `JointSet.missing` only make joints MISSING)
+            out = track.stage.step(det, stamp_s, intrinsics, checked=True)
+            if hidden is not None:
+                out = _kept(out, track.last, hidden)
+            track.names = out.names
+            if i not in seen and track.id and self._left(out, depth_m, intrinsics):
+                gone.append(track)
+                continue
+            if i in seen:
+                self._seen(track, out, stamp_s)
+                if not track.id and (track.hits >= cfg.confirm_frames or seen[i] in trusted):
+                    track.id, self.next_id = self.next_id, self.next_id + 1
+                    self.born.append(track.id)
+            track.last = _with_track_id(out, track.id)
+        # a tentative track must be matched every frame (confirmed ones end at the next step
+        # once unseen over `max_unseen_s`)
+        self.tracks = [t for t in self.tracks
+                       if (t.id or t.seen_s == stamp_s) and t not in gone]
+        self.ended += [t.id for t in gone]
+        # a pose held too long is mostly where nobody is: kept, not published
+        return [t.last for t in self._ordered(stamp_s)
+                if not (t.held and stamp_s - t.held_s > cfg.max_held_s)]
+
+    def _left(self, joints: JointSet | None, depth_m: NDArray[np.floating] | None,
+              intrinsics: Intrinsics | None) -> bool:
+        """Whether an unseen track's person has left: the depth image shows free space where
+        `joints` put them (`free_space`; never without depth or with `free_space_m` 0)."""
+        return (joints is not None and depth_m is not None and self.config.free_space_m > 0
+                and free_space(joints, depth_m, intrinsics, self.config))
+
+    def _match(self, detections: Sequence[JointSet], points: list[tuple[NDArray, NDArray]],
+               cost: NDArray[np.float64], intrinsics: Intrinsics | None
+               ) -> tuple[dict[int, int], set[int], dict[int, set[int]], list[tuple[int, int]]]:
+        """The assignment on `cost` ({detection: track}), the detections trusted at once,
+        those emerging from behind a nearer person, and the pairs (track, detection) whose
+        track refuses the detection (`_refuses`)."""
+        matched = {j: i for i, j in self._assign(cost)}
+        trusted = self._trusted(detections, matched)
+        emerging = self._emerging(detections, points, matched)
+        refused = [(i, j) for j, i in matched.items() if self._refuses(
+            self.tracks[i], self._born(detections[j], j in emerging and _clear_of_sides(
+                detections[j], intrinsics)), emerging.get(j))]
+        return matched, trusted, emerging, refused
+
+    def _refuses(self, track: _Track, born: bool, fronts: set[int] | None) -> bool:
+        """Whether `track` refuses a detection assigned to it (`born`: it may start a track;
+        `fronts`: the ids of the people it comes out from behind): a held track one away
+        from where its person would come out (`_elsewhere`), a tentative track or one
+        unseen beside another person one that could not start a track (`_continues`)."""
+        out = _out_from_behind(track, fronts, self.config.held_own_front)
+        return self._elsewhere(track, out) or (not born and not self._continues(track, out))
+
+    def _assign(self, cost: NDArray[np.float64]) -> list[tuple[int, int]]:
+        """`assign` for the confirmed tracks first, then for the tentative ones on the
+        detections left: a track just started beside a confirmed one never takes its person's
+        detection from it (the confirmed one would go on unseen, predicted where nobody is)."""
+        gate = self.config.gate_chi2
+        tentative = [i for i, t in enumerate(self.tracks) if not t.id]
+        if not (self.config.confirmed_first and tentative):
+            return assign(cost, gate)
+        rows = [i for i, t in enumerate(self.tracks) if t.id]
+        pairs = [(rows[r], c) for r, c in assign(cost[rows], gate)]
+        taken = {c for _, c in pairs}
+        left = [c for c in range(cost.shape[1]) if c not in taken]
+        if left:
+            pairs += [(tentative[r], left[c])
+                      for r, c in assign(cost[np.ix_(tentative, left)], gate)]
+        return pairs
+
+    def _trusted(self, detections: Sequence[JointSet], matched: dict[int, int]) -> set[int]:
+        """The detections confirmed at their first frame: none while a track is confirmed;
+        with nobody tracked, every one scoring at least `trust_score`, or, when none does, the
+        first not matched (the foreground's best region), as the single-person tracker trusts
+        its one detection, if it scores at least `birth_score` (a desk in an empty room,
+        trusted at the first frame, was a ghost on real recordings: lab_walk with the
+        photograph network 111 -> 94 ghosts; validation renders unchanged)."""
+        if any(t.id for t in self.tracks):
+            return set()
+        free = [j for j in range(len(detections)) if j not in matched]
+        sure = {j for j in free if detections[j].score >= self.config.trust_score}
+        return sure or {j for j in free[:1] if not detections[j].score < self.config.birth_score}
+
+    def _hidden(self, det: JointSet, point: NDArray[np.float64],
+                others: list[tuple[JointSet, NDArray[np.float64]]],
+                intrinsics: Intrinsics | None) -> NDArray[np.bool_] | None:
+        """(J,) the joints of `det` that lie on a nearer person's body: within
+        `occluded_width_m` (at that person's depth) of one of their bones in the image, that
+        person's torso nearer by over `torso_std_m`; None when there is none."""
+        cfg = self.config
+        if intrinsics is None or not _finite(point):
+            return None
+        hidden = np.zeros(len(det.names), bool)
+        for other, q in others:
+            if not (_finite(q) and q[2] < point[2] - cfg.torso_std_m):
+                continue
+            ok = (other.source != cj.MISSING) & np.isfinite(other.uv).all(axis=1)
+            r = cfg.occluded_width_m * intrinsics.fx / q[2]
+            for a, b in tree_for(other.names).edges():
+                if ok[a] and ok[b]:
+                    hidden |= _near_segment(det.uv, other.uv[a], other.uv[b], r)
+        return hidden if hidden.any() else None
+
+    def _checker(self) -> object:
+        """A stage to check detections with while there is no track (made once)."""
+        if self._spare is None:
+            self._spare = self.make()
+        return self._spare
+
+    def _born(self, det: JointSet, emerging: bool = False) -> bool:
+        """Whether a detection may start or grow a tentative track (`birth_score`, or
+        `emerging_score` where it comes out from behind a nearer person)."""
+        cfg = self.config
+        least = min(cfg.birth_score, cfg.emerging_score) if emerging else cfg.birth_score
+        return not det.score < least  # NaN: no score to judge by
+
+    def _continues(self, track: _Track, emerging: bool = False) -> bool:
+        """Whether a confirmed track takes any detection: no other confirmed track exists (one
+        person is tracked as the single-person tracker tracks them), or it was seen at the
+        last frame, or it is held behind another and the detection is `emerging` from
+        behind a nearer person (`held_continues`; elsewhere it takes none, `_elsewhere`).
+        Otherwise only a detection that could start a track (`birth_score`) is its: what the
+        gate of a track unseen beside another person reaches is often a part of the room."""
+        if not track.id:
+            return False
+        if not any(t.id for t in self.tracks if t is not track):
+            return True
+        # a person held behind another comes out partly seen, and scores low meanwhile
+        return track.seen_s == self._previous_s or (
+            track.held and emerging and self.config.held_continues)
+
+    def _elsewhere(self, track: _Track, emerging: bool) -> bool:
+        """Whether a track held behind a nearer person is offered a detection away from where
+        they would come out (`held_continues`), whatever its score."""
+        return self.config.held_continues and track.held and not emerging
+
+    def _emerging(self, detections: Sequence[JointSet], points: list[tuple[NDArray, NDArray]],
+                  matched: dict[int, int]) -> dict[int, set[int]]:
+        """The detections whose torso pixel lies in the box of a nearer person matched to a
+        confirmed track (`_in_box`), farther by over `torso_std_m` in 3-D, each with the ids
+        of those tracks: where a person hidden behind them comes out (a held track takes
+        only a detection coming out from behind the person hiding it, `_out_from_behind`:
+        its gate, grown with the time unseen, also reaches the room's clutter metres away,
+        coming out from behind someone else), and where a tentative track may grow from
+        `emerging_score`."""
+        cfg = self.config
+        if not ((cfg.held_continues and any(t.held for t in self.tracks))
+                or (cfg.emerging_score < cfg.birth_score and len(detections) > 1)):
+            return {}
+        fronts = [(k, self.tracks[i].id, detections[k], points[k][0])
+                  for k, i in matched.items() if self.tracks[i].id and _finite(points[k][0])]
+        out: dict[int, set[int]] = {}
+        for j, (point, _) in enumerate(points):
+            pixel = torso_px(detections[j])[0]
+            if not (_finite(pixel) and _finite(point)):
+                continue
+            ids = {t for k, t, other, q in fronts if k != j and point[2] > q[2] + cfg.torso_std_m
+                   and _in_box(other, pixel)}
+            if ids:
+                out[j] = ids
+        return out
+
+    def _behind(self, track: _Track, stamp_s: float) -> int:
+        """The id of the track of a person seen this frame whom an unseen track's person is
+        hidden behind (0: nobody): their last torso pixel within that person's box (its
+        located joints, grown by a tenth of its height) and their torso farther by over
+        `torso_std_m` (both in 3-D)."""
+        if not (_finite(track.pixel) and _finite(track.point)):
+            return 0
+        for other in self.tracks:
+            if other is track or not other.id or other.seen_s != stamp_s or other.last is None \
+                    or not _finite(other.point) \
+                    or not track.point[2] > other.point[2] + self.config.torso_std_m:
+                continue
+            if _in_box(other.last, track.pixel):
+                return other.id
+        return 0
+
+    def _cost(self, detections: Sequence[JointSet], points: list[tuple[NDArray, NDArray]],
+              stamp_s: float) -> NDArray[np.float64]:
+        """Squared Mahalanobis torso distances (tracks x detections) in 3-D; where a track or a
+        detection has no 3-D torso, in the image, the spread a quarter of the person's height
+        growing as in 3-D (at 2.5 m)."""
+        cfg = self.config
+        cost = np.full((len(self.tracks), len(points)), np.nan)
+        seen = [j for j, (p, _) in enumerate(points) if _finite(p)]
+        pairs, d, s = [], [], []
+        for i, t in enumerate(self.tracks):
+            if not _finite(t.point):
+                continue
+            dt = max(stamp_s - t.seen_s, 0.0)
+            predicted = t.point + t.velocity * min(dt, cfg.max_unseen_s)
+            spread = (cfg.torso_std_m ** 2 + (cfg.max_speed_mps * dt) ** 2) * _EYE3
+            for j in seen:
+                p, c = points[j]
+                pairs.append((i, j))
+                d.append(p - predicted)
+                s.append(t.cov + c + spread)
+        if pairs:
+            rows, cols = zip(*pairs, strict=True)
+            cost[rows, cols] = _mahalanobis2_all(np.array(d), np.array(s))
+        # where a track or a detection has no 3-D torso: in the image
+        pixels = [torso_px(d) for d in detections]
+        for i, t in enumerate(self.tracks):
+            if t.size_px > 0 and _finite(t.pixel):
+                dt = max(stamp_s - t.seen_s, 0.0)
+                sigma = 0.25 * t.size_px * (1.0 + cfg.max_speed_mps * dt / 0.5)
+                for j, (uv, _) in enumerate(pixels):
+                    if np.isnan(cost[i, j]) and _finite(uv):
+                        cost[i, j] = float(np.sum((uv - t.pixel) ** 2)) / sigma ** 2
+        return cost
+
+    def _seen(self, track: _Track, out: JointSet, stamp_s: float) -> None:
+        pixel, size = torso_px(out)
+        if np.isfinite(pixel).all():
+            track.pixel = pixel
+            track.size_px = size if size > 0 else track.size_px
+        point, cov = torso(out)
+        if _finite(point):
+            dt = stamp_s - track.seen_s
+            if _finite(track.point) and 0 < dt <= self.config.max_unseen_s:
+                track.velocity = 0.7 * track.velocity + 0.3 * (point - track.point) / dt
+            track.point, track.cov = point, cov
+        track.hits += 1
+        track.seen_s = stamp_s
+
+    def _ordered(self, stamp_s: float) -> list[_Track]:
+        confirmed = sorted((t for t in self.tracks if t.id), key=lambda t: t.id)
+        seen = [t for t in confirmed if t.seen_s == stamp_s]
+        # the longest tracked: seen in most frames (the first confirmed on a tie)
+        primary = sorted(seen or confirmed, key=lambda t: -t.hits)[:1]
+        return primary + [t for t in confirmed if t not in primary]
+
+
+def free_space(joints: JointSet, depth_m: NDArray[np.floating], intrinsics: Intrinsics | None,
+               config: TrackingConfig) -> bool:
+    """Whether the depth image shows that nobody is where `joints` (an unseen track's
+    prediction) puts a person: its torso point projects outside the image, or at least
+    `free_share` of the depth readings in a square of the torso's size (0.3 m) around it lie
+    over `free_space_m` beyond it (the camera sees through where the person would be). A person
+    hidden behind something nearer, or in a hole of the depth image, is not free space."""
+    point, _ = torso(joints)
+    if intrinsics is None or not _finite(point) or point[2] <= 0:
+        return False
+    u, v = project(point[None], intrinsics)[0]
+    h, w = depth_m.shape
+    if not (0 <= u < w and 0 <= v < h):
+        return True
+    r = max(int(0.15 * intrinsics.fx / point[2]), 1)
+    x, y = int(u), int(v)
+    window = depth_m[max(y - r, 0):y + r + 1, max(x - r, 0):x + r + 1]
+    readings = window[np.isfinite(window)]
+    if readings.size < 0.25 * window.size:
+        return False
+    return bool(np.count_nonzero(readings > point[2] + config.free_space_m)
+                >= config.free_share * readings.size)
+
+
+def _out_from_behind(track: _Track, fronts: set[int] | None, own_front: bool) -> bool:
+    """Whether a detection coming out from behind the people of the track ids `fronts`
+    (`PeopleTracker._emerging`; None: from behind nobody) comes out where `track`'s person
+    would: with `own_front`, for a track held behind a person, from behind that person only
+    (not seen this frame, nobody comes out from behind them); otherwise from behind anyone."""
+    return bool(fronts) and (not (own_front and track.held) or track.behind in fronts)
+
+
+def _finite(v: NDArray[np.float64]) -> bool:
+    """Every value finite (`np.isfinite(v).all()` without its Python wrapper)."""
+    return bool(np.logical_and.reduce(np.isfinite(v), axis=None))
+
+
+# a detection reaching this share of the image's width from its left or right edge starts no
+# track from `emerging_score` (`_clear_of_sides`)
+SIDE_SHARE = 0.04
+
+
+def _clear_of_sides(det: JointSet, intrinsics: Intrinsics | None) -> bool:
+    """Whether every located joint of `det` lies farther than `SIDE_SHARE` of the image's
+    width from its left and right edges. Behind a person near the image's side, a wall's edge
+    or furniture cut by the border is a candidate that scores as a partly seen person does
+    (on validation, `valid60_people3` and `valid60_people3b`: 3.5-4, where people coming out
+    from behind another score 3.4-5), and the foreground already counts a region cut by the
+    side borders as more often no person (`PersonConfig.border_penalty`)."""
+    if intrinsics is None:
+        return False
+    u = det.uv[det.source != cj.MISSING, 0]
+    margin = SIDE_SHARE * intrinsics.width
+    return bool(u.size) and bool(np.all((u > margin) & (u < intrinsics.width - 1 - margin)))
+
+
+def _in_box(joints: JointSet, pixel: NDArray[np.float64]) -> bool:
+    """Whether `pixel` lies in the box of the located joints (at least two), grown by a tenth
+    of its height."""
+    uv = joints.uv[(joints.source != cj.MISSING) & np.isfinite(joints.uv).all(axis=1)]
+    if len(uv) < 2:
+        return False
+    lo, hi = uv.min(axis=0), uv.max(axis=0)
+    grow = 0.1 * (hi[1] - lo[1])
+    return bool(np.all(pixel >= lo - grow) and np.all(pixel <= hi + grow))
+
+
+def _near_segment(p: NDArray[np.float64], a: NDArray[np.float64], b: NDArray[np.float64],
+                  r: float) -> NDArray[np.bool_]:
+    """(N,) points of p (N, 2) within r of the segment a-b."""
+    ab = b - a
+    t = np.clip(((p - a) @ ab) / max(float(ab @ ab), 1e-9), 0.0, 1.0)
+    d = p - (a + t[:, None] * ab)
+    with np.errstate(invalid='ignore'):
+        return (d * d).sum(axis=1) <= r * r
+
+
+def _without(det: JointSet, hidden: NDArray[np.bool_]) -> JointSet:
+    """`det` with the joints `hidden` MISSING."""
+    uv, xyz = det.uv.copy(), det.xyz.copy()
+    source, conf = det.source.copy(), det.confidence.copy()
+    uv[hidden], xyz[hidden], source[hidden], conf[hidden] = np.nan, np.nan, cj.MISSING, 0.0
+    return JointSet.of_arrays(det.names, uv, xyz, conf, source, det.covariance,
+                              score=det.score, track_id=det.track_id)
+
+
+def _kept(out: JointSet, last: JointSet, hidden: NDArray[np.bool_]) -> JointSet:
+    """The tracker's output `out` with the joints `hidden` at their estimate of `last`
+    (TRACKED) where it has one."""
+    keep = hidden & (last.source != cj.MISSING)
+    if out.names != last.names or not keep.any():
+        return out
+    uv, xyz, source = out.uv.copy(), out.xyz.copy(), out.source.copy()
+    uv[keep], xyz[keep], source[keep] = last.uv[keep], last.xyz[keep], cj.TRACKED
+    return JointSet.of_arrays(out.names, uv, xyz, out.confidence, source, out.covariance,
+                              score=out.score, track_id=out.track_id)
+
+
+def _held(joints: JointSet | None) -> JointSet | None:
+    """A track's last pose kept while its person is hidden: every located joint TRACKED."""
+    if joints is None:
+        return None
+    source = np.where(joints.source == cj.MISSING, cj.MISSING, cj.TRACKED).astype(np.uint8)
+    return JointSet.of_arrays(joints.names, joints.uv, joints.xyz, joints.confidence, source,
+                              joints.covariance, score=joints.score, track_id=joints.track_id)
+
+
+def _with_track_id(joints: JointSet, track_id: int) -> JointSet:
+    """`joints` with another `track_id`, sharing its (read-only) arrays."""
+    return JointSet.of_arrays(joints.names, joints.uv, joints.xyz, joints.confidence,
+                              joints.source, joints.covariance, score=joints.score,
+                              track_id=track_id)
+
+
+_EYE3 = np.eye(3)
+_EYE3.setflags(write=False)
