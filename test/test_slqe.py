@@ -258,6 +258,13 @@ def test_drifted_filter_yields_to_consistent_detections() -> None:
     assert err(np.array(pos[40:]), truth[40:, 7]).max() < 5.0
 
 
+# A stiffer filter than the default (the process noise tuned on corrupted real motion, before
+# real cameras asked for more): the rules below exist for the frames where the prediction
+# rejects what really happened, and at the default these sudden changes of motion fall within
+# its gate more often (nothing to show)
+STIFF = 300.0
+
+
 @pytest.mark.parametrize('stop', [True, False])
 def test_a_body_that_stops_dead_is_followed_at_once(stop: bool) -> None:
     """A body moving 16 px a frame stops: the prediction overshoots the detections at rest
@@ -267,7 +274,7 @@ def test_a_body_that_stops_dead_is_followed_at_once(stop: bool) -> None:
     t = np.arange(40) / FPS
     truth = np.tile(rng.uniform(100, 200, (10, 2)), (40, 1, 1))
     truth[:30, :, 0] += (16.0 * np.arange(30) - 16.0 * 29)[:, None]
-    tracker = SlqeTracker(SlqeConfig(stop_hypothesis=stop), PARTS_10)
+    tracker = SlqeTracker(SlqeConfig(stop_hypothesis=stop, process_noise=STIFF), PARTS_10)
     pos, src = run(tracker, t, truth + rng.normal(0, 1.0, truth.shape))
     assert (src[:30] == Source.DETECTED).all()  # the motion itself is followed
     if stop:
@@ -322,7 +329,7 @@ def test_a_hand_whipped_round_its_elbow_is_followed(tolerance: float) -> None:
     second rejected detection, still 30 px from the accepted elbow's, restarts the wrist."""
     t = np.arange(40) / FPS
     truth = swung_wrist(20)
-    tracker = SlqeTracker(SlqeConfig(limb_tolerance=tolerance), ARM)
+    tracker = SlqeTracker(SlqeConfig(limb_tolerance=tolerance, process_noise=STIFF), ARM)
     pos, src = run(tracker, t, truth + np.random.default_rng(3).normal(0, 0.5, truth.shape))
     assert (src[:, :2] == Source.DETECTED).all()
     assert src[20, 2] == Source.TRACKED  # the first frame of the swing is an outlier to it
