@@ -346,3 +346,37 @@ def test_train_refine_runs_the_detector_and_refuses_too_few_parts(tiny_set: Path
     assert pose4d_main(['train', str(tiny_set), '--refine', 'rgbd_14', '--stages', '0',
                         '--out', str(out)]) == 2
     assert '--stages must be >= 1' in capsys.readouterr().err
+
+
+def test_a_second_peer_is_one_line_in_the_registry(tiny_set: Path, tmp_path: Path,
+                                                   monkeypatch) -> None:
+    """`--peer` chooses from `peer.PEERS` and the verbs know no peer by name: a peer that puts
+    every joint at the image's centre, registered under a name of its own, gets its row in
+    `pose4d eval` and its time in `pose4d bench`; an unknown name is refused."""
+    from pose4d_ros import peer as peers
+    from pose4d_ros.core.joints import JointSet
+
+    class Centre:
+        name, description, last_cpu_s = 'centre', 'every joint at the centre', 0.001
+        closed = 0
+
+        def step(self, color, depth_m, intrinsics, *, new_video=False):
+            h, w = color.shape[:2]
+            return JointSet(peers.NAMES, np.tile([w / 2, h / 2], (len(peers.NAMES), 1)),
+                            confidence=np.ones(len(peers.NAMES)))
+
+        def close(self):
+            Centre.closed += 1
+
+    monkeypatch.setitem(peers.PEERS, 'centre', Centre)
+    out = tmp_path / 'centre.json'
+    assert pose4d_main(['eval', str(tiny_set), '--json', str(out), '--peer', 'centre']) == 0
+    rows = json.loads(out.read_text())['rows']
+    assert list(rows)[-1] == 'centre' and 'rgbd_kf_ik' in rows
+    bench = tmp_path / 'bench.json'
+    assert pose4d_main(['bench', str(tiny_set), '--json', str(bench), '--peer', 'centre',
+                        '--frames', '4', '--warmup', '1']) == 0
+    assert json.loads(bench.read_text())['peer'] == 'every joint at the centre'
+    assert Centre.closed >= 1
+    with pytest.raises(ValueError, match="no peer called 'nobody'"):
+        peers.make_peer('nobody')

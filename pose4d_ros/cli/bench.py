@@ -63,7 +63,7 @@ from pose4d_ros.datasets.sources import load_frames, source_kind
 from pose4d_ros.evaluation.pipeline import ms_stats
 from pose4d_ros.evaluation.tables import default_models
 from pose4d_ros.models import model_path
-from pose4d_ros.peer import PEERS, MediaPipePeer
+from pose4d_ros.peer import PEERS, make_peer
 from pose4d_ros.util.machine import machine
 
 
@@ -128,7 +128,7 @@ def run(args: argparse.Namespace) -> int:
         from pose4d_ros.core.dpm.net_unary import NetUnary
 
         unary = NetUnary(load_convnet(model_path(args.colour_net)))
-    peer = MediaPipePeer() if args.peer else None  # without its venv, stop before any work
+    peer = make_peer(args.peer) if args.peer else None  # without its venv, stop before any work
     try:
         frames = load_frames([args.source], frame_range=args.frame_range,
                              max_frames=args.frames + args.warmup, labelled=False)

@@ -85,7 +85,7 @@ from pose4d_ros.evaluation.pipeline import (
     score_rows,
 )
 from pose4d_ros.evaluation.tables import clean_row, default_models, format_table, load_any
-from pose4d_ros.peer import PEERS, MediaPipePeer
+from pose4d_ros.peer import PEERS, Peer, make_peer
 from pose4d_ros.util.progress import log, progress
 
 
@@ -181,7 +181,7 @@ def run(args: argparse.Namespace) -> int:
         raise ValueError(f'--photo-scales {args.photo_scales}: must include 1 and lie within '
                          f'0.25..4')
     # the peer first: without its venv, stop before any work
-    peer = MediaPipePeer() if args.peer else None
+    peer = make_peer(args.peer) if args.peer else None
     if args.plot is not None and args.plot.suffix.lower() != '.png':
         raise ValueError(f'--plot {args.plot}: the figure is a PNG file (.png)')
     try:
@@ -212,7 +212,7 @@ def run(args: argparse.Namespace) -> int:
 
 
 def table_rows(args: argparse.Namespace, kind: str, models: dict[str, PartModel | ConvNet],
-               peer: MediaPipePeer | None, offsets: dict[str, float] | None = None
+               peer: Peer | None, offsets: dict[str, float] | None = None
                ) -> tuple[dict[str, dict], int, dict[str, dict]]:
     """Every model's rows and the peer's ({row name: table}), the number of frames, and the
     rows' accuracy curves (`evaluation.pipeline.curve_rows` at `evaluation.plot.ALPHAS`).
@@ -293,7 +293,7 @@ def stage_configs(args: argparse.Namespace, settings: dict, unary: NetUnary | No
 
 
 def real_rows(args: argparse.Namespace, models: dict[str, PartModel | ConvNet],
-              peer: MediaPipePeer | None) -> dict:
+              peer: Peer | None) -> dict:
     """A recording without joint labels (a real camera's): every RGB-D model run as the nodes
     run it (the several-person pipeline), each scored against the peer as the reference and
     against the hand labels (`--labels`), `evaluation.real`; `--draw` draws every frame."""

@@ -14,7 +14,7 @@ from pose4d_ros.core.dpm.infer import SearchWork
 from pose4d_ros.core.pipeline import STAGES, FramePipeline
 from pose4d_ros.datasets.frame import Frame
 from pose4d_ros.evaluation.pipeline import ms_stats
-from pose4d_ros.peer import MediaPipePeer
+from pose4d_ros.peer import Peer
 from pose4d_ros.util.progress import progress
 
 
@@ -26,7 +26,7 @@ def _step(pipeline: FramePipeline, f: Frame, use_depth: bool):
 def time_stages(pipeline: FramePipeline, frames: Sequence[Frame], warmup: int, *,
                 use_depth: bool, several: bool,
                 after_warmup: Callable[[], None] = lambda: None,
-                peer: MediaPipePeer | None = None) -> dict:
+                peer: Peer | None = None) -> dict:
     """Each stage's CPU and wall ms per frame (and their `total`: one frame through all four)
     over the frames after `warmup` (`after_warmup` is called when the warm-up is over): the
     verb's `stages_ms` and `wall_ms`, and with `several` `people_ms` (CPU ms by the number of

@@ -46,7 +46,7 @@ from pose4d_ros.core.slqe import SlqeConfig
 from pose4d_ros.core.stages import DetectorStage, ForegroundStage, TrackerStage
 from pose4d_ros.datasets.frame import Frame
 from pose4d_ros.evaluation.tracking_metrics import score_people, seen_share, seen_table
-from pose4d_ros.peer import MediaPipePeer
+from pose4d_ros.peer import Peer
 
 
 # A model's rows (suffixes of its channels) and the stages each one's CPU time counts
@@ -172,7 +172,7 @@ def convnet_rows(frames: Iterable[Frame], net: ConvNet, *, name: str | None = No
     return {name or net.channels: row}
 
 
-def peer_rows(frames: Iterable[Frame], peer: MediaPipePeer, *, sequence: bool = True
+def peer_rows(frames: Iterable[Frame], peer: Peer, *, sequence: bool = True
               ) -> dict[str, Row]:
     """The peer's row over the frames: a new video wherever our tracker starts a new track (a
     stamp gap over `SlqeConfig.max_dt_s`, or a stamp going back), every frame unless

@@ -21,8 +21,9 @@ import subprocess
 import sys
 import tempfile
 import time
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from pathlib import Path
+from typing import Protocol
 
 import numpy as np
 from numpy.typing import NDArray
@@ -41,7 +42,30 @@ JOINT_LANDMARKS: dict[str, tuple[int, ...]] = {
     'right_hip': (24,), 'right_knee': (26,), 'right_ankle': (28,),
 }
 NAMES: tuple[str, ...] = tuple(JOINT_LANDMARKS)
-PEERS = ('mediapipe',)
+
+
+class Peer(Protocol):
+    """What a peer is to `pose4d eval` and `pose4d bench` (the verbs see no more of it).
+
+    Attributes
+    ----------
+    name : its row's name, and the `--peer` name it is chosen by (`PEERS`).
+    description : what it runs, for the record (e.g. 'mediapipe 0.10.21 pose ...').
+    last_cpu_s : CPU seconds of the last `step`, every process and thread of it included.
+    """
+
+    name: str
+    description: str
+    last_cpu_s: float
+
+    def step(self, color: NDArray[np.uint8], depth_m: NDArray[np.floating] | None,
+             intrinsics: Intrinsics | None, *, new_video: bool = False) -> JointSet:
+        """One person's joints (any subset of our joint names) in one RGB frame, in 3-D where
+        depth has a reading; all MISSING when it finds nobody. `new_video`: forget the frames
+        before (a new take)."""
+
+    def close(self) -> None:
+        """Free what it holds (a worker process)."""
 
 
 def peer_python() -> Path:
@@ -191,3 +215,18 @@ class MediaPipePeer:
         joints = JointSet(NAMES, uv, xyz, confidence=conf, score=float(conf.mean()))
         self.last_cpu_s += time.thread_time() - start
         return joints
+
+
+# Every peer, by the name `--peer` chooses it by: how to start one (a ValueError in one line when
+# it cannot run here, e.g. its venv is absent). A new peer is a class like `MediaPipePeer` and a
+# line here.
+PEERS: dict[str, Callable[[], Peer]] = {'mediapipe': MediaPipePeer}
+
+
+def make_peer(name: str) -> Peer:
+    """The peer called `name` (`PEERS`), started."""
+    try:
+        start = PEERS[name]
+    except KeyError:
+        raise ValueError(f'no peer called {name!r}: one of {", ".join(PEERS)}') from None
+    return start()
