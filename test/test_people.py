@@ -28,7 +28,7 @@ def person(x: float, z: float = 2.5) -> JointSet:
 
 
 def tracker(**kw) -> PeopleTracker:
-    return PeopleTracker(TrackerStage, TrackingConfig(**kw))
+    return PeopleTracker(TrackerStage(), TrackingConfig(**kw))
 
 
 def ids_by_x(out: list[JointSet]) -> dict[int, float]:
@@ -203,6 +203,9 @@ def test_work_is_bounded_by_max_people():
     searched = []
 
     class Counting:
+        def spawn(self):
+            return type(self)()
+
         def step(self, color, depth, intrinsics, *, mask, stamp_s, blanked, occluder=None):
             searched.append(int(np.flatnonzero(mask.any(axis=0))[0]))
             return JointSet.missing(PARTS_10.names)
@@ -215,7 +218,7 @@ def test_work_is_bounded_by_max_people():
         mask[50:200, 30 * k:30 * k + 20] = True
         people.append(ForegroundResult(mask=mask, box=(30 * k, 50, 30 * k + 20, 200),
                                        depth_m=3.0, found=True))
-    detector = PeopleDetector(Counting, TrackingConfig(max_people=4))
+    detector = PeopleDetector(Counting(), TrackingConfig(max_people=4))
     out = detector.step(color, depth, INTR, people, stamp_s=0.0)
     assert len(out) == 4 and searched == [0, 30, 60, 90]
     assert len(detector.slots) == 4
@@ -230,6 +233,9 @@ def test_a_person_is_searched_with_the_nearer_people_in_front_of_them():
     given = {}
 
     class Recording:
+        def spawn(self):
+            return type(self)()
+
         def step(self, color, depth, intrinsics, *, mask, stamp_s, blanked, occluder=None):
             given[int(np.flatnonzero(mask.any(axis=0))[0])] = occluder
             return JointSet.missing(PARTS_10.names)
@@ -242,7 +248,7 @@ def test_a_person_is_searched_with_the_nearer_people_in_front_of_them():
         mask[50:200, x:x + 40] = True
         people.append(ForegroundResult(mask=mask, box=(x, 50, x + 40, 200), depth_m=z,
                                        found=True))
-    PeopleDetector(Recording, TrackingConfig(torso_std_m=0.15)).step(
+    PeopleDetector(Recording(), TrackingConfig(torso_std_m=0.15)).step(
         color, depth, INTR, people, stamp_s=0.0)
     assert given[60] is None                                     # the nearest
     assert (given[180] == people[1].mask).all()                  # 2 m in front of 3 m
@@ -261,8 +267,9 @@ def test_a_persons_detector_state_lives_as_long_as_their_track():
     made = []
 
     class Stage:
-        def __init__(self):
-            made.append(self)
+        def spawn(self):
+            made.append(Stage())
+            return made[-1]
 
         def step(self, color, depth, intrinsics, *, mask, stamp_s, blanked, occluder=None):
             return JointSet.missing(PARTS_10.names).with_(score=12.0)
@@ -273,7 +280,7 @@ def test_a_persons_detector_state_lives_as_long_as_their_track():
     mask[50:200, 100:140] = True
     person = ForegroundResult(mask=mask, box=(100, 50, 140, 200), depth_m=3.0, found=True)
     cfg = TrackingConfig(max_unseen_s=1.0, max_hidden_s=2.0)
-    detector = PeopleDetector(Stage, cfg)
+    detector = PeopleDetector(Stage(), cfg)
     detector.step(color, depth, INTR, [person], stamp_s=0.0)
     detector.step(color, depth, INTR, [], stamp_s=1.5)
     detector.step(color, depth, INTR, [person], stamp_s=1.5 + DT)
@@ -282,7 +289,7 @@ def test_a_persons_detector_state_lives_as_long_as_their_track():
     detector.step(color, depth, INTR, [person], stamp_s=4.0 + DT)
     assert len(made) == 2
     # the detector node's own lifetime (`detector.keep_unseen_s`) for a tracker set otherwise
-    detector = PeopleDetector(Stage, replace(cfg, detector_keep_s=5.0))
+    detector = PeopleDetector(Stage(), replace(cfg, detector_keep_s=5.0))
     detector.step(color, depth, INTR, [person], stamp_s=0.0)
     detector.step(color, depth, INTR, [], stamp_s=4.5)
     detector.step(color, depth, INTR, [person], stamp_s=4.5 + DT)
@@ -303,6 +310,9 @@ def test_a_still_region_that_scored_low_keeps_its_detection_a_few_frames():
     searched = []
 
     class Scoring:
+        def spawn(self):
+            return type(self)()
+
         def step(self, color, depth, intrinsics, *, mask, stamp_s, blanked, occluder=None):
             x = int(np.flatnonzero(mask.any(axis=0))[0])
             searched.append((round(stamp_s / DT), x))
@@ -318,7 +328,7 @@ def test_a_still_region_that_scored_low_keeps_its_detection_a_few_frames():
         return ForegroundResult(mask=mask, box=(x, top, x + 40, 200), depth_m=depth_m,
                                 found=True)
 
-    detector = PeopleDetector(Scoring, TrackingConfig(quiet_frames=3))
+    detector = PeopleDetector(Scoring(), TrackingConfig(quiet_frames=3))
     for k in range(10):
         # the edge's top flickers by 6 rows of its 150 (96 % of its pixels the same)
         edge = region(0, top=50 + 6 * (k % 2))
@@ -339,7 +349,7 @@ def test_a_still_region_that_scored_low_keeps_its_detection_a_few_frames():
     assert [x for _, x in searched] == [3] * 3
     # quiet_frames 0: every region every frame
     searched.clear()
-    detector = PeopleDetector(Scoring, TrackingConfig(quiet_frames=0))
+    detector = PeopleDetector(Scoring(), TrackingConfig(quiet_frames=0))
     for k in range(3):
         detector.step(color, depth, INTR, [region(0)], stamp_s=k * DT)
     assert len(searched) == 3
@@ -755,3 +765,22 @@ def test_an_unseen_person_predicted_out_of_the_image_has_left():
     assert [t.track_id for t in out] == [1]  # predicted at 1.0 m: still in the image
     # far beyond the side 0.5 s later; the depth there unknown, no reading is needed
     assert tr.step([], 25 * DT, INTR, _wall(None)) == [] and tr.ended == [1]
+
+
+def test_a_setting_changed_live_reaches_every_persons_stage_and_the_next_person():
+    """`configure` on the several-person stages (what the nodes and `FramePipeline.configure`
+    call on a live parameter change) sets the template and every person's stage; a person
+    who comes later gets it through `spawn`."""
+    from pose4d_ros.core.slqe import SlqeConfig
+
+    tr = tracker()
+    for k in range(3):
+        tr.step([person(-0.6), person(0.6)], k * DT, INTR)
+    assert len(tr.tracks) == 2
+    tr.configure(slqe=SlqeConfig(gate_chi2=20.0), depth_std_m=0.2)
+    for stage in [tr.template, *(t.stage for t in tr.tracks)]:
+        assert stage.slqe_config.gate_chi2 == 20.0 and stage.depth_std_m == 0.2
+    for k in range(3, 6):
+        tr.step([person(-0.6), person(0.6), person(1.6, z=3.5)], k * DT, INTR)
+    assert len(tr.tracks) == 3
+    assert {t.stage.slqe_config.gate_chi2 for t in tr.tracks} == {20.0}

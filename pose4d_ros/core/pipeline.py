@@ -36,7 +36,9 @@ class FrameResult:
     None for a frame without depth), and each stage's time per name of `STAGES`: `cpu_s`,
     seconds of this process's CPU (`time.process_time`), and `wall_s`. Several people: every
     person's skeleton (`people`), each candidate's detection (`detections`, scored or not) and
-    each confirmed track's tracked parts (`tracks`)."""
+    each confirmed track's tracked parts (`tracks`), and the jump of the input stamps before
+    this frame (`jump_s`, seconds, negative: back; None: none) at which every stage started
+    anew, as a node does (`core.sync.StampJumps`)."""
 
     foreground: ForegroundResult | None
     color_masked: NDArray[np.uint8]
@@ -53,6 +55,7 @@ class FrameResult:
     ended: tuple[int, ...] = ()
     detections: tuple[JointSet, ...] = ()
     tracks: tuple[JointSet, ...] = ()
+    jump_s: float | None = None
 
 
 class FramePipeline:
@@ -88,6 +91,24 @@ class FramePipeline:
         # per name of `STAGES`, a profiler (enable(), disable(): `cProfile.Profile`) that runs
         # only while that stage does (`pose4d bench` counts the Python calls of each stage)
         self.profilers: Mapping[str, Any] | None = None
+
+    def configure(self, *, foreground: Mapping[str, Any] | None = None,
+                  detector: Mapping[str, Any] | None = None,
+                  tracker: Mapping[str, Any] | None = None, ik: Mapping[str, Any] | None = None,
+                  people: TrackingConfig | None = None) -> None:
+        """New settings of the stages (each stage's `configure` keywords; several people:
+        every person's stages too) and of how people are told apart, used from the next frame
+        on; None leaves a stage as it is."""
+        if foreground is not None:
+            self.foreground.configure(**foreground)
+        multi = self.multi
+        for stage, many, settings in ((self.detector, multi and multi.detector, detector),
+                                      (self.tracker, multi and multi.tracker, tracker),
+                                      (self.ik, multi and multi.ik, ik)):
+            if settings is not None:
+                (many or stage).configure(**settings)
+        if people is not None and multi is not None:
+            self.people = multi.config = multi.detector.config = multi.tracker.config = people
 
     def reset(self) -> None:
         """Forget the previous frames (the next one starts a new track)."""
@@ -127,7 +148,8 @@ class FramePipeline:
     def _step_people(self, color: NDArray[np.uint8], depth_m: NDArray[np.floating],
                      intrinsics: Intrinsics, stamp_s: float) -> FrameResult:
         multi = self.multi
-        if self._jumps.jump_s(round(stamp_s * 1e9)) is not None:
+        jump_s = self._jumps.jump_s(round(stamp_s * 1e9))
+        if jump_s is not None:
             self.reset()
         clock = self._lap([])
         found, n, color_m, depth_mm = self.foreground.step_people(
@@ -149,7 +171,7 @@ class FramePipeline:
             skeletons[0] if skeletons else JointSet.missing(SKELETON_14), cpu_s, wall_s,
             people=tuple(skeletons), foregrounds=tuple(found), candidates=n,
             born=tuple(multi.tracker.born), ended=tuple(multi.tracker.ended),
-            detections=tuple(parts), tracks=tuple(tracked))
+            detections=tuple(parts), tracks=tuple(tracked), jump_s=jump_s)
 
     def _lap(self, clock: list[tuple[float, float]]) -> list[tuple[float, float]]:
         """`clock` with the times (CPU, wall) at a boundary between stages appended; with
@@ -178,43 +200,20 @@ class FramePipeline:
 
 
 class PeopleStages:
-    """The several-person stages (`core.people`), each person served by a copy of the
-    single-person stages given, made with their settings (`configure` passes new ones on)."""
+    """The several-person stages (`core.people`), each person served by a copy (`spawn`) of
+    the single-person stages given, which stay the templates of every person's."""
 
     def __init__(self, detector: DetectorStage, tracker: TrackerStage, ik: IkStage,
                  config: TrackingConfig) -> None:
         self.config = config
-        self.templates = (detector, tracker, ik)
-        self.detector = PeopleDetector(lambda: DetectorStage(
-            detector.model, search=detector.detector.config,
-            scale=detector.person_scale.config, min_confidence=detector.min_confidence,
-            unary=detector.detector.unary), config)
-        self.tracker = PeopleTracker(lambda: TrackerStage(
-            kind=tracker.kind, slqe=tracker.slqe_config, cv=tracker.cv_config,
-            tree=tracker.fixed_tree, depth_std_m=tracker.depth_std_m), config)
-        self.ik = PeopleIk(lambda: IkStage(ik.config, lengths=ik.defaults, learn=ik.learn,
-                                           method=ik.method, limits=ik.limits,
-                                           use_depth=ik.use_depth))
+        self.detector = PeopleDetector(detector, config)
+        self.tracker = PeopleTracker(tracker, config)
+        self.ik = PeopleIk(ik)
 
     def reset(self) -> None:
         self.detector.reset()
         self.tracker.reset()
         self.ik.reset()
-
-    def configure(self, config: TrackingConfig | None = None) -> None:
-        """Give every person's stages the templates' current settings (and `config`)."""
-        if config is not None:
-            self.config = self.detector.config = self.tracker.config = config
-        detector, tracker, ik = self.templates
-        for slot in self.detector.slots:
-            slot.stage.configure(search=detector.detector.config,
-                                 scale=detector.person_scale.config,
-                                 min_confidence=detector.min_confidence)
-        for track in self.tracker.tracks:
-            track.stage.configure(slqe=tracker.slqe_config, cv=tracker.cv_config,
-                                  depth_std_m=tracker.depth_std_m)
-        for stage in self.ik.stages.values():
-            stage.configure(lengths=ik.defaults, learn=ik.learn)
 
 
 def _stage_times(clock: list[tuple[float, float]]) -> tuple[dict[str, float], dict[str, float]]:

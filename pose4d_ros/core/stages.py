@@ -264,6 +264,13 @@ class DetectorStage:
             self.person_scale = PersonScale(scale)
         self.min_confidence = min_confidence
 
+    def spawn(self) -> DetectorStage:
+        """A new stage with this one's settings as they are now and the same model, knowing
+        nobody yet: another person's (`core.people`)."""
+        return DetectorStage(self.model, search=self.detector.config,
+                             scale=self.person_scale.config, min_confidence=self.min_confidence,
+                             unary=self.detector.unary)
+
     @property
     def names(self) -> tuple[str, ...]:
         return self.model.part_names
@@ -397,6 +404,12 @@ class TrackerStage:
         if hasattr(self, 'filter'):
             self.filter.config = (self.slqe_config if self.kind == 'slqe'
                                   else self.cv_config.to_slqe())
+
+    def spawn(self) -> TrackerStage:
+        """A new stage with this one's settings as they are now, tracking nobody yet: another
+        person's (`core.people`)."""
+        return TrackerStage(kind=self.kind, slqe=self.slqe_config, cv=self.cv_config,
+                            tree=self.fixed_tree, depth_std_m=self.depth_std_m)
 
     def _use(self, tree: PartTree) -> None:
         """A new filter (no track) on `tree`."""
@@ -621,6 +634,13 @@ class IkStage:
             self.learner = LimbLengths(defaults)
         self.defaults = defaults
         self.learn = learn
+
+    def spawn(self) -> IkStage:
+        """A new stage with this one's settings as they are now, having learned nothing yet:
+        another person's (`core.people`)."""
+        return IkStage(self.config, lengths=self.defaults, learn=self.learn,
+                       use_depth=self.use_depth, method=self.method, limits=self.limits,
+                       hidden_legs=self.hidden_legs)
 
     def lengths(self) -> dict[str, tuple[float, float]]:
         return self.learner.as_dict() if self.learn else dict(self.learner.defaults)

@@ -210,13 +210,18 @@ class StageMonitor:
 
     def time_jumped(self, stamp_ns: int) -> bool:
         jump = self._jumps.jump_s(stamp_ns)
-        if jump is None:
-            return False
+        if jump is not None:
+            self.jumped(jump)
+        return jump is not None
+
+    def jumped(self, jump_s: float) -> None:
+        """Say that the input stamps jumped by `jump_s` (negative: back) and the stage
+        started anew (`time_jumped`, or a stage that checks its stamps itself: the
+        `FramePipeline` of the pipeline node)."""
         self._node.get_logger().info(
-            f'input stamps jumped {"back" if jump < 0 else "forward"} {abs(jump):.3f} s (a '
+            f'input stamps jumped {"back" if jump_s < 0 else "forward"} {abs(jump_s):.3f} s (a '
             'looping or restarted replay, a paused camera?): starting anew',
             throttle_duration_sec=5.0)
-        return True
 
     def dropped(self, n: int = 1) -> None:
         self.dropped_frames += n

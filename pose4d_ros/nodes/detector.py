@@ -210,7 +210,7 @@ class DetectorNode(Node):
         p = self.params.values
         self.template = detector_stage(p)
         self.template.warm_up(cad60_intrinsics())  # compile before the first camera frame
-        self.people = PeopleDetector(self._new_stage, people_config(p))
+        self.people = PeopleDetector(self.template, people_config(p))
         color, depth, mask = warm_up_frame(cad60_intrinsics())  # the several-person path too
         for stamp_s in (0.0, 1 / 30):
             self.people.step(color, depth, cad60_intrinsics(),
@@ -235,16 +235,9 @@ class DetectorNode(Node):
             f'{self.resolve_topic_name("pose4d/parts")}(/people), up to '
             f'{p["detector.max_people"]} people')
 
-    def _new_stage(self) -> DetectorStage:
-        t = self.template
-        return DetectorStage(t.model, search=t.detector.config, scale=t.person_scale.config,
-                             min_confidence=t.min_confidence, unary=t.detector.unary)
-
     def process(self, items: Any) -> None:
         if (p := self.params.changes()) is not None:
-            self.template.configure(**detector_settings(p))
-            for slot in self.people.slots:
-                slot.stage.configure(**detector_settings(p))
+            self.people.configure(**detector_settings(p))
             self.people.config = people_config(p)
         color_msg, depth_msg, mask_msg = items
         t0 = time.perf_counter()

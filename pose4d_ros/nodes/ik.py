@@ -162,7 +162,7 @@ class IkNode(Node):
         p = self.params.values
         self.template = ik_stage(p)
         self.template.warm_up(cad60_intrinsics())  # compile before the first frame
-        self.people = PeopleIk(self._new_stage)
+        self.people = PeopleIk(self.template)
         self.monitor = StageMonitor(self, 'ik')
         self.monitor.values['people'] = 0
         self.camera = LatestIntrinsics(self, self.monitor)
@@ -178,16 +178,9 @@ class IkNode(Node):
             f'{self.resolve_topic_name("pose4d/skeletons")} (depth: {self.template.use_depth}, '
             f'learn lengths: {p["ik.learn_lengths"]}, joints on /tf: {p["tf.publish"]})')
 
-    def _new_stage(self) -> IkStage:
-        t = self.template
-        return IkStage(t.config, lengths=t.defaults, learn=t.learn, use_depth=t.use_depth,
-                       method=t.method, limits=t.limits)
-
     def process(self, tracked: list[JointSet], header: Header, extra: tuple) -> None:
         if (p := self.params.changes()) is not None:
-            self.template.configure(**ik_settings(p))
-            for stage in self.people.stages.values():
-                stage.configure(**ik_settings(p))
+            self.people.configure(**ik_settings(p))
             self.outputs.configure(p)
         t0 = time.perf_counter()
         stamp = stamp_to_ns(header.stamp)

@@ -94,11 +94,10 @@ class PipelineNode(Node):
 
     def configure(self, p: dict[str, Any]) -> None:
         """The live parameters' new values, between two frames."""
-        self.pipeline.foreground.configure(**foreground.foreground_settings(p))
-        self.pipeline.detector.configure(**detector.detector_settings(p))
-        self.pipeline.tracker.configure(**tracker.tracker_settings(p))
-        self.pipeline.ik.configure(**ik.ik_settings(p))
-        self.pipeline.multi.configure(tracker.people_config(p))
+        self.pipeline.configure(foreground=foreground.foreground_settings(p),
+                                detector=detector.detector_settings(p),
+                                tracker=tracker.tracker_settings(p), ik=ik.ik_settings(p),
+                                people=tracker.people_config(p))
         self.outputs.configure(p)
 
     def process(self, items: Any) -> None:
@@ -107,14 +106,14 @@ class PipelineNode(Node):
         color_msg, depth_msg, info_msg = items
         t0 = time.perf_counter()
         stamp = stamp_to_ns(color_msg.header.stamp)
-        if self.monitor.time_jumped(stamp):
-            self.pipeline.reset()
         try:
             out = self.pipeline.step(color_from_msg(color_msg), depth_from_msg(depth_msg),
                                      intrinsics_from_msg(info_msg), stamp * 1e-9)
         except ValueError as exc:
             self.monitor.bad_input(f'frame at {stamp} ns refused: {exc}')
             return
+        if out.jump_s is not None:  # the pipeline checks the stamps and starts anew itself
+            self.monitor.jumped(out.jump_s)
         header = color_msg.header
         values = self.monitor.values
         values['people'] = len(out.people)

@@ -141,7 +141,7 @@ class TrackerNode(Node):
         self.params = NodeParams(self, PARAMS, check=tracker_settings)
         p = self.params.values
         self.template = tracker_stage(p)
-        self.people = PeopleTracker(self._new_stage, people_config(p))
+        self.people = PeopleTracker(self.template, people_config(p))
         self.people.warm_up(cad60_intrinsics())
         self.monitor = StageMonitor(self, 'tracker')
         self.monitor.values.update(people=0, tracks_born=0, tracks_ended=0)
@@ -160,16 +160,9 @@ class TrackerNode(Node):
             f'{self.resolve_topic_name("pose4d/parts/tracked")}(/people) with '
             f'{self.template.kind}')
 
-    def _new_stage(self) -> TrackerStage:
-        t = self.template
-        return TrackerStage(kind=t.kind, slqe=t.slqe_config, cv=t.cv_config,
-                            depth_std_m=t.depth_std_m)
-
     def process(self, detections: list[JointSet], header: Any, _: tuple) -> None:
         if (p := self.params.changes()) is not None:
-            self.template.configure(**tracker_settings(p))
-            for track in self.people.tracks:
-                track.stage.configure(**tracker_settings(p))
+            self.people.configure(**tracker_settings(p))
             self.people.config = people_config(p)
         t0 = time.perf_counter()
         stamp = stamp_to_ns(header.stamp)
@@ -177,8 +170,9 @@ class TrackerNode(Node):
             self.people.reset()
         intrinsics = self.camera.intrinsics
         try:
-            depth = (self.depth.at(stamp) if self.depth is not None and intrinsics is not None
-                     else None)
+            # read only when a track goes unseen
+            depth = ((lambda: self.depth.at(stamp))
+                     if self.depth is not None and intrinsics is not None else None)
             tracked = self.people.step(detections, stamp * 1e-9, intrinsics, depth)
         except ValueError as exc:
             self.monitor.bad_input(f'pose4d/parts frame at {stamp} ns refused: {exc}')

@@ -5,7 +5,7 @@ regions, a still region that scored low kept without a search (`quiet_frames`)."
 from __future__ import annotations
 
 import math
-from collections.abc import Callable, Sequence
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -16,6 +16,7 @@ from pose4d_ros.core.foreground import ForegroundResult, apply_mask
 from pose4d_ros.core.joints import JointSet
 from pose4d_ros.core.people.assignment import assign
 from pose4d_ros.core.people.config import TrackingConfig
+from pose4d_ros.core.stages import DetectorStage
 
 # A candidate region has not moved when its pixels overlap those of the last one searched by
 # at least this share (intersection over union) and its median depth is within this many metres
@@ -46,7 +47,8 @@ class PeopleDetector:
 
     Parameters
     ----------
-    make : a new `core.pipeline.DetectorStage` (sharing the model) for a new person.
+    template : the `core.stages.DetectorStage` whose copy (`spawn`, sharing the model) each new
+        person gets.
     config : `TrackingConfig` (max_people, max_speed_mps, torso_std_m; a person's state is
         kept unseen as long as a track can be, the longer of max_unseen_s and max_hidden_s,
         or `detector_keep_s`: a person held behind a nearer one comes back to their person
@@ -56,10 +58,16 @@ class PeopleDetector:
         (88.64) and valid30_people2b (86.26) and every tracking figure unchanged.
     """
 
-    def __init__(self, make: Callable[[], object], config: TrackingConfig | None = None) -> None:
-        self.make = make
+    def __init__(self, template: DetectorStage, config: TrackingConfig | None = None) -> None:
+        self.template = template
         self.config = config or TrackingConfig()
         self.slots: list[_Slot] = []
+
+    def configure(self, **settings: object) -> None:
+        """New stage settings (`DetectorStage.configure`) for the template and every person,
+        from the next frame on."""
+        for stage in [self.template, *(slot.stage for slot in self.slots)]:
+            stage.configure(**settings)
 
     def reset(self) -> None:
         self.slots = []
@@ -84,7 +92,7 @@ class PeopleDetector:
             if j in pairs:
                 slot = self.slots[pairs[j]]
             else:
-                slot = _Slot(self.make(), centre, stamp_s)
+                slot = _Slot(self.template.spawn(), centre, stamp_s)
                 self.slots.append(slot)
             slot.centre, slot.seen_s = centre, stamp_s
             if self._quiet(slot, person):

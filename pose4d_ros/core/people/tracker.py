@@ -5,6 +5,7 @@ package's docstring, `core.people`)."""
 
 from __future__ import annotations
 
+import functools
 import math
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
@@ -18,6 +19,7 @@ from pose4d_ros.core.joints import JointSet
 from pose4d_ros.core.people.assignment import _mahalanobis2_all, assign, torso, torso_px
 from pose4d_ros.core.people.config import TrackingConfig
 from pose4d_ros.core.skeleton import tree_for
+from pose4d_ros.core.stages import TrackerStage
 
 
 @dataclass
@@ -44,7 +46,7 @@ class PeopleTracker:
 
     Parameters
     ----------
-    make : a new TrackerStage for a new track.
+    template : the `core.stages.TrackerStage` whose copy (`spawn`) each new track gets.
     config : `TrackingConfig`.
 
     Attributes
@@ -53,8 +55,8 @@ class PeopleTracker:
     next_id : the id the next confirmed track gets (ids are never reused).
     """
 
-    def __init__(self, make: Callable[[], object], config: TrackingConfig | None = None) -> None:
-        self.make = make
+    def __init__(self, template: TrackerStage, config: TrackingConfig | None = None) -> None:
+        self.template = template
         self.config = config or TrackingConfig()
         self.tracks: list[_Track] = []
         self.last_s: float | None = None
@@ -63,6 +65,13 @@ class PeopleTracker:
         self.next_id = 1
         self.born: list[int] = []
         self.ended: list[int] = []
+
+    def configure(self, **settings: object) -> None:
+        """New stage settings (`TrackerStage.configure`) for the template and every track,
+        from the next frame on."""
+        for stage in [self.template, *(t.stage for t in self.tracks), *[self._spare] * bool(
+                self._spare)]:
+            stage.configure(**settings)
 
     def reset(self) -> None:
         """End every track (ids still count on)."""
@@ -90,11 +99,15 @@ class PeopleTracker:
 
     def step(self, detections: Sequence[JointSet], stamp_s: float,
              intrinsics: Intrinsics | None,
-             depth_m: NDArray[np.floating] | None = None) -> list[JointSet]:
+             depth_m: NDArray[np.floating] | Callable[[], NDArray[np.floating] | None]
+             | None = None) -> list[JointSet]:
         """Track one frame: the tracked parts of every confirmed track (its `track_id` set),
         primary first, then by id. `depth_m` (the camera's depth, metres, NaN = no reading):
-        an unseen track whose person the depth image shows is not there ends (`free_space`)."""
+        an unseen track whose person the depth image shows is not there ends (`free_space`);
+        or a function giving it (None: none), called once, and only if a track went unseen
+        (a node reads the image only then)."""
         cfg = self.config
+        depth = functools.cache(depth_m if callable(depth_m) else lambda: depth_m)
         # every detection checked before anything changes: a frame with one the SLQE would
         # refuse is refused whole (ValueError), and the tracks are untouched
         checker = self.tracks[0].stage if self.tracks else self._checker()
@@ -128,7 +141,7 @@ class PeopleTracker:
             born = self._born(det, j in emerging and _clear_of_sides(det, intrinsics))
             if j not in matched and (_finite(points[j][0]) or _finite(torso_px(det)[0])) \
                     and (j in trusted or born):
-                stage = self.make()
+                stage = self.template.spawn()
                 self.tracks.append(_Track(stage, names=stage.check(det, intrinsics).names))
                 matched[j] = len(self.tracks) - 1
         seen = {i: j for j, i in matched.items()}
@@ -142,7 +155,7 @@ class PeopleTracker:
                 if not track.held:
                     track.held, track.held_s, track.behind = True, stamp_s, behind
                 track.last = _held(track.last)
-                if self._left(track.last, depth_m, intrinsics):
+                if self._left(track.last, depth, intrinsics):
                     gone.append(track)
                 continue
             if i in seen and track.held:
@@ -162,7 +175,7 @@ class PeopleTracker:
             if hidden is not None:
                 out = _kept(out, track.last, hidden)
             track.names = out.names
-            if i not in seen and track.id and self._left(out, depth_m, intrinsics):
+            if i not in seen and track.id and self._left(out, depth, intrinsics):
                 gone.append(track)
                 continue
             if i in seen:
@@ -180,11 +193,13 @@ class PeopleTracker:
         return [t.last for t in self._ordered(stamp_s)
                 if not (t.held and stamp_s - t.held_s > cfg.max_held_s)]
 
-    def _left(self, joints: JointSet | None, depth_m: NDArray[np.floating] | None,
+    def _left(self, joints: JointSet | None,
+              depth: Callable[[], NDArray[np.floating] | None],
               intrinsics: Intrinsics | None) -> bool:
         """Whether an unseen track's person has left: the depth image shows free space where
         `joints` put them (`free_space`; never without depth or with `free_space_m` 0)."""
-        return (joints is not None and depth_m is not None and self.config.free_space_m > 0
+        return (joints is not None and self.config.free_space_m > 0
+                and (depth_m := depth()) is not None
                 and free_space(joints, depth_m, intrinsics, self.config))
 
     def _match(self, detections: Sequence[JointSet], points: list[tuple[NDArray, NDArray]],
@@ -262,7 +277,7 @@ class PeopleTracker:
     def _checker(self) -> object:
         """A stage to check detections with while there is no track (made once)."""
         if self._spare is None:
-            self._spare = self.make()
+            self._spare = self.template.spawn()
         return self._spare
 
     def _born(self, det: JointSet, emerging: bool = False) -> bool:
