@@ -177,7 +177,7 @@ def check_tf(skeletons: list, tf_messages: list, prefix: str = 'pose4d') -> int:
     import math
 
     from pose4d_ros.core.joints import MISSING
-    from pose4d_ros.nodes.convert import stamp_to_ns
+    from pose4d_ros.wire import stamp_to_ns
 
     by_stamp = {stamp_to_ns(m.transforms[0].header.stamp): m for m in tf_messages}
     seen = 0

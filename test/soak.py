@@ -46,7 +46,7 @@ def soak(bag_path: Path, seconds: float, work: Path) -> dict[str, object]:
     from sensor_msgs.msg import CameraInfo
 
     from pose4d_ros.nodes import qos
-    from pose4d_ros.nodes.convert import stamp_to_ns
+    from pose4d_ros.wire import stamp_to_ns
 
     recorded = work / 'soak_run'
     graph = Graph(work)

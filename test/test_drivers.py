@@ -64,12 +64,8 @@ def test_the_pipeline_node_takes_the_driver_as_it_publishes(ros, person, tmp_pat
     from pose4d_ros.core.skeleton import SKELETON_14
     from pose4d_ros.datasets.utkinect import UTKINECT_JOINTS
     from pose4d_ros.nodes import qos
-    from pose4d_ros.nodes.convert import (
-        array_to_image,
-        intrinsics_to_msg,
-        joints_from_msg,
-        ns_to_stamp,
-    )
+    from pose4d_ros.nodes.convert import array_to_image, intrinsics_to_msg, ns_to_stamp
+    from pose4d_ros.wire import joints_from_msg
 
     driver = DRIVERS[name]
     remaps = {'camera/color/image_raw': driver.color, 'camera/depth/image_raw': driver.depth,

@@ -100,7 +100,7 @@ def test_each_stage_killed_and_restarted_mid_replay(ros, tmp_path):
     from rclpy.qos import QoSProfile, ReliabilityPolicy
     from sensor_msgs.msg import Image
 
-    from pose4d_ros.nodes.convert import joints_from_msg, stamp_to_ns
+    from pose4d_ros.wire import joints_from_msg, stamp_to_ns
 
     sample = default_bag()
     truth = {f.stamp_ns: f.truth for f in open_source(sample)}

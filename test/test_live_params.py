@@ -26,7 +26,8 @@ def test_set_parameters_through_the_service_take_effect_on_the_next_frame(ros, t
     from tf2_msgs.msg import TFMessage
 
     from pose4d_ros.nodes import qos
-    from pose4d_ros.nodes.convert import intrinsics_to_msg, stamp_to_ns
+    from pose4d_ros.nodes.convert import intrinsics_to_msg
+    from pose4d_ros.wire import stamp_to_ns
 
     node = start('ik', {'ik.use_depth': False}, log_dir=tmp_path)
     try:

@@ -68,7 +68,8 @@ def test_source_constants_match_core():
 
 
 def test_joint_set_message_round_trip():
-    from pose4d_ros.nodes.convert import joints_from_msg, joints_to_msg
+    from pose4d_ros.nodes.convert import joints_to_msg
+    from pose4d_ros.wire import joints_from_msg
 
     msg = _joint_array()
     js = joints_from_msg(msg)
@@ -90,7 +91,7 @@ def test_depth_image_both_encodings(encoding, padding, bigendian):
 
     from sensor_msgs.msg import Image
 
-    from pose4d_ros.nodes.convert import depth_from_msg
+    from pose4d_ros.wire import depth_from_msg
 
     rng = np.random.default_rng(0)
     metres = rng.uniform(0.5, 4.0, size=(4, 5)).astype(np.float32)
@@ -117,7 +118,7 @@ def test_bad_images_are_refused_with_the_reason():
 
     from sensor_msgs.msg import Image
 
-    from pose4d_ros.nodes.convert import color_from_msg, depth_from_msg
+    from pose4d_ros.wire import color_from_msg, depth_from_msg
 
     msg = Image(height=2, width=2, encoding='rgb8', step=6)
     msg.data = array.array('B', bytes(12))
@@ -138,12 +139,8 @@ def test_bad_images_are_refused_with_the_reason():
 def test_color_and_camera_info_round_trip():
     from std_msgs.msg import Header
 
-    from pose4d_ros.nodes.convert import (
-        array_to_image,
-        color_from_msg,
-        intrinsics_from_msg,
-        intrinsics_to_msg,
-    )
+    from pose4d_ros.nodes.convert import array_to_image, intrinsics_to_msg
+    from pose4d_ros.wire import color_from_msg, intrinsics_from_msg
 
     rng = np.random.default_rng(0)
     rgb = rng.integers(0, 256, size=(3, 4, 3), dtype=np.uint8)
@@ -165,7 +162,8 @@ def test_image_to_cdr_is_the_serialised_message(encoding, shape, dtype, frame_id
     from sensor_msgs.msg import Image
     from std_msgs.msg import Header
 
-    from pose4d_ros.nodes.convert import array_to_image, image_to_cdr
+    from pose4d_ros.nodes.convert import array_to_image
+    from pose4d_ros.wire import image_to_cdr
 
     rng = np.random.default_rng(len(frame_id))
     img = (rng.random((shape[0], 2 * shape[1], *shape[2:])) * 200).astype(dtype)[:, ::2]
@@ -191,7 +189,8 @@ def test_joints_to_cdr_is_the_serialised_message(frame_id, n):
 
     from pose4d_ros.core.joints import JointSet
     from pose4d_ros.core.skeleton import SKELETON_14
-    from pose4d_ros.nodes.convert import joints_to_cdr, joints_to_msg
+    from pose4d_ros.nodes.convert import joints_to_msg
+    from pose4d_ros.wire import joints_to_cdr
 
     rng = np.random.default_rng(n)
     uv = rng.normal(size=(n, 2)) * 100
@@ -227,7 +226,7 @@ def test_tf_to_cdr_is_the_serialised_message(frame_id):
 
     from pose4d_ros.core.joints import DETECTED, INFERRED, MISSING, TRACKED, JointSet
     from pose4d_ros.core.skeleton import SKELETON_14
-    from pose4d_ros.nodes.convert import tf_to_cdr
+    from pose4d_ros.wire import tf_to_cdr
 
     rng = np.random.default_rng(7)
     people = []
@@ -266,7 +265,8 @@ def test_skeletons_to_cdr_is_the_serialised_message(people):
 
     from pose4d_ros.core.joints import JointSet
     from pose4d_ros.core.skeleton import SKELETON_14
-    from pose4d_ros.nodes.convert import skeletons_to_cdr, skeletons_to_msg
+    from pose4d_ros.nodes.convert import skeletons_to_msg
+    from pose4d_ros.wire import skeletons_to_cdr
 
     rng = np.random.default_rng(people)
     sets = []
@@ -328,13 +328,14 @@ def test_skeletons_from_cdr_reads_what_the_message_holds(people, frame_id):
     from rclpy.serialization import deserialize_message, serialize_message
     from std_msgs.msg import Header
 
-    from pose4d_ros.datasets.messages import cdr_header, joints_from_cdr, skeletons_from_cdr
-    from pose4d_ros.nodes.convert import (
+    from pose4d_ros.nodes.convert import joints_to_msg, skeletons_to_msg
+    from pose4d_ros.wire import (
+        cdr_header,
+        joints_from_cdr,
         joints_from_msg,
-        joints_to_msg,
+        skeletons_from_cdr,
         skeletons_from_msg,
         skeletons_to_cdr,
-        skeletons_to_msg,
     )
 
     sets = _people(people, seed=people)
@@ -359,8 +360,7 @@ def test_skeletons_from_cdr_refuses_damaged_bytes():
     from builtin_interfaces.msg import Time
     from std_msgs.msg import Header
 
-    from pose4d_ros.datasets.messages import cdr_header, skeletons_from_cdr
-    from pose4d_ros.nodes.convert import skeletons_to_cdr
+    from pose4d_ros.wire import cdr_header, skeletons_from_cdr, skeletons_to_cdr
 
     data = skeletons_to_cdr(_people(2), Header(frame_id='cam', stamp=Time(sec=1, nanosec=2)))
     refused = 0

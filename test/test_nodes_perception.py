@@ -51,7 +51,8 @@ def test_foreground_node_masks_the_person(ros, frames, tmp_path):
     from std_msgs.msg import Header
 
     from pose4d_ros.nodes import qos
-    from pose4d_ros.nodes.convert import depth_from_msg, image_to_array, ns_to_stamp
+    from pose4d_ros.nodes.convert import ns_to_stamp
+    from pose4d_ros.wire import depth_from_msg, image_to_array
 
     node = start('foreground', {}, log_dir=tmp_path)
     try:
@@ -136,7 +137,8 @@ def test_foreground_and_detector_nodes_find_the_parts(ros, frames, tmp_path, det
     from pose4d_ros.core.skeleton import PARTS_14
     from pose4d_ros.datasets.utkinect import UTKINECT_JOINTS
     from pose4d_ros.nodes import qos
-    from pose4d_ros.nodes.convert import joints_from_msg, ns_to_stamp
+    from pose4d_ros.nodes.convert import ns_to_stamp
+    from pose4d_ros.wire import joints_from_msg
 
     nodes = [start('foreground', {}, log_dir=tmp_path),
              start('detector', detector_params, log_dir=tmp_path)]
@@ -177,12 +179,8 @@ def test_pipeline_node_publishes_the_skeleton_and_survives_a_bad_frame(ros, fram
 
     from pose4d_ros.core.skeleton import SKELETON_14
     from pose4d_ros.nodes import qos
-    from pose4d_ros.nodes.convert import (
-        array_to_image,
-        intrinsics_to_msg,
-        joints_from_msg,
-        ns_to_stamp,
-    )
+    from pose4d_ros.nodes.convert import array_to_image, intrinsics_to_msg, ns_to_stamp
+    from pose4d_ros.wire import joints_from_msg
 
     node = start('pipeline', {'pipeline.publish_foreground': False}, log_dir=tmp_path)
     try:

@@ -26,7 +26,8 @@ def test_tracker_node(ros, info_pub, tmp_path):
     from pose4d_msgs.msg import JointArray
 
     from pose4d_ros.nodes import qos
-    from pose4d_ros.nodes.convert import intrinsics_to_msg, joints_from_msg
+    from pose4d_ros.nodes.convert import intrinsics_to_msg
+    from pose4d_ros.wire import joints_from_msg
 
     node = start('tracker', {'tracker.kind': 'slqe'}, log_dir=tmp_path)
     try:
@@ -68,7 +69,8 @@ def test_tracker_node_ends_the_track_of_a_person_the_depth_sees_through(ros, inf
     from sensor_msgs.msg import Image
 
     from pose4d_ros.nodes import qos
-    from pose4d_ros.nodes.convert import array_to_image, intrinsics_to_msg, joints_from_msg
+    from pose4d_ros.nodes.convert import array_to_image, intrinsics_to_msg
+    from pose4d_ros.wire import joints_from_msg
 
     node = start('tracker', {}, log_dir=tmp_path)
     try:
@@ -116,7 +118,8 @@ def test_ik_node(ros, info_pub, tmp_path, use_depth):
     from visualization_msgs.msg import MarkerArray
 
     from pose4d_ros.nodes import qos
-    from pose4d_ros.nodes.convert import array_to_image, intrinsics_to_msg, joints_from_msg
+    from pose4d_ros.nodes.convert import array_to_image, intrinsics_to_msg
+    from pose4d_ros.wire import joints_from_msg
 
     prefix = 'people' if use_depth else 'pose4d'  # a prefix of our choice, and the default
     node = start('ik', {'ik.use_depth': use_depth, 'tf.prefix': prefix} if use_depth
@@ -180,7 +183,8 @@ def test_ik_node_before_any_camera_info(ros, tmp_path):
     from sensor_msgs.msg import Image
 
     from pose4d_ros.nodes import qos
-    from pose4d_ros.nodes.convert import array_to_image, joints_from_msg
+    from pose4d_ros.nodes.convert import array_to_image
+    from pose4d_ros.wire import joints_from_msg
 
     diagnostics = ros.collect(DiagnosticArray, '/diagnostics')
     node = start('ik', {'ik.use_depth': True}, log_dir=tmp_path)

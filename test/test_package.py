@@ -8,6 +8,7 @@ import importlib
 import inspect
 import os
 import subprocess
+import sys
 from importlib.metadata import distribution
 from pathlib import Path
 
@@ -104,18 +105,29 @@ def _is_ros(module: str) -> bool:
     return module in ROS_MODULES or module.endswith('_msgs') or module.endswith('_interfaces')
 
 
-@pytest.mark.parametrize('folder', ['core', 'datasets', 'synth'])
-def test_core_datasets_synth_never_import_ros(folder):
+@pytest.mark.parametrize('folder', ['core', 'datasets', 'synth', 'wire'])
+def test_core_datasets_synth_wire_never_import_ros(folder):
     files = sorted((REPO / PACKAGE / folder).rglob('*.py'))
     assert files
     offenders = {}
     for f in files:
         bad = {m for m in _imports(f) if _is_ros(m)}
-        if folder == 'core' or f.name != 'bag.py':
+        if folder != 'datasets' or f.name != 'bag.py':
             bad |= {m for m in _imports(f) if m == 'rosbags'}
         if bad:
             offenders[str(f.relative_to(REPO))] = sorted(bad)
     assert not offenders, f'ROS imports where none may be: {offenders}'
+
+
+def test_wire_imports_numpy_opencv_and_core_only():
+    """The wire format (`pose4d_ros.wire`) is read and written by the nodes, the bag readers
+    and the offline tools alike: besides the standard library it imports numpy, OpenCV and
+    ours (`LAYERS`: core), nothing that needs a ROS install."""
+    allowed = {'numpy', 'cv2', PACKAGE, '__future__'} | set(sys.stdlib_module_names)
+    files = sorted((REPO / PACKAGE / 'wire').glob('*.py'))
+    assert files
+    offenders = {str(f.relative_to(REPO)): sorted(_imports(f) - allowed) for f in files}
+    assert not {k: v for k, v in offenders.items() if v}
 
 
 def test_boundary_check_catches_a_violation(tmp_path):
@@ -126,15 +138,16 @@ def test_boundary_check_catches_a_violation(tmp_path):
 
 
 # What each subpackage may import of ours (besides itself and the top package): core nothing
-# above it; util (progress, log, machine facts) only core; the readers and the renderer no
-# nodes or tools; training and evaluation the algorithms and the data, never a node or a verb;
-# graph (the node graph in processes) the nodes too; the tools (cli) anything.
-LAYERS = {'core': set(), 'util': {'core'}, 'datasets': {'core', 'util'},
+# above it; util (progress, log, machine facts) and wire (messages and their bytes <-> arrays)
+# only core; the readers and the renderer no nodes or tools; training and evaluation the
+# algorithms and the data, never a node or a verb; graph (the node graph in processes) the
+# nodes too; the tools (cli) anything.
+LAYERS = {'core': set(), 'util': {'core'}, 'wire': {'core'}, 'datasets': {'core', 'util', 'wire'},
           'synth': {'core', 'datasets', 'util'}, 'models': set(), 'peer': {'core'},
-          'nodes': {'core', 'datasets', 'models'},
+          'nodes': {'core', 'datasets', 'models', 'wire'},
           'training': {'core', 'datasets', 'models', 'util'},
-          'evaluation': {'core', 'datasets', 'synth', 'peer', 'models', 'util'},
-          'graph': {'core', 'datasets', 'models', 'nodes', 'util'}}
+          'evaluation': {'core', 'datasets', 'synth', 'peer', 'models', 'util', 'wire'},
+          'graph': {'core', 'datasets', 'models', 'nodes', 'util', 'wire'}}
 
 
 def test_every_subpackage_has_its_layer():

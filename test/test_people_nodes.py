@@ -57,12 +57,8 @@ def test_two_people_get_two_stable_ids(ros, tmp_path, frames, graph):
     from std_msgs.msg import Header
 
     from pose4d_ros.nodes import qos
-    from pose4d_ros.nodes.convert import (
-        array_to_image,
-        intrinsics_to_msg,
-        ns_to_stamp,
-        skeletons_from_msg,
-    )
+    from pose4d_ros.nodes.convert import array_to_image, intrinsics_to_msg, ns_to_stamp
+    from pose4d_ros.wire import skeletons_from_msg
 
     exes = ['pipeline'] if graph == 'pipeline' else ['foreground', 'detector', 'tracker', 'ik']
     nodes = [start(exe, log_dir=tmp_path) for exe in exes]
@@ -103,7 +99,7 @@ def test_two_people_get_two_stable_ids(ros, tmp_path, frames, graph):
     for k, ((_, _, heads), header) in enumerate(zip(frames, headers, strict=True)):
         people = skeletons_from_msg(by_stamp[header.stamp.nanosec])
         if not heads and k < 2:  # nobody in view: an empty array, an empty primary skeleton
-            assert people == [] and singles[header.stamp.nanosec].track_id == 0
+            assert people == () and singles[header.stamp.nanosec].track_id == 0
             continue
         if not heads:  # everyone just left: their tracks predicted, nothing detected
             assert sorted(p.track_id for p in people) == [1, 2]

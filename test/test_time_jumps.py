@@ -17,7 +17,7 @@ from helpers import INTR, parts_msg
 
 from pose4d_ros.core import joints as cj
 from pose4d_ros.datasets import bag
-from pose4d_ros.nodes.convert import stamp_to_ns
+from pose4d_ros.wire import stamp_to_ns
 
 T0_NS = 1_325_419_200_000_000_000  # 2012-01-01 12:00 UTC
 STEP_NS = 33_333_333

@@ -1,8 +1,9 @@
 """A set of named joints of one person in one frame: the core-side twin of JointArray.
 
-`nodes/convert.py` turns it into a `pose4d_msgs/JointArray` and back; everything else works on
-this dataclass. Unknown values are NaN. Source codes equal the message's constants (a test
-checks it). `check_joints` is the physical-sense check of a JointSet that came from outside.
+`wire` reads it from a `pose4d_msgs/JointArray` (the message or its bytes) and writes its
+bytes, `nodes/convert.py` builds the rclpy message; everything else works on this dataclass.
+Unknown values are NaN. Source codes equal the message's constants (a test checks it).
+`check_joints` is the physical-sense check of a JointSet that came from outside.
 """
 
 from __future__ import annotations

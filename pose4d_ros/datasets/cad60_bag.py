@@ -34,7 +34,7 @@ from pose4d_ros.core.joints import JointSet
 from pose4d_ros.core.sync import StampSync
 from pose4d_ros.datasets import bag, cad60
 from pose4d_ros.datasets.frame import Frame
-from pose4d_ros.datasets.messages import (
+from pose4d_ros.wire import (
     color_from_msg,
     depth_from_msg,
     image_to_array,

@@ -22,7 +22,7 @@ from typing import Any
 from pose4d_ros.core.sync import StampSync
 from pose4d_ros.datasets.bag import any_reader
 from pose4d_ros.datasets.frame import Frame
-from pose4d_ros.datasets.messages import (
+from pose4d_ros.wire import (
     color_from_compressed,
     color_from_msg,
     depth_from_compressed,

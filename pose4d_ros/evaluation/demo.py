@@ -31,7 +31,6 @@ from pose4d_ros.core.people import TrackingConfig
 from pose4d_ros.core.skeleton import SKELETON_14
 from pose4d_ros.datasets import bag
 from pose4d_ros.datasets.frame import Frame
-from pose4d_ros.datasets.messages import joints_from_msg, stamp_to_ns
 from pose4d_ros.evaluation.draw import overlay_frame, overlay_picture, write_video
 from pose4d_ros.evaluation.pipeline import (
     Row,
@@ -42,6 +41,7 @@ from pose4d_ros.evaluation.pipeline import (
     score_rows,
 )
 from pose4d_ros.evaluation.tables import format_table
+from pose4d_ros.wire import joints_from_msg, stamp_to_ns
 
 LIVE = 'graph'  # the live row's name in the tables
 SKELETON_TOPIC = '/pose4d/skeleton'

@@ -21,7 +21,7 @@ import numpy as np
 
 from pose4d_ros.core.joints import MISSING, JointSet
 from pose4d_ros.datasets import bag, cad60_bag
-from pose4d_ros.datasets.messages import joints_from_msg, stamp_to_ns
+from pose4d_ros.wire import joints_from_msg, stamp_to_ns
 
 STAGES = ('foreground', 'detector', 'tracker', 'ik')
 RECORDED = ('pose4d/skeleton', 'pose4d/skeletons', 'pose4d/parts', 'pose4d/parts/tracked',
@@ -181,7 +181,6 @@ def run_graph(bag_path: Path, out: Path, *, rate: float = 1.0, model: str = 'rgb
 
     from pose4d_ros.nodes import qos
     from pose4d_ros.nodes.common import executor
-    from pose4d_ros.nodes.convert import stamp_to_ns
 
     frames = bag.topics(bag_path)[cad60_bag.COLOR_TOPIC].count
     # this process and the nodes: Fast DDS with room for large frames (config/fastdds.xml)
@@ -276,7 +275,7 @@ def tf_per_skeleton(recorded: Path, skeletons: dict[int, JointSet], *,
     """The recorded /tf against the recorded skeletons: `matching` counts the skeletons whose
     stamp has exactly one transform per located joint (`<prefix>/<track>/<joint>`) of every
     person of that frame (/pose4d/skeletons, where recorded; else the skeleton's own) on /tf."""
-    from pose4d_ros.nodes.convert import joint_frame
+    from pose4d_ros.wire import joint_frame
 
     frames: dict[int, list[str]] = {}
     for m in bag.read_messages(recorded, ['/tf']):

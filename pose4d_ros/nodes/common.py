@@ -38,13 +38,13 @@ from rclpy.subscription import Subscription
 from sensor_msgs.msg import CameraInfo, Image
 from std_msgs.msg import Header
 
+from pose4d_ros import wire
 from pose4d_ros.core.camera import Intrinsics
 from pose4d_ros.core.sync import TIME_JUMP_S, StampJumps, StampSync
 from pose4d_ros.core.threads import set_blas_threads
-from pose4d_ros.datasets import messages
 from pose4d_ros.nodes import qos
-from pose4d_ros.nodes.convert import depth_from_msg, intrinsics_from_msg, stamp_to_ns
 from pose4d_ros.nodes.params import ParameterError
+from pose4d_ros.wire import depth_from_msg, intrinsics_from_msg, stamp_to_ns
 
 DIAGNOSTICS_TOPIC = '/diagnostics'
 # A stamp farther than this from the node's clock was taken on another clock, seconds
@@ -437,7 +437,7 @@ class RecentDepth:
     frame's stamp when it has come but never waits for it (the tracker's free-space check):
     `at(stamp_ns)` is that image in metres (the nearest stamp within `slop_ns`), or None.
 
-    Only the stamps are read as the images arrive (`messages.cdr_header`); an image is
+    Only the stamps are read as the images arrive (`wire.cdr_header`); an image is
     deserialised when it is used."""
 
     KEEP = 8
@@ -466,7 +466,7 @@ class RecentDepth:
 
 
 def _stamp_ns(data: bytes) -> int:
-    sec, nanosec, _, _ = messages.cdr_header(data)
+    sec, nanosec, _, _ = wire.cdr_header(data)
     return sec * 1_000_000_000 + nanosec
 
 
@@ -538,17 +538,17 @@ class _Pivot:
     @classmethod
     def of_bytes(cls, data: bytes, msg_type: type) -> _Pivot:
         """A serialised SkeletonArray's or JointArray's frame, read straight from the bytes
-        (`datasets.messages`: a third of the CPU of deserialising the message and reading its
+        (`wire.cdr`: a third of the CPU of deserialising the message and reading its
         fields) as it arrives, so that bytes which hold none are counted at once (ValueError);
         bytes in another encoding than little-endian CDR are deserialised the general way."""
         several = msg_type is SkeletonArray
         try:
-            sec, nanosec, frame_id, at = messages.cdr_header(data)
+            sec, nanosec, frame_id, at = wire.cdr_header(data)
         except ValueError:
             msg = deserialize_message(data, msg_type)
-            return cls(msg.header, (lambda: list(messages.skeletons_from_msg(msg))) if several
-                       else (lambda: [messages.joints_from_msg(msg)]))
-        people = (list(messages.skeletons_from_cdr(data, at)) if several
-                  else [messages.joints_from_cdr(data)])
+            return cls(msg.header, (lambda: list(wire.skeletons_from_msg(msg))) if several
+                       else (lambda: [wire.joints_from_msg(msg)]))
+        people = (list(wire.skeletons_from_cdr(data, at)) if several
+                  else [wire.joints_from_cdr(data)])
         return cls(Header(stamp=Time(sec=sec, nanosec=nanosec), frame_id=frame_id),
                    lambda: people)

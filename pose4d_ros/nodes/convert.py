@@ -1,22 +1,19 @@
-"""Messages <-> arrays for the nodes (after cv_bridge and image_geometry).
+"""Arrays -> the rclpy message objects the nodes publish (after cv_bridge and image_geometry):
+what needs the message classes, and only that.
 
-Reading (Image, CameraInfo, JointArray and stamps to arrays) is `datasets.messages`, shared with
-the bag readers and re-exported here; this module adds what needs the rclpy message classes:
-
-- numpy -> `sensor_msgs/Image` (rows packed; or its serialised bytes, `image_to_cdr`),
-  `PointCloud2`, RViz markers;
+- numpy -> `sensor_msgs/Image` (rows packed), `PointCloud2`, RViz markers;
 - `core.camera.Intrinsics` -> `sensor_msgs/CameraInfo`;
-- `core.joints.JointSet` -> `pose4d_msgs/JointArray` (a message, or its serialised CDR bytes
-  for `Publisher.publish`: `joints_to_cdr`; several people's `SkeletonArray`:
-  `skeletons_to_cdr`), and -> `tf2_msgs/TFMessage`'s bytes (`tf_to_cdr`);
-- integer nanoseconds -> `builtin_interfaces/Time`.
+- `core.joints.JointSet` -> `pose4d_msgs/JointArray`, several people's `SkeletonArray`;
+- integer nanoseconds -> `builtin_interfaces/Time`; a type name -> its message class.
+
+Reading messages (objects or bytes) into arrays, and writing arrays straight to a message's
+serialised bytes (what the nodes publish on their busy topics), is `pose4d_ros.wire`.
 """
 
 from __future__ import annotations
 
 import array
 import importlib
-import struct
 import sys
 
 import numpy as np
@@ -31,46 +28,20 @@ from visualization_msgs.msg import Marker, MarkerArray
 from pose4d_ros.core.camera import Intrinsics
 from pose4d_ros.core.draw import person_rgb
 from pose4d_ros.core.joints import DETECTED, INFERRED, MISSING, TRACKED, JointSet
-from pose4d_ros.datasets.messages import (
-    CDR_LE,
-    CDR_TIME,
-    CDR_TRACK,
-    CDR_U32,
-    ENCODINGS,
-    color_from_msg,
-    depth_from_msg,
-    image_to_array,
-    intrinsics_from_msg,
-    joints_from_msg,
-    stamp_to_ns,
-)
+from pose4d_ros.wire.pixels import as_encoding
 
-__all__ = ['array_to_image', 'cloud_to_msg', 'color_from_msg', 'depth_from_msg',
-           'image_to_array', 'image_to_cdr', 'intrinsics_from_msg', 'intrinsics_to_msg',
-           'joint_frame', 'joints_from_msg', 'joints_to_cdr', 'joints_to_msg', 'tf_to_cdr',
-           'message_type', 'ns_to_stamp', 'skeleton_markers', 'skeletons_to_cdr',
-           'skeletons_to_msg', 'stamp_to_ns']
+__all__ = ['array_to_image', 'cloud_to_msg', 'intrinsics_to_msg', 'joints_to_msg',
+           'message_type', 'ns_to_stamp', 'people_markers', 'skeleton_markers',
+           'skeletons_to_msg']
 
 
 def ns_to_stamp(ns: int) -> Time:
     return Time(sec=int(ns // 1_000_000_000), nanosec=int(ns % 1_000_000_000))
 
 
-def _image_array(img: NDArray, encoding: str) -> tuple[NDArray, int]:
-    """`img` as the C-contiguous pixels of `encoding`, and its channels; ValueError when it
-    cannot be."""
-    if encoding not in ENCODINGS:
-        raise ValueError(f'unsupported image encoding {encoding!r}')
-    kind, channels = ENCODINGS[encoding]
-    img = np.ascontiguousarray(img, dtype=np.dtype(kind))
-    if img.ndim != (3 if channels > 1 else 2) or (channels > 1 and img.shape[2] != channels):
-        raise ValueError(f'array of shape {img.shape} does not fit encoding {encoding}')
-    return img, channels
-
-
 def array_to_image(img: NDArray, encoding: str, header: Header) -> Image:
     """An Image message holding `img` (a copy), rows packed (step = width x pixel size)."""
-    img, channels = _image_array(img, encoding)
+    img, channels = as_encoding(img, encoding)
     msg = Image(header=header, height=img.shape[0], width=img.shape[1], encoding=encoding,
                 is_bigendian=int(sys.byteorder == 'big'),
                 step=img.shape[1] * channels * img.dtype.itemsize)
@@ -99,116 +70,6 @@ def joints_to_msg(joints: JointSet, header: Header) -> JointArray:
             position_covariance=joints.covariance[i].reshape(9).tolist()))
     msg.joints = out
     return msg
-
-
-_SIZE = struct.Struct('<II')        # an Image's height and width; its step and data length
-_JOINT = struct.Struct('<5dfB')     # u, v, position x, y, z, confidence, source
-_COVARIANCE = struct.Struct('<9d')
-
-
-def _cdr_string(out: bytearray, text: str) -> None:
-    """A CDR string at a 4-byte boundary: length with the terminating NUL, bytes, NUL."""
-    out += bytes(-len(out) % 4)
-    raw = text.encode()
-    out += CDR_U32.pack(len(raw) + 1) + raw + b'\x00'
-
-
-def joints_to_cdr(joints: JointSet, header: Header) -> bytes:
-    """`joints_to_msg(joints, header)` serialised (CDR, little-endian, as
-    `rclpy.serialization.serialize_message` gives it), built without the message classes:
-    publishing these bytes costs a tenth of converting and publishing the message (measured:
-    about 0.05 against 0.5 ms for 14 joints)."""
-    out = bytearray()   # alignment is counted from the start of the payload
-    _joints_cdr(out, joints, header)
-    return CDR_LE + bytes(out)
-
-
-def skeletons_to_cdr(people: list[JointSet], header: Header) -> bytes:
-    """`skeletons_to_msg(people, header)` serialised as `joints_to_cdr` serialises one
-    JointArray: the detector, tracker and IK nodes publish every person's this way."""
-    out = bytearray()
-    _header_cdr(out, header)
-    out += bytes(-len(out) % 4)
-    out += CDR_U32.pack(len(people))
-    for joints in people:
-        _joints_cdr(out, joints, header)
-    return CDR_LE + bytes(out)
-
-
-def _header_cdr(out: bytearray, header: Header) -> None:
-    out += bytes(-len(out) % 4)
-    out += CDR_TIME.pack(int(header.stamp.sec), int(header.stamp.nanosec))
-    _cdr_string(out, header.frame_id)
-
-
-def _joints_cdr(out: bytearray, joints: JointSet, header: Header) -> None:
-    """One JointArray appended to a CDR payload `out` (alignment from the payload's start)."""
-    _header_cdr(out, header)
-    out += bytes(-len(out) % 4)
-    out += CDR_TRACK.pack(int(joints.track_id), float(joints.score))
-    out += CDR_U32.pack(len(joints.names))
-    uv, xyz = joints.uv.tolist(), joints.xyz.tolist()
-    conf, src = joints.confidence.tolist(), joints.source.tolist()
-    cov = joints.covariance.reshape(-1, 9).tolist()
-    for i, name in enumerate(joints.names):
-        _cdr_string(out, name)
-        out += bytes(-len(out) % 8)
-        out += _JOINT.pack(*uv[i], *xyz[i], conf[i], src[i])
-        out += bytes(-len(out) % 8)
-        out += _COVARIANCE.pack(*cov[i])
-
-
-def image_to_cdr(img: NDArray, encoding: str, header: Header) -> bytes:
-    """`array_to_image(img, encoding, header)` serialised (little-endian CDR, as
-    `rclpy.serialization.serialize_message` gives it), built without the message: the pixels
-    are copied once, into the bytes (the message costs three copies and its conversion)."""
-    img, channels = _image_array(img, encoding)
-    out = bytearray()
-    _header_cdr(out, header)
-    out += bytes(-len(out) % 4)
-    out += _SIZE.pack(img.shape[0], img.shape[1])
-    _cdr_string(out, encoding)
-    out += bytes((int(sys.byteorder == 'big'),))
-    out += bytes(-len(out) % 4)
-    out += _SIZE.pack(img.shape[1] * channels * img.dtype.itemsize, img.nbytes)
-    return b''.join((CDR_LE, out, img.data.cast('B')))
-
-
-def joint_frame(prefix: str, track_id: int, name: str) -> str:
-    """The TF frame of a tracked person's joint: `<prefix>/<track_id>/<name>`."""
-    return f'{prefix}/{track_id}/{name}' if prefix else f'{track_id}/{name}'
-
-
-_TRANSFORM = struct.Struct('<7d')  # translation x, y, z, rotation x, y, z, w
-
-
-def tf_to_cdr(people: list[JointSet], header: Header, prefix: str) -> bytes | None:
-    """Every person's joints on /tf: a `tf2_msgs/TFMessage` serialised (little-endian CDR, as
-    `rclpy.serialization.serialize_message` gives it), built without the message classes;
-    None when no joint is located. One transform per joint with a known 3-D position (not
-    MISSING, finite), from the image's frame (`header.frame_id`) to
-    `joint_frame(prefix, track_id, name)`, stamped with `header.stamp`; the joint's position is
-    the translation, the rotation is the identity. Building the ~30 `TransformStamped` objects
-    of two people and serialising them cost the IK node more CPU than the IK itself."""
-    out = bytearray()
-    out += CDR_U32.pack(0)  # the count, written once known
-    count = 0
-    stamp = CDR_TIME.pack(int(header.stamp.sec), int(header.stamp.nanosec))
-    for joints in people:
-        located = (joints.source != MISSING) & np.isfinite(joints.xyz).all(axis=1)
-        xyz = joints.xyz.tolist()
-        for i in np.flatnonzero(located).tolist():
-            out += bytes(-len(out) % 4)
-            out += stamp
-            _cdr_string(out, header.frame_id)
-            _cdr_string(out, joint_frame(prefix, int(joints.track_id), joints.names[i]))
-            out += bytes(-len(out) % 8)
-            out += _TRANSFORM.pack(*xyz[i], 0.0, 0.0, 0.0, 1.0)
-            count += 1
-    if not count:
-        return None
-    out[:4] = CDR_U32.pack(count)
-    return CDR_LE + bytes(out)
 
 
 def message_type(name: str) -> type:
@@ -309,8 +170,3 @@ def people_markers(people: list[JointSet], bones: list[tuple[int, int]], header:
 def skeletons_to_msg(people: list[JointSet], header: Header) -> SkeletonArray:
     """Every person of a frame as a SkeletonArray (each JointArray with the same header)."""
     return SkeletonArray(header=header, skeletons=[joints_to_msg(j, header) for j in people])
-
-
-def skeletons_from_msg(msg: SkeletonArray) -> list[JointSet]:
-    """The people of a SkeletonArray (ValueError as `joints_from_msg` for a bad one)."""
-    return [joints_from_msg(m) for m in msg.skeletons]

@@ -61,7 +61,8 @@ from pose4d_ros.nodes.common import (
     StageMonitor,
     run,
 )
-from pose4d_ros.nodes.convert import (
+from pose4d_ros.nodes.params import NodeParams, Param, ParameterError
+from pose4d_ros.wire import (
     color_from_msg,
     depth_from_msg,
     image_to_array,
@@ -69,7 +70,6 @@ from pose4d_ros.nodes.convert import (
     skeletons_to_cdr,
     stamp_to_ns,
 )
-from pose4d_ros.nodes.params import NodeParams, Param, ParameterError
 
 _S = SearchConfig()
 _C = ScaleConfig()

@@ -44,15 +44,15 @@ from pose4d_ros.core.people import people_labels
 from pose4d_ros.core.stages import ForegroundStage
 from pose4d_ros.nodes import qos
 from pose4d_ros.nodes.common import PairedInputs, StageMonitor, run
-from pose4d_ros.nodes.convert import (
-    cloud_to_msg,
+from pose4d_ros.nodes.convert import cloud_to_msg
+from pose4d_ros.nodes.params import NodeParams, Param
+from pose4d_ros.wire import (
     color_from_msg,
     depth_from_msg,
     image_to_cdr,
     intrinsics_from_msg,
     stamp_to_ns,
 )
-from pose4d_ros.nodes.params import NodeParams, Param
 
 _F = ForegroundConfig()
 # Person regions published at most per frame (the detector's max_people bounds its work)
@@ -111,7 +111,7 @@ def foreground_stage(p: dict[str, Any]) -> ForegroundStage:
 def foreground_messages(labels: np.ndarray, color_m: np.ndarray, depth_m: np.ndarray,
                         encoding: str, header: Header) -> tuple[bytes, bytes, bytes]:
     """Mask (mono8 labels, `core.people.people_labels`), masked colour (rgb8) and masked depth
-    (in the input's `encoding`), as the serialised Image messages (`convert.image_to_cdr`)."""
+    (in the input's `encoding`), as the serialised Image messages (`wire.image_to_cdr`)."""
     depth = (image_to_cdr(depth_m, '32FC1', header) if encoding == '32FC1'
              else image_to_cdr(depth_to_millimetres(depth_m), '16UC1', header))
     return (image_to_cdr(labels, 'mono8', header),

@@ -52,16 +52,9 @@ from pose4d_ros.core.skeleton import SKELETON_14, limb_bones
 from pose4d_ros.core.stages import IkStage
 from pose4d_ros.nodes import qos
 from pose4d_ros.nodes.common import LatestIntrinsics, PeopleInputs, StageMonitor, run
-from pose4d_ros.nodes.convert import (
-    depth_from_msg,
-    joints_to_cdr,
-    people_markers,
-    skeleton_markers,
-    skeletons_to_cdr,
-    stamp_to_ns,
-    tf_to_cdr,
-)
+from pose4d_ros.nodes.convert import people_markers, skeleton_markers
 from pose4d_ros.nodes.params import NodeParams, Param
+from pose4d_ros.wire import depth_from_msg, joints_to_cdr, skeletons_to_cdr, stamp_to_ns, tf_to_cdr
 
 
 def _frame_prefix(value: str) -> str | None:

@@ -37,14 +37,14 @@ from pose4d_ros.core.people import people_labels
 from pose4d_ros.core.pipeline import FramePipeline
 from pose4d_ros.nodes import detector, foreground, ik, qos, tracker
 from pose4d_ros.nodes.common import PairedInputs, StageMonitor, run
-from pose4d_ros.nodes.convert import (
+from pose4d_ros.nodes.params import NodeParams, Param
+from pose4d_ros.wire import (
     color_from_msg,
     depth_from_msg,
     intrinsics_from_msg,
     joints_to_cdr,
     stamp_to_ns,
 )
-from pose4d_ros.nodes.params import NodeParams, Param
 
 PARAMS = (
     *foreground.PARAMS, *detector.PARAMS, *tracker.PARAMS, *ik.PARAMS,

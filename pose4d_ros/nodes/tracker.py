@@ -50,8 +50,8 @@ from pose4d_ros.nodes.common import (
     StageMonitor,
     run,
 )
-from pose4d_ros.nodes.convert import joints_to_cdr, skeletons_to_cdr, stamp_to_ns
 from pose4d_ros.nodes.params import NodeParams, Param
+from pose4d_ros.wire import joints_to_cdr, skeletons_to_cdr, stamp_to_ns
 
 _D = SlqeConfig()
 PARAMS = (
