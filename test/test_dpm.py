@@ -25,12 +25,12 @@ from pose4d_ros.core.dpm.dp import (
 )
 from pose4d_ros.core.dpm.dt import dt2d
 from pose4d_ros.core.dpm.infer import OcclusionFloor, arm_limbs
-from pose4d_ros.core.dpm.samples import TrainConfig
-from pose4d_ros.core.dpm.solver import Examples, dcd, margins, rebuild_w
-from pose4d_ros.core.dpm.train import choose_depth_lookup, kmeans
 from pose4d_ros.core.hog import feature_pyramid
 from pose4d_ros.core.lifting import lift_parts
 from pose4d_ros.core.skeleton import PARTS_10, PARTS_14, PARTS_22
+from pose4d_ros.training.dpm.samples import TrainConfig
+from pose4d_ros.training.dpm.solver import Examples, dcd, margins, rebuild_w
+from pose4d_ros.training.dpm.train import choose_depth_lookup, kmeans
 
 # --------------------------------------------------------------------------- distance transforms
 
@@ -567,12 +567,13 @@ def test_kmeans_is_deterministic_and_finds_separated_clusters() -> None:
 
 
 def test_labelled_pose_score_is_the_tree_dp_at_fixed_cells() -> None:
-    """tools/lspet_diagnose's score of a given pose: at the DP's best pose it equals the best
-    score, anywhere else it is no higher (the DP is the max over all poses)."""
+    """The score of a given pose (`labelled_score`, the tools' check of the labelled pose): at
+    the DP's best pose it equals the best score, anywhere else it is no higher (the DP is the
+    max over all poses)."""
     from pose4d_ros.core.dpm.dp import backtrack, best_roots, model_arrays, score_level
     from pose4d_ros.core.hog import feature_pyramid
+    from pose4d_ros.training.dpm.diagnose import labelled_score
 
-    tool = _diagnose_tool()
     m = tenpart_model('rgb')
     rng = np.random.default_rng(3)
     img = rng.integers(0, 255, (90, 70, 3), dtype=np.uint8)
@@ -582,11 +583,11 @@ def test_labelled_pose_score_is_the_tree_dp_at_fixed_cells() -> None:
     parts, _ = backtrack(best_roots(res, 1), *arrays[1:2], res.resp, res.ix, res.iy, res.ik,
                          *arrays[2:])
     resp = res.resp.astype(np.float64)
-    assert tool.labelled_score(resp, parts[0][:, 1:], m) == pytest.approx(res.root.max(), abs=1e-4)
+    assert labelled_score(resp, parts[0][:, 1:], m) == pytest.approx(res.root.max(), abs=1e-4)
     ny, nx = resp.shape[2:]
     for _ in range(20):
         cells = np.stack([rng.integers(0, ny, 10), rng.integers(0, nx, 10)], 1)
-        assert tool.labelled_score(resp, cells, m) <= res.root.max() + 1e-4
+        assert labelled_score(resp, cells, m) <= res.root.max() + 1e-4
 
 
 def _diagnose_tool():
@@ -603,7 +604,7 @@ def test_diagnose_summary_splits_by_placement_and_tilt() -> None:
     """Left and right swapped by name, the middle parts kept (`mirror_index`, which the tool
     and mirrored positives use); tools/lspet_diagnose's summary averages the found pose's
     PCK@0.2 over the photographs it lies on the person in and by torso tilt."""
-    from pose4d_ros.core.dpm.samples import mirror_index
+    from pose4d_ros.training.dpm.samples import mirror_index
 
     tool = _diagnose_tool()
     names = PARTS_14.names
@@ -645,7 +646,7 @@ def _labelled_frame(rng: np.random.Generator, names: tuple[str, ...], key: str =
 
 
 def test_jittered_positive_moves_the_crop_origin_not_the_labels() -> None:
-    from pose4d_ros.core.dpm.samples import prepare_positive
+    from pose4d_ros.training.dpm.samples import prepare_positive
 
     cfg = TrainConfig(parts='10', channels='rgb', jitter=1)
     rng = np.random.default_rng(5)
@@ -667,9 +668,9 @@ def test_jittered_positive_moves_the_crop_origin_not_the_labels() -> None:
 
 
 def test_bone_scale_sees_through_a_torso_seen_end_on() -> None:
-    from pose4d_ros.core.dpm.samples import bone_ratios, bone_scale, joint_scale, person_scale
     from pose4d_ros.core.joints import JointSet
     from pose4d_ros.datasets.frame import Frame
+    from pose4d_ros.training.dpm.samples import bone_ratios, bone_scale, joint_scale, person_scale
 
     tree = PARTS_14
     rng = np.random.default_rng(8)
@@ -718,7 +719,7 @@ def test_bone_scale_sees_through_a_torso_seen_end_on() -> None:
 
 
 def test_background_rooms_come_first_and_lose_depth_for_rgb() -> None:
-    from pose4d_ros.core.dpm.negatives import build_negatives
+    from pose4d_ros.training.dpm.negatives import build_negatives
 
     cfg = TrainConfig(parts='10', channels='rgb')
     rng = np.random.default_rng(6)

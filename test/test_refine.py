@@ -1,4 +1,5 @@
-"""Boosted trees (core/boost.py) and the learned corrections of the parts (core/refine.py)."""
+"""Boosted trees (core/boost.py, fitted by training/boost.py) and the learned corrections of the
+parts (core/refine.py, fitted by training/refiner.py)."""
 
 from __future__ import annotations
 
@@ -9,7 +10,7 @@ import pytest
 from helpers import INTR
 from numpy.testing import assert_allclose
 
-from pose4d_ros.core.boost import BoostedTrees, fit, predict_stacked
+from pose4d_ros.core.boost import BoostedTrees, predict_stacked
 from pose4d_ros.core.dpm import load_model, save_model
 from pose4d_ros.core.refine import (
     MAX_DEPTH_M,
@@ -18,15 +19,15 @@ from pose4d_ros.core.refine import (
     QUANTILES,
     PartRefiner,
     features,
-    fit_refiner,
     group_of,
     person_scale,
-    targets,
 )
 from pose4d_ros.core.skeleton import PARTS_14
 from pose4d_ros.core.stages import DetectorStage
 from pose4d_ros.core.warm_up import warm_up_frame
 from pose4d_ros.models import model_path
+from pose4d_ros.training.boost import fit
+from pose4d_ros.training.refiner import fit_refiner, targets
 
 # --------------------------------------------------------------------------- boosted trees
 

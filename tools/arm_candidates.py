@@ -16,13 +16,10 @@ from __future__ import annotations
 import argparse
 import sys
 from collections import Counter
-from pathlib import Path
 
 import numpy as np
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # the source tree
-
-from pose4d_ros.core.dpm.dp import (  # noqa: E402
+from pose4d_ros.core.dpm.dp import (
     LIMB_CANDIDATES,
     backtrack,
     best_roots,
@@ -30,12 +27,12 @@ from pose4d_ros.core.dpm.dp import (  # noqa: E402
     model_arrays,
     score_level,
 )
-from pose4d_ros.core.dpm.infer import Detector  # noqa: E402
-from pose4d_ros.core.dpm.model import load_model  # noqa: E402
-from pose4d_ros.core.stages import ForegroundStage  # noqa: E402
-from pose4d_ros.core.threads import set_blas_threads  # noqa: E402
-from pose4d_ros.datasets.sources import load_frames  # noqa: E402
-from pose4d_ros.models import model_path  # noqa: E402
+from pose4d_ros.core.dpm.infer import Detector
+from pose4d_ros.core.dpm.model import load_model
+from pose4d_ros.core.stages import ForegroundStage
+from pose4d_ros.core.threads import set_blas_threads
+from pose4d_ros.datasets.sources import load_frames
+from pose4d_ros.models import model_path
 
 
 def main(argv: list[str]) -> int:

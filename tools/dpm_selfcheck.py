@@ -21,26 +21,23 @@ level the positives and the wrong poses are cut from):
 from __future__ import annotations
 
 import argparse
-import sys
 import time
 from pathlib import Path
 
 import numpy as np
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-
-from lspet_diagnose import labelled_score  # noqa: E402
-
-from pose4d_ros.core.dpm.dp import (  # noqa: E402
+from pose4d_ros.core.dpm.dp import (
     backtrack,
     best_roots,
     model_arrays,
     score_level,
 )
-from pose4d_ros.core.dpm.infer import Detector, SearchPlan  # noqa: E402
-from pose4d_ros.core.dpm.model import load_model  # noqa: E402
-from pose4d_ros.core.dpm.negatives import build_negatives  # noqa: E402
-from pose4d_ros.core.dpm.samples import (  # noqa: E402
+from pose4d_ros.core.dpm.infer import Detector, SearchPlan
+from pose4d_ros.core.dpm.model import load_model
+from pose4d_ros.datasets.sources import load_frames
+from pose4d_ros.training.dpm.diagnose import labelled_score
+from pose4d_ros.training.dpm.negatives import build_negatives
+from pose4d_ros.training.dpm.samples import (
     TrainConfig,
     frame_of,
     level_of,
@@ -48,9 +45,8 @@ from pose4d_ros.core.dpm.samples import (  # noqa: E402
     person_scale,
     prepare_positive,
 )
-from pose4d_ros.core.dpm.solver import Layout, pose_blocks  # noqa: E402
-from pose4d_ros.core.dpm.train import train  # noqa: E402
-from pose4d_ros.datasets.sources import load_frames  # noqa: E402
+from pose4d_ros.training.dpm.solver import Layout, pose_blocks
+from pose4d_ros.training.dpm.train import train
 
 
 def raw_w(model) -> tuple[np.ndarray, Layout]:

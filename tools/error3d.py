@@ -21,21 +21,18 @@ from __future__ import annotations
 
 import argparse
 import sys
-from pathlib import Path
 
 import numpy as np
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # the source tree
-
-from pose4d_ros.core.camera import backproject  # noqa: E402
-from pose4d_ros.core.dpm.infer import Detector  # noqa: E402
-from pose4d_ros.core.dpm.model import load_model  # noqa: E402
-from pose4d_ros.core.lifting import lift_parts  # noqa: E402
-from pose4d_ros.core.skeleton import SKELETON_14  # noqa: E402
-from pose4d_ros.core.threads import set_blas_threads  # noqa: E402
-from pose4d_ros.datasets.sources import load_frames  # noqa: E402
-from pose4d_ros.evaluation.pipeline import pipeline_rows  # noqa: E402
-from pose4d_ros.models import model_path  # noqa: E402
+from pose4d_ros.core.camera import backproject
+from pose4d_ros.core.dpm.infer import Detector
+from pose4d_ros.core.dpm.model import load_model
+from pose4d_ros.core.lifting import lift_parts
+from pose4d_ros.core.skeleton import SKELETON_14
+from pose4d_ros.core.threads import set_blas_threads
+from pose4d_ros.datasets.sources import load_frames
+from pose4d_ros.evaluation.pipeline import pipeline_rows
+from pose4d_ros.models import model_path
 
 REACH_PX = (0, 5, 7, 9, 12, np.inf)
 

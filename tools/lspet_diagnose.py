@@ -4,7 +4,7 @@
         [--model lspet_rgb_14] [--json out/lspet_diagnose.json]
 
 For every photograph whose 14 joints are all labelled:
-- the labelled person's scale (`core.dpm.samples.person_scale` with the model's training
+- the labelled person's scale (`training.dpm.samples.person_scale` with the model's training
   settings, as training measured it) and the model's level at that scale;
 - the score of the labelled pose on that level: each part's filter at the labelled cell, its
   spring from its parent's labelled cell and the best types (an exact max over the types on the
@@ -35,41 +35,23 @@ import numpy as np
 from pose4d_ros.core.dpm.dp import model_arrays, score_level
 from pose4d_ros.core.dpm.infer import Detector, SearchPlan
 from pose4d_ros.core.dpm.model import PartModel, load_model
-from pose4d_ros.core.dpm.samples import TrainConfig, mirror_index, person_scale
 from pose4d_ros.core.files import write_json
+from pose4d_ros.core.metrics import pck_per_frame, reference_size
 from pose4d_ros.datasets.lspet import read_frames
 from pose4d_ros.models import model_path
-
-
-def labelled_score(resp: np.ndarray, cells: np.ndarray, model: PartModel) -> float:
-    """The best score over part types of the pose with part c at window `cells[c]` = (row,
-    col) on a level whose filter responses are `resp` (P, K, ny, nx)."""
-    parents = np.asarray(model.parents)
-    sp, an, bias = (model.springs.astype(np.float64), model.anchors, model.bias.astype(np.float64))
-    n_parts, n_types = resp.shape[:2]
-    below = np.zeros((n_parts, n_types))  # best score of each part's subtree, per its type
-    for c in range(n_parts - 1, -1, -1):
-        r, q = cells[c]
-        below[c] += resp[c, :, r, q]
-        if c == 0:
-            break
-        p = parents[c]
-        dx = q - cells[p, 1] - an[c, :, 0]
-        dy = r - cells[p, 0] - an[c, :, 1]
-        spring = (sp[c, :, 0] * dx + sp[c, :, 1] * dx * dx
-                  + sp[c, :, 2] * dy + sp[c, :, 3] * dy * dy)
-        # message to the parent: for each parent type, the best child type
-        below[p] += np.max(below[c][None, :] - spring[None, :] + bias[c], axis=1)
-    return float(np.max(below[0] + bias[0, 0]))
+from pose4d_ros.training.dpm.diagnose import labelled_score
+from pose4d_ros.training.dpm.samples import TrainConfig, mirror_index, person_scale
 
 
 def pck(uv: np.ndarray, truth: np.ndarray, alpha: float = 0.1) -> float:
-    return 100.0 * float(np.mean(np.hypot(*(uv - truth).T) <= alpha * box_size(truth)))
+    """PCK@alpha of the pose `uv` against the all-labelled joints `truth` (the table's rule,
+    `core.metrics`)."""
+    return float(pck_per_frame(uv[None], truth[None], _all(truth), alpha=alpha)[0])
 
 
-def box_size(truth: np.ndarray) -> float:
-    """max(h, w) of the labelled joints' box (PCK's reference length)."""
-    return float(np.max(np.ptp(truth, axis=0)))
+def _all(truth: np.ndarray) -> np.ndarray:
+    """(1, J) every joint of `truth` labelled."""
+    return np.ones((1, len(truth)), bool)
 
 
 TOP_K = 10
@@ -105,7 +87,8 @@ def diagnose(root: str, first: int, last: int, model: PartModel) -> list[dict]:
         same = det.poses_from_levels([level])[0]
         cands = det.detect(frame.color, None, top_k=TOP_K)
         found = cands[0]
-        off = float(np.hypot(*(found.uv.mean(0) - truth.mean(0)))) / box_size(truth)
+        off = (float(np.hypot(*(found.uv.mean(0) - truth.mean(0))))
+               / float(reference_size(truth[None], _all(truth))[0]))
         down = truth[hips].mean(0) - truth[neck]
         out.append({'key': Path(frame.key).name, 'person_scale_px': round(s, 1),
                     'labelled_score': round(gt, 3),

@@ -1,9 +1,10 @@
 """Write config/<node>.yaml from a node module's PARAMS (the code holds the defaults).
 
-    .venv/bin/python tools/write_config.py tracker ik ...
+    PYTHONPATH=. .venv/bin/python tools/write_config.py tracker ik ...
 
 A test checks that every config file equals its node's defaults, so run this after changing a
-parameter.
+parameter (with `PYTHONPATH=.`, the source tree's PARAMS: the venv's copy of the package is
+the one `make` last installed).
 """
 
 import importlib
@@ -11,8 +12,6 @@ import sys
 from pathlib import Path
 
 import yaml
-
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # the source tree
 
 CONFIG = Path(__file__).resolve().parents[1] / 'config'
 

@@ -7,7 +7,7 @@ SOURCE is a CAD-60 directory (real or synthetic: a root of dataN/ directories, o
 or an LSPET root (with --range, e.g. 1-2500). Negatives (for hard-negative mining) are the
 background of the training frames: the strips of each frame away from the person, and for sets
 with person masks (synthetic) the room itself, assembled from the frames where the person is
-elsewhere. See `core.dpm.train` for the method.
+elsewhere. See `training.dpm.train` for the method.
 """
 
 from __future__ import annotations
@@ -19,13 +19,13 @@ from dataclasses import replace
 from pathlib import Path
 
 from pose4d_ros.core.dpm.model import load_model, save_model
-from pose4d_ros.core.dpm.negatives import build_negatives
-from pose4d_ros.core.dpm.samples import TrainConfig, bone_ratios, part_joints
-from pose4d_ros.core.dpm.train import train
 from pose4d_ros.core.threads import set_blas_threads
 from pose4d_ros.datasets.frame import Frame
 from pose4d_ros.datasets.sources import load_frames
 from pose4d_ros.models import model_path
+from pose4d_ros.training.dpm.negatives import build_negatives
+from pose4d_ros.training.dpm.samples import TrainConfig, bone_ratios, part_joints
+from pose4d_ros.training.dpm.train import train
 from pose4d_ros.training.part_model import depth_lifting, recalibrate, with_foreground_masks
 from pose4d_ros.training.refiner import fit_stages, refiner_frames
 from pose4d_ros.util.machine import command_line, git_commit, machine

@@ -86,6 +86,16 @@ def correct(pred: NDArray, gt: NDArray, visible: NDArray, *, alpha: float = 0.1
     return hit & counted, counted
 
 
+def pck_per_frame(pred: NDArray, gt: NDArray, visible: NDArray, *, alpha: float = 0.1
+                  ) -> NDArray[np.float64]:
+    """(F,) PCK@alpha of each frame in percent over its counted joints (`correct`); NaN where
+    none is."""
+    hit, counted = correct(pred, gt, visible, alpha=alpha)
+    n = counted.sum(axis=1)
+    with np.errstate(invalid='ignore', divide='ignore'):
+        return np.where(n > 0, 100.0 * (hit & counted).sum(axis=1) / n, np.nan)
+
+
 def average_precision(scores: NDArray, true_positive: NDArray[np.bool_], n_positives: int
                       ) -> float:
     """All-point interpolated average precision of scored detections, in [0, 1]."""

@@ -21,8 +21,8 @@ stage reads the frame again where the stages before it put the parts and correct
 left.
 
 Each stage is fitted on the pipeline's own detections of labelled frames, moved by the stages
-before it (`pose4d train --refine`, `fit_refiner`), a left part and its right twin pooled (one
-set of ensembles per group, the horizontal offsets of right parts mirrored).
+before it (`pose4d train --refine`, `training.refiner.fit_refiner`), a left part and its right
+twin pooled (one set of ensembles per group, the horizontal offsets of right parts mirrored).
 """
 
 from __future__ import annotations
@@ -36,7 +36,7 @@ import numba as nb
 import numpy as np
 from numpy.typing import NDArray
 
-from pose4d_ros.core.boost import BoostedTrees, fit, predict_kernel
+from pose4d_ros.core.boost import BoostedTrees, predict_kernel
 from pose4d_ros.core.camera import NO_MASK, Intrinsics
 from pose4d_ros.core.stats import median
 
@@ -63,7 +63,7 @@ OUTPUTS = ('du', 'dv', 'dz')
 # Largest correction learned or applied: person scales across the image, metres of depth
 MAX_SHIFT_SCALES = 1.0
 MAX_DEPTH_M = 0.4
-_LIMITS = np.array([MAX_SHIFT_SCALES, MAX_SHIFT_SCALES, MAX_DEPTH_M])  # per output
+LIMITS = np.array([MAX_SHIFT_SCALES, MAX_SHIFT_SCALES, MAX_DEPTH_M])  # per output
 
 
 def person_scale(z: NDArray[np.floating], fx: float) -> float:
@@ -183,7 +183,7 @@ def features(names: Sequence[str], parents: Sequence[int], uv: NDArray[np.floati
     up, root = _tree_rows(tuple(parents))
     k = intrinsics
     return _features(depth, mask, np.asarray(uv, np.float64), np.asarray(z, np.float64),
-                     np.asarray(confidence, np.float64), up, root, _mirrored(tuple(names)),
+                     np.asarray(confidence, np.float64), up, root, mirrored_parts(tuple(names)),
                      _WINDOWS, _QUANTILES, _PROBES, k.fx, k.fy, k.cx, k.cy)
 
 
@@ -195,7 +195,8 @@ def _tree_rows(parents: tuple[int, ...]) -> tuple[NDArray[np.int64], int]:
 
 
 @functools.lru_cache(maxsize=16)
-def _mirrored(names: tuple[str, ...]) -> NDArray[np.bool_]:
+def mirrored_parts(names: tuple[str, ...]) -> NDArray[np.bool_]:
+    """Which of `names` are right parts (their horizontal offsets mirrored)."""
     return np.array([n.startswith('right_') for n in names])
 
 
@@ -285,7 +286,7 @@ class PartRefiner:
         out = predict_kernel(x.repeat(k, axis=0), ensemble, self._base64, self.feature,
                              self.threshold, self.leaf).reshape(len(names), k)
         # np.clip's values, without its Python wrapper
-        return np.minimum(np.maximum(out, -_LIMITS), _LIMITS)
+        return np.minimum(np.maximum(out, -LIMITS), LIMITS)
 
     @functools.cached_property
     def _base64(self) -> NDArray[np.float64]:
@@ -317,7 +318,7 @@ class PartRefiner:
         `stages` stages of the cascade (None: all)."""
         uv, z = np.asarray(uv, np.float64), np.asarray(z, np.float64)
         edge = np.array([intrinsics.width - 1, intrinsics.height - 1], np.float64)
-        mirrored = _mirrored(tuple(names))
+        mirrored = mirrored_parts(tuple(names))
         for stage in range(self.stages if stages is None else stages):
             scale = person_scale(z, intrinsics.fx)
             if not math.isfinite(scale):
@@ -351,48 +352,3 @@ def _first_ensembles(groups: tuple[str, ...], names: tuple[str, ...]) -> NDArray
     """The index of each part's group's first ensemble (-1: none)."""
     index = {g: i * len(OUTPUTS) for i, g in enumerate(groups)}
     return np.array([index.get(group_of(n), -1) for n in names], np.int64)
-
-
-def targets(names: Sequence[str], uv: NDArray[np.floating], z: NDArray[np.floating],
-            true_uv: NDArray[np.floating], true_z: NDArray[np.floating], fx: float
-            ) -> NDArray[np.float64]:
-    """(P, 3) what the refiner learns for detected parts (`uv`, lifted depths `z`) whose joints
-    are at `true_uv`, `true_z`: `OUTPUTS`, NaN where either is unknown."""
-    scale = person_scale(z, fx)
-    d = (np.asarray(true_uv, np.float64) - uv) / scale
-    d[:, 0] = np.where(_mirrored(tuple(names)), -d[:, 0], d[:, 0])
-    return np.column_stack([d, np.asarray(true_z, np.float64) - z])
-
-
-def fit_refiner(names: Sequence[str], x: NDArray[np.floating], part: NDArray[np.integer],
-                target: NDArray[np.floating], *, trees: int = 200, depth: int = 5,
-                min_samples: int = 200, outputs: Sequence[str] = OUTPUTS) -> PartRefiner:
-    """Fit the ensembles of each group of `names` on samples `x` (N, F) of parts `part` (N,)
-    (indices into `names`) with `target` (N, 3) (`targets`; clipped to the largest
-    corrections); only those of `outputs` (the others correct nothing). Groups with fewer than
-    `min_samples` samples get none."""
-    if not outputs or not set(outputs) <= set(OUTPUTS):
-        raise ValueError(f'outputs must be some of {OUTPUTS}, got {tuple(outputs)}')
-    x = np.asarray(x, np.float64)
-    part = np.asarray(part)
-    target = np.clip(np.asarray(target, np.float64), -_LIMITS, _LIMITS)
-    ok = known_parts(x) & np.isfinite(target).all(axis=1)
-    groups, ensembles = [], []
-    for g in dict.fromkeys(group_of(n) for n in names):
-        sel = ok & np.isin(part, [i for i, n in enumerate(names) if group_of(n) == g])
-        if sel.sum() >= min_samples:
-            groups.append(g)
-            ensembles += [fit(x[sel], target[sel, k], trees=trees, depth=depth)
-                          if out in outputs else _nothing(trees, depth)
-                          for k, out in enumerate(OUTPUTS)]
-    if not groups:
-        raise ValueError(f'too few samples to fit a part refiner ({int(ok.sum())})')
-    return PartRefiner.stack(groups, ensembles)
-
-
-def _nothing(trees: int, depth: int) -> BoostedTrees:
-    """An ensemble of the shape `fit` gives that predicts 0 (skipped by the predictor)."""
-    n = 2 ** depth - 1
-    return BoostedTrees(0.0, np.zeros((trees, n), np.int16),
-                        np.full((trees, n), np.inf, np.float32),
-                        np.zeros((trees, n + 1), np.float32))

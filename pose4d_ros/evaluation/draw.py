@@ -23,7 +23,7 @@ from numpy.typing import NDArray
 from pose4d_ros.core.draw import draw_people, draw_skeleton, legend
 from pose4d_ros.core.files import write_atomic
 from pose4d_ros.core.joints import JointSet
-from pose4d_ros.core.metrics import correct
+from pose4d_ros.core.metrics import pck_per_frame
 from pose4d_ros.core.skeleton import SKELETON_14, limb_bones
 from pose4d_ros.datasets.frame import Frame
 from pose4d_ros.evaluation.pipeline import Row, row_arrays
@@ -35,10 +35,7 @@ def frame_pck(name: str, row: Row, frames: Sequence[Frame], alpha: float = 0.1
               ) -> NDArray[np.float64]:
     """(F,) PCK@alpha of each frame in percent over its scored joints; NaN where none is."""
     _, arrays = row_arrays(name, row, frames)
-    hit, counted = correct(arrays['pred'], arrays['gt'], arrays['visible'], alpha=alpha)
-    n = counted.sum(axis=1)
-    with np.errstate(invalid='ignore', divide='ignore'):
-        return np.where(n > 0, 100.0 * (hit & counted).sum(axis=1) / n, np.nan)
+    return pck_per_frame(arrays['pred'], arrays['gt'], arrays['visible'], alpha=alpha)
 
 
 def _on_skeleton(joints: JointSet) -> JointSet:

@@ -3,7 +3,7 @@ renders (`pose4d eval --fit-peer-depth`, `--peer-depth`).
 
 The peer (`pose4d_ros.peer`) lifts each joint at the surface the camera sees (`robust_depth`,
 the median of a 7 x 7 window); a joint's centre lies behind that surface. Our detector adds a
-learned depth offset per part (`core.dpm.train.calibrate`: the median of joint depth less
+learned depth offset per part (`training.dpm.train.calibrate`: the median of joint depth less
 surface depth over the parts it places right on its training frames). `fit_depth_offsets`
 learns the same for the peer: for each joint, the median of (true depth - lifted depth) over the
 frames of a labelled set where the peer places the joint right in the image (within PCK@0.1 of

@@ -1,4 +1,4 @@
-"""The part model's training around `core.dpm.train`: the frames masked as the live pipeline
+"""The part model's training around `training.dpm.train`: the frames masked as the live pipeline
 masks them, and the calibration again on other frames (`pose4d train --calibrate`)."""
 
 from __future__ import annotations
@@ -8,9 +8,9 @@ from dataclasses import replace
 import numpy as np
 
 from pose4d_ros.core.dpm.model import PartModel
-from pose4d_ros.core.dpm.samples import TrainConfig, part_joints
-from pose4d_ros.core.dpm.train import calibrate, positive_scale, scale_span
 from pose4d_ros.datasets.frame import Frame
+from pose4d_ros.training.dpm.samples import TrainConfig, part_joints
+from pose4d_ros.training.dpm.train import calibrate, positive_scale, scale_span
 from pose4d_ros.util.progress import log, progress
 
 
@@ -42,7 +42,7 @@ def with_foreground_masks(samples: list[Frame]) -> list[Frame]:
 
 def recalibrate(model: PartModel, samples: list[Frame], *, search_percent: float,
                 seed: int) -> tuple[PartModel, int]:
-    """The last steps of `core.dpm.train.train` alone, on `samples`: the person scales searched
+    """The last steps of `training.dpm.train.train` alone, on `samples`: the person scales searched
     without depth (from all of them, covering `search_percent` to 100 minus it) and the
     calibration (on the same deterministic subset of `TrainConfig.calibration_samples` frames,
     masked as the model was trained); the model and the number of frames calibrated on."""

@@ -1,21 +1,32 @@
 """The part refiner's training (`core.refine`): the detections it learns from, run as the nodes
-run them, its samples, and the cascade of stages fitted one after the other, each on the parts
-as the stages before it move them."""
+run them, its samples and what each part is to learn (`targets`), a stage's ensembles
+(`fit_refiner`, boosted trees of `training.boost`), and the cascade of stages fitted one after
+the other, each on the parts as the stages before it move them."""
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, replace
 
 import numpy as np
 from numpy.typing import NDArray
 
+from pose4d_ros.core.boost import BoostedTrees
 from pose4d_ros.core.camera import Intrinsics
 from pose4d_ros.core.dpm.model import PartModel
-from pose4d_ros.core.refine import OUTPUTS, PartRefiner, fit_refiner, known_parts, targets
+from pose4d_ros.core.refine import (
+    LIMITS,
+    OUTPUTS,
+    PartRefiner,
+    group_of,
+    known_parts,
+    mirrored_parts,
+    person_scale,
+)
 from pose4d_ros.core.refine import features as refine_features
 from pose4d_ros.core.stages import DetectorStage, ForegroundStage
 from pose4d_ros.datasets.frame import Frame
+from pose4d_ros.training.boost import fit
 from pose4d_ros.util.progress import progress
 
 
@@ -74,7 +85,7 @@ def refiner_samples(model: PartModel, frames: list[RefinerFrame]
     """The training samples of a refiner stage: for every labelled part of `frames` with a
     detection and a lifted depth, where the stages before it put it, its features
     (`core.refine.features`), its index and what the stage is to learn
-    (`core.refine.targets`)."""
+    (`targets`)."""
     names = model.part_names
     xs, parts, ys = [], [], []
     for f in frames:
@@ -107,3 +118,48 @@ def fit_stages(model: PartModel, frames: list[RefinerFrame], *, stages: int,
             f'{1000 * np.median(np.abs(target[:, 2])):.1f} mm in depth, '
             f'{np.median(np.hypot(*target[:, :2].T)):.3f} person scales across')
     return refiner, len(target)
+
+
+def targets(names: Sequence[str], uv: NDArray[np.floating], z: NDArray[np.floating],
+            true_uv: NDArray[np.floating], true_z: NDArray[np.floating], fx: float
+            ) -> NDArray[np.float64]:
+    """(P, 3) what the refiner learns for detected parts (`uv`, lifted depths `z`) whose joints
+    are at `true_uv`, `true_z`: `OUTPUTS`, NaN where either is unknown."""
+    scale = person_scale(z, fx)
+    d = (np.asarray(true_uv, np.float64) - uv) / scale
+    d[:, 0] = np.where(mirrored_parts(tuple(names)), -d[:, 0], d[:, 0])
+    return np.column_stack([d, np.asarray(true_z, np.float64) - z])
+
+
+def fit_refiner(names: Sequence[str], x: NDArray[np.floating], part: NDArray[np.integer],
+                target: NDArray[np.floating], *, trees: int = 200, depth: int = 5,
+                min_samples: int = 200, outputs: Sequence[str] = OUTPUTS) -> PartRefiner:
+    """Fit the ensembles of each group of `names` on samples `x` (N, F) of parts `part` (N,)
+    (indices into `names`) with `target` (N, 3) (`targets`; clipped to the largest
+    corrections); only those of `outputs` (the others correct nothing). Groups with fewer than
+    `min_samples` samples get none."""
+    if not outputs or not set(outputs) <= set(OUTPUTS):
+        raise ValueError(f'outputs must be some of {OUTPUTS}, got {tuple(outputs)}')
+    x = np.asarray(x, np.float64)
+    part = np.asarray(part)
+    target = np.clip(np.asarray(target, np.float64), -LIMITS, LIMITS)
+    ok = known_parts(x) & np.isfinite(target).all(axis=1)
+    groups, ensembles = [], []
+    for g in dict.fromkeys(group_of(n) for n in names):
+        sel = ok & np.isin(part, [i for i, n in enumerate(names) if group_of(n) == g])
+        if sel.sum() >= min_samples:
+            groups.append(g)
+            ensembles += [fit(x[sel], target[sel, k], trees=trees, depth=depth)
+                          if out in outputs else _nothing(trees, depth)
+                          for k, out in enumerate(OUTPUTS)]
+    if not groups:
+        raise ValueError(f'too few samples to fit a part refiner ({int(ok.sum())})')
+    return PartRefiner.stack(groups, ensembles)
+
+
+def _nothing(trees: int, depth: int) -> BoostedTrees:
+    """An ensemble of the shape `fit` gives that predicts 0 (skipped by the predictor)."""
+    n = 2 ** depth - 1
+    return BoostedTrees(0.0, np.zeros((trees, n), np.int16),
+                        np.full((trees, n), np.inf, np.float32),
+                        np.zeros((trees, n + 1), np.float32))

@@ -3,8 +3,9 @@
 - `model`: the `PartModel` dataclass, `save_model`, `load_model`.
 - `infer`: `Detector`, `detect`, `Pose`, `SearchConfig` (exact inference by dynamic programming).
 - `dt`: generalized distance transforms.
-- `train`: part types by k-means, per-part templates, the structural SVM (dual coordinate
-  descent) with hard-negative mining.
+
+Training lives in `training.dpm`: part types by k-means, per-part templates, the structural SVM
+(dual coordinate descent) with hard-negative mining.
 """
 
 from pose4d_ros.core.dpm.infer import Detector, Pose, SearchConfig, detect

@@ -30,7 +30,7 @@ import numba as nb
 import numpy as np
 from numpy.typing import NDArray
 
-# A finite "minus infinity" for score maps (`core.dpm.mining`): keeps the arithmetic free of
+# A finite "minus infinity" for score maps (`training.dpm.mining`): keeps the arithmetic free of
 # inf - inf.
 NEG = -1.0e10
 # A pass whose candidate windows average more cells than this runs the lower envelope instead

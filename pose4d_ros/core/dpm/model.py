@@ -19,7 +19,7 @@ Geometry: a part location is the top-left cell of its filter in a padded HOG lev
 have one shape); anchors and spring offsets are in cells of that level. The level that holds a
 person at the model's canonical size is found from the person's scale: `canonical_scale_px`
 level pixels per `scale_length_m` metres of body (from depth), or per the same length measured
-on the joints (see `core.dpm.samples.person_scale`).
+on the joints (see `training.dpm.samples.person_scale`).
 """
 
 from __future__ import annotations

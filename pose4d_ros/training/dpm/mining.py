@@ -20,7 +20,8 @@ from pose4d_ros.core.dpm.dp import (
 from pose4d_ros.core.dpm.dt import NEG
 from pose4d_ros.core.dpm.infer import Detector, SearchPlan
 from pose4d_ros.core.dpm.model import PartModel
-from pose4d_ros.core.dpm.samples import (
+from pose4d_ros.core.hog import Level
+from pose4d_ros.training.dpm.samples import (
     Negative,
     Positive,
     Progress,
@@ -28,8 +29,7 @@ from pose4d_ros.core.dpm.samples import (
     frame_of,
     level_of,
 )
-from pose4d_ros.core.dpm.solver import Examples, Layout, Whitening, dot, pose_blocks, whitened
-from pose4d_ros.core.hog import Level
+from pose4d_ros.training.dpm.solver import Examples, Layout, Whitening, dot, pose_blocks, whitened
 
 
 def _add_new(ex: Examples, candidates: Iterable[tuple], room: int) -> int:

@@ -12,8 +12,8 @@ import numpy as np
 from numpy.typing import NDArray
 
 from pose4d_ros.core.dpm.model import PartModel
-from pose4d_ros.core.dpm.samples import TrainConfig
 from pose4d_ros.core.skeleton import PartTree
+from pose4d_ros.training.dpm.samples import TrainConfig
 
 
 @dataclass(frozen=True)

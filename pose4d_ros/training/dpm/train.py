@@ -57,9 +57,11 @@ from numpy.typing import NDArray
 
 from pose4d_ros.core.camera import backproject, lift_depth
 from pose4d_ros.core.dpm.infer import Detector
-from pose4d_ros.core.dpm.mining import mine_background, mine_structural, relabel_positives
 from pose4d_ros.core.dpm.model import DEFAULT_DEPTH_LOOKUP, PartModel
-from pose4d_ros.core.dpm.samples import (
+from pose4d_ros.core.hog import N_FEATURES, Level
+from pose4d_ros.core.skeleton import PartTree
+from pose4d_ros.training.dpm.mining import mine_background, mine_structural, relabel_positives
+from pose4d_ros.training.dpm.samples import (
     Log,
     Negative,
     Positive,
@@ -71,7 +73,7 @@ from pose4d_ros.core.dpm.samples import (
     person_scale,
     prepare_positive,
 )
-from pose4d_ros.core.dpm.solver import (
+from pose4d_ros.training.dpm.solver import (
     Examples,
     Layout,
     Whitening,
@@ -83,8 +85,6 @@ from pose4d_ros.core.dpm.solver import (
     w_from_model,
     whitened,
 )
-from pose4d_ros.core.hog import N_FEATURES, Level
-from pose4d_ros.core.skeleton import PartTree
 
 
 def kmeans(x: NDArray[np.float64], k: int, rng: np.random.Generator, *, iters: int = 50,

@@ -1,4 +1,4 @@
-"""The negatives of hard-negative mining (`core.dpm.mining`): background images without a
+"""The negatives of hard-negative mining (`training.dpm.mining`): background images without a
 person, from the training frames themselves. The strips of each frame away from the person, and
 for sets with person masks (synthetic) the room itself, assembled from the frames where the
 person is elsewhere. A frame is a `datasets.frame.Frame` (colour, depth, mask, video, truth).
@@ -10,7 +10,7 @@ from collections import defaultdict
 
 import numpy as np
 
-from pose4d_ros.core.dpm.samples import (
+from pose4d_ros.training.dpm.samples import (
     Negative,
     TrainConfig,
     background_crops,
