@@ -38,6 +38,10 @@ from pose4d_ros.core.files import write_json
 from pose4d_ros.core.warm_up import warm_up_frame
 
 NODES = ('foreground', 'detector', 'tracker', 'ik', 'pipeline')
+# `make fuzz` fails when a node's resident memory grows more than this share from after the
+# warm-up (every kind of frame sent three times) to the end: memory flat (`make fuzz` with
+# 10,000 a node measured +0.1 % to +1.1 %, docs/NOTES.md)
+MAX_RSS_GROWTH = 0.05
 BATCH = 50  # malformed messages between two valid frames
 ANSWER_S = 10.0  # a valid frame must be answered within this (3 sends)
 HANG_S = 30.0  # after a liveness failure: no answer for this long is a hang
@@ -479,7 +483,14 @@ def main(argv: list[str] | None = None) -> int:
     print(f'wrote {args.out} (node logs in {log_dir})')
     bad = sum(r['crashes'] + r['hangs'] + r['liveness_failures']
               for r in report['nodes'].values())
-    return 1 if bad else 0
+    grown = {name: r['rss_mb_end'] / r['rss_mb_start'] - 1.0
+             for name, r in report['nodes'].items()
+             if r['rss_mb_end'] > (1.0 + MAX_RSS_GROWTH) * r['rss_mb_start']}
+    if grown:
+        print('memory not flat (more than '
+              f'{100 * MAX_RSS_GROWTH:.0f} % growth): '
+              + ', '.join(f'{name} {100 * g:+.1f} %' for name, g in grown.items()))
+    return 1 if bad or grown else 0
 
 
 if __name__ == '__main__':

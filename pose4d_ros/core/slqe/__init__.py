@@ -79,7 +79,16 @@ constant-velocity Kalman filter used for comparison, with the same interface.
 
 The package, one module a job: `config` (the parameters, the state and what a step returns),
 `motion` (A and Q, the prediction), `update` (the gate, the Kalman update and the restart
-hypotheses; the output), `tracker` (the per-frame trackers).
+hypotheses; the output), `tracker` (the per-frame trackers), `kernel` (one step compiled).
+
+The filter is written twice, on purpose: the Python functions above are its readable statement
+(the paper's equations, what the behaviour tests read), and `kernel.slqe_step` does exactly
+their work as one compiled call (the Python path costs some 130 interpreter calls per person
+and frame). A change to the filter is made in both, in the same order and arithmetic: first in
+the Python functions (with a behaviour test in `test/test_slqe.py`), then in the kernel (a new
+setting also goes into `kernel.config_params`); `test_compiled_step_is_the_python_functions`
+runs both over the same noisy, gapped detections and fails until they agree in every array and
+counter, and a new setting's non-default value belongs in its parameter list.
 """
 
 from pose4d_ros.core.slqe.config import (
