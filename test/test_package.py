@@ -249,6 +249,104 @@ def test_layering_check_catches_a_violation(tmp_path):
     assert any(f.startswith('import cycle') for f in faults), faults
 
 
+# The team's sizes: no file of the package over MAX_FILE_LINES lines, no function over
+# MAX_FUNCTION_LINES (from its `def` to its last line); a numba kernel may be longer when it
+# says why (`KERNEL_REASON` in its docstring or in the comment right above it)
+MAX_FILE_LINES = 700
+MAX_FUNCTION_LINES = 100
+KERNEL_REASON = 'more than 100 lines'
+
+
+def _is_jit(expr: ast.expr) -> bool:
+    """`njit`/`jit`, bare or called, plain or qualified (`nb.njit(cache=True)`)."""
+    if isinstance(expr, ast.Call):
+        expr = expr.func
+    name = expr.attr if isinstance(expr, ast.Attribute) else getattr(expr, 'id', None)
+    return name in ('njit', 'jit')
+
+
+def _numba_kernels(tree: ast.Module) -> set[str]:
+    """The names of the functions numba compiles: decorated (`@njit`, `@nb.njit(...)`) or
+    passed to it (`f = nb.njit(cache=True)(g)`, `njit(g)`)."""
+    kernels = set()
+    for node in ast.walk(tree):
+        if isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef)):
+            if any(_is_jit(d) for d in node.decorator_list):
+                kernels.add(node.name)
+        elif isinstance(node, ast.Call) and (_is_jit(node.func) or (
+                isinstance(node.func, ast.Call) and _is_jit(node.func.func))):
+            kernels.update(a.id for a in node.args if isinstance(a, ast.Name))
+    return kernels
+
+
+def _says_why(node: ast.FunctionDef | ast.AsyncFunctionDef, lines: list[str]) -> bool:
+    """Its docstring, or the comment lines right above its first decorator (or `def`), hold
+    `KERNEL_REASON` (case, whitespace and line breaks aside)."""
+    first = min([node.lineno, *(d.lineno for d in node.decorator_list)])
+    above = []
+    for line in reversed(lines[:first - 1]):
+        if not line.strip().startswith('#'):
+            break
+        above.append(line.strip().lstrip('#'))
+    text = ' '.join([ast.get_docstring(node) or '', *reversed(above)])
+    return KERNEL_REASON in ' '.join(text.split()).lower()
+
+
+def _size_faults(root: Path) -> list[str]:
+    """Files over MAX_FILE_LINES and functions over MAX_FUNCTION_LINES under `root`'s
+    package; a numba kernel over it only when it does not say why."""
+    faults = []
+    for f in sorted((root / PACKAGE).rglob('*.py')):
+        name = f.relative_to(root).as_posix()
+        text = f.read_text()
+        lines = text.splitlines()
+        if len(lines) > MAX_FILE_LINES:
+            faults.append(f'{name}: {len(lines)} lines (at most {MAX_FILE_LINES})')
+        tree = ast.parse(text, filename=str(f))
+        kernels = _numba_kernels(tree)
+        for node in ast.walk(tree):
+            if not isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef)):
+                continue
+            length = node.end_lineno - node.lineno + 1
+            if length <= MAX_FUNCTION_LINES:
+                continue
+            if node.name not in kernels:
+                faults.append(f'{name}:{node.lineno} {node.name}: {length} lines (at most '
+                              f'{MAX_FUNCTION_LINES})')
+            elif not _says_why(node, lines):
+                faults.append(f'{name}:{node.lineno} {node.name}: a numba kernel of {length} '
+                              f'lines that does not say why ("{KERNEL_REASON}: ...")')
+    return faults
+
+
+def test_no_file_over_700_lines_no_function_over_100():
+    """Numba kernels aside, each saying why it is one long function."""
+    assert len(list((REPO / PACKAGE).rglob('*.py'))) > 50  # the walk found the package
+    faults = _size_faults(REPO)
+    assert not faults, '\n'.join(faults)
+
+
+def test_size_check_catches_long_files_and_functions(tmp_path):
+    (tmp_path / PACKAGE).mkdir()
+    body = ''.join(f'    x{i} = {i}\n' for i in range(MAX_FUNCTION_LINES))
+    kernels = {'plain': 'def f():\n', 'decorated': '@nb.njit(cache=True)\ndef f():\n',
+               'assigned': 'def f():\n', 'why': '@njit\ndef f():\n    """More than\n'
+               '    100 lines: one loop over pixels."""\n'}
+    for name, head in kernels.items():
+        tail = 'g = nb.njit(cache=True)(f)\n' if name == 'assigned' else ''
+        (tmp_path / PACKAGE / f'{name}.py').write_text(head + body + tail)
+    (tmp_path / PACKAGE / 'long.py').write_text('x = 1\n' * (MAX_FILE_LINES + 1))
+    faults = _size_faults(tmp_path)
+    assert faults == [
+        f'{PACKAGE}/assigned.py:1 f: a numba kernel of {MAX_FUNCTION_LINES + 1} lines that does '
+        f'not say why ("{KERNEL_REASON}: ...")',
+        f'{PACKAGE}/decorated.py:2 f: a numba kernel of {MAX_FUNCTION_LINES + 1} lines that '
+        f'does not say why ("{KERNEL_REASON}: ...")',
+        f'{PACKAGE}/long.py: {MAX_FILE_LINES + 1} lines (at most {MAX_FILE_LINES})',
+        f'{PACKAGE}/plain.py:1 f: {MAX_FUNCTION_LINES + 1} lines (at most '
+        f'{MAX_FUNCTION_LINES})'], faults
+
+
 @pytest.mark.parametrize('exe', sorted(NODE_MODULES))
 def test_yaml_defaults_equal_code_defaults(exe):
     module = importlib.import_module(NODE_MODULES[exe])

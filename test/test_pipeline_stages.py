@@ -1,4 +1,4 @@
-"""The tracker and IK stages that nodes and offline tools share (core/stages.py)."""
+"""The tracker and IK stages that nodes and offline tools share (core/stages/)."""
 
 from __future__ import annotations
 
@@ -262,8 +262,8 @@ def test_reorder_and_bones():
 
 def test_foreground_holds_the_person_through_a_frame_or_two_without_one(monkeypatch):
     from pose4d_ros.core import foreground
-    from pose4d_ros.core import stages as pl
     from pose4d_ros.core.stages import ForegroundStage
+    from pose4d_ros.core.stages import foreground as pl
 
     color, depth, person = warm_up_frame(INTR)
     stage = ForegroundStage()

@@ -12,6 +12,7 @@ import pytest
 
 from pose4d_ros.cli.main import main as pose4d_main
 from pose4d_ros.evaluation import results as r
+from pose4d_ros.evaluation import results_jobs
 
 
 def option(ds: r.DataSet, name: str) -> str:
@@ -113,7 +114,7 @@ def test_a_set_is_made_again_when_its_motion_is_read_differently(tmp_path, monke
         Path(out).mkdir()
         return 0.0
 
-    monkeypatch.setattr(r, 'DATA', tmp_path)
+    monkeypatch.setattr(results_jobs, 'DATA', tmp_path)
     monkeypatch.setattr(r, '_run', fake_run)
     for name in ('valid30_msr', 'valid30'):
         (tmp_path / name).mkdir()
@@ -172,7 +173,7 @@ def test_a_bench_set_is_made_with_its_bag(tmp_path, monkeypatch):
         Path(out).mkdir()
         return 0.0
 
-    monkeypatch.setattr(r, 'DATA', tmp_path)
+    monkeypatch.setattr(results_jobs, 'DATA', tmp_path)
     monkeypatch.setattr(r, '_run', fake_run)
     (tmp_path / 'bench300_bag').mkdir()
     (tmp_path / 'bench300_bag' / 'stale.mcap').write_bytes(b'')
@@ -187,10 +188,10 @@ def test_a_bench_set_is_made_with_its_bag(tmp_path, monkeypatch):
 def test_the_colour_network_is_chosen_on_validation_and_reported_on_test(tmp_path, monkeypatch):
     """The weighting that keeps the RGB-D rows within COLOUR_NET_RGBD_LOSS and places most
     joints of the validation photographs is chosen; the held-out LSPET job runs it."""
-    monkeypatch.setattr(r, 'WORK', tmp_path / 'work')
-    monkeypatch.setattr(r, 'RESULTS', tmp_path / 'results')
-    r.WORK.mkdir()
-    r.RESULTS.mkdir()
+    monkeypatch.setattr(results_jobs, 'WORK', tmp_path / 'work')
+    monkeypatch.setattr(results_jobs, 'RESULTS', tmp_path / 'results')
+    results_jobs.WORK.mkdir()
+    results_jobs.RESULTS.mkdir()
     # photographs' PCK@0.2; average7 on valid30 (540 frames) and valid30_msr (1620 frames)
     figures = {'none': (12.0, 98.8, 93.4), 'w1_h1': (57.0, 98.4, 93.6),
                'w2_h1': (63.0, 98.4, 94.0), 'w4_h1': (60.0, 98.6, 93.0),
@@ -211,7 +212,7 @@ def test_the_colour_network_is_chosen_on_validation_and_reported_on_test(tmp_pat
     assert v['values']['none']['renders']['average7'] == pytest.approx(94.75)
     assert v['values']['w4_h0']['renders']['average7'] == pytest.approx(95.2)
     assert v['chosen'] == 'w2_h1' and v['best_on_photographs'] == 'w16_h0'
-    (r.RESULTS / 'colour_net.json').write_text(json.dumps(v))
+    (results_jobs.RESULTS / 'colour_net.json').write_text(json.dumps(v))
     ctx = r.Context('U', 'L', peer=True, dry=True)
     cmds = next(j for j in r.JOBS if j.name == 'lspet').commands(ctx)
     held_out = cmds[-1]
@@ -225,7 +226,7 @@ def test_the_colour_network_is_chosen_on_validation_and_reported_on_test(tmp_pat
                                      for _ in range(2)]
     assert all(('unary.weight=2' in c) == ('--colour-net' in c) and '--peer' not in c
                for c in tests) and sum('--colour-net' in c for c in tests) == 3
-    (r.RESULTS / 'colour_net.json').write_text(json.dumps({**v, 'chosen': 'none'}))
+    (results_jobs.RESULTS / 'colour_net.json').write_text(json.dumps({**v, 'chosen': 'none'}))
     assert len(next(j for j in r.JOBS if j.name == 'lspet').commands(ctx)) == 1
     assert next(j for j in r.JOBS if j.name == 'colour_net_test').commands(ctx) == []
 

@@ -8,8 +8,9 @@ command), runs `pose4d eval` and `pose4d bench` for every table (with `--peer me
 `make peer` has made .venv-peer; without it, the peer's rows and the job that fits its depth
 offsets are skipped and said so), and writes docs/results/*.json, docs/results/index.json (the
 commands, the machine, the commit, what was skipped), the generated docs/RESULTS.md and the
-README's summary (`evaluation.results`, `evaluation.results_doc`). Run from the repository
-root. Jobs, in order: see `--help` (`--only`).
+README's summary (`evaluation.results`, the sets and jobs in `evaluation.results_jobs`,
+`evaluation.results_doc`). Run from the repository root. Jobs, in order: see `--help`
+(`--only`).
 """
 
 from __future__ import annotations

@@ -166,32 +166,18 @@ class GraphRun:
         return (len(t) - 1) / (t[-1] - t[0]) if len(t) > 1 and t[-1] > t[0] else float('nan')
 
 
-def run_graph(bag_path: Path, out: Path, *, rate: float = 1.0, model: str = 'rgbd_14',
-              timeout: float = 60.0, pipeline: bool = False, best_effort: bool = False,
-              load: Sequence[str] = ()) -> GraphRun:
-    """Replay `bag_path` through the graph, each node its own process as `ros2 run` starts
-    it (or the single `pipeline` process), with a recorder; stop everything cleanly.
-    `best_effort`: the replay publishes best effort, as camera drivers do. `load`: processes
-    run beside the graph while the bag plays (`graph.load`: 'busy', 'query')."""
-    import rclpy
+def _probe(node: Any) -> tuple[dict[int, float], dict[int, float], dict[str, int]]:
+    """Subscribe `node` to what `run_graph` measures the graph by, filled as `node` spins:
+    {stamp: monotonic s} when each frame's colour camera_info reached this process (entered)
+    and when its skeleton did (left), and {stage: frames it dropped} from each stage's
+    /diagnostics."""
     from diagnostic_msgs.msg import DiagnosticArray
     from pose4d_msgs.msg import JointArray
     from rclpy.qos import QoSProfile, ReliabilityPolicy
     from sensor_msgs.msg import CameraInfo
 
     from pose4d_ros.nodes import qos
-    from pose4d_ros.nodes.common import executor
 
-    frames = bag.topics(bag_path)[cad60_bag.COLOR_TOPIC].count
-    # this process and the nodes: Fast DDS with room for large frames (config/fastdds.xml)
-    os.environ.setdefault('FASTRTPS_DEFAULT_PROFILES_FILE', str(share_path('config/fastdds.xml')))
-    out.mkdir(parents=True, exist_ok=True)
-    recorded = out / ('pipeline_run' if pipeline else 'graph_run')
-    if recorded.exists():
-        shutil.rmtree(recorded)
-    graph = Graph(out)
-    rclpy.init()
-    node = rclpy.create_node('pose4d_demo')
     left: dict[int, float] = {}
     entered: dict[int, float] = {}
     node.create_subscription(
@@ -213,6 +199,31 @@ def run_graph(bag_path: Path, out: Path, *, rate: float = 1.0, model: str = 'rgb
                 dropped[status.name.removeprefix('pose4d: ')] = int(values.get('dropped', 0))
 
     node.create_subscription(DiagnosticArray, '/diagnostics', on_diagnostics, 100)
+    return entered, left, dropped
+
+
+def run_graph(bag_path: Path, out: Path, *, rate: float = 1.0, model: str = 'rgbd_14',
+              timeout: float = 60.0, pipeline: bool = False, best_effort: bool = False,
+              load: Sequence[str] = ()) -> GraphRun:
+    """Replay `bag_path` through the graph, each node its own process as `ros2 run` starts
+    it (or the single `pipeline` process), with a recorder; stop everything cleanly.
+    `best_effort`: the replay publishes best effort, as camera drivers do. `load`: processes
+    run beside the graph while the bag plays (`graph.load`: 'busy', 'query')."""
+    import rclpy
+
+    from pose4d_ros.nodes.common import executor
+
+    frames = bag.topics(bag_path)[cad60_bag.COLOR_TOPIC].count
+    # this process and the nodes: Fast DDS with room for large frames (config/fastdds.xml)
+    os.environ.setdefault('FASTRTPS_DEFAULT_PROFILES_FILE', str(share_path('config/fastdds.xml')))
+    out.mkdir(parents=True, exist_ok=True)
+    recorded = out / ('pipeline_run' if pipeline else 'graph_run')
+    if recorded.exists():
+        shutil.rmtree(recorded)
+    graph = Graph(out)
+    rclpy.init()
+    node = rclpy.create_node('pose4d_demo')
+    entered, left, dropped = _probe(node)
     ex = executor(node)
     stages = ('pipeline',) if pipeline else STAGES
     connections = PIPELINE_CONNECTIONS if pipeline else CONNECTIONS

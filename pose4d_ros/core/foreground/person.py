@@ -329,6 +329,10 @@ def _region_parts(g: NDArray[np.uint8], above: NDArray[np.float32], has_above: b
                   extent_levels: float, edge_rows: int
                   ) -> tuple[NDArray[np.bool_], NDArray[np.int64], NDArray[np.float64]]:
     """One stable region traced and cut into depth parts, in one pass of compiled code.
+    (One numba kernel of more than 100 lines: its steps, trace, histogram, cut and describe,
+    hand each other the visited map, the box, the crop and the histogram of levels, which
+    helpers used nowhere else would pass back and forth; what stands alone, a range's
+    extent, Otsu cut and median, is its helpers already.)
 
     The region is the connected component of ``{g >= level}`` (8- or 4-connected) holding
     pixel (`sy`, `sx`); its histogram of levels is split where more than `gap_levels` levels

@@ -175,7 +175,11 @@ def slqe_step(x0, cov0, active0, missed0, rejected0, last_rejected0, confidence0
     """One frame: predict over `dt` (> 0 or 0 = no motion) from the state at the previous
     frame (the arrays ending in 0 and `dt0`, not modified), update with detections `z` (P, 2)
     and confidences `conf` (P,), and output. `params` from `config_params`, `parents` the
-    tree's, `limb` (P,) bool the parts of `limb_parts`.
+    tree's, `limb` (P,) bool the parts of `limb_parts`. (One numba kernel of more than 100
+    lines: it is `motion.predict`, `update.update` and `update.output` in their order, phases
+    handing each other a dozen state arrays, which pieces would pass back and forth and no
+    longer read beside the Python path `test_slqe.py` compares it with; what stands alone,
+    the transition, the Kalman update, the restart and kept-track tests, is its helpers.)
 
     Returns the new state's arrays (x, cov, active, counters: (3, P) missed, rejected and
     shadow_left, last_rejected, confidence, shadow_x, shadow_cov, its dt) and the output's
