@@ -246,11 +246,10 @@ class Target:
         self.name = name
         color, depth_m, mask = warm_up_frame(INTR)
         camera = name in ('foreground', 'pipeline')
-        prefix = 'camera/color/' if camera else 'pose4d/foreground/'
         self.topics: dict[str, tuple[type, str, object]] = {}
         if name in ('foreground', 'pipeline', 'detector'):
-            self.topics['color'] = (Image, prefix + 'image_raw' if camera else prefix + 'color',
-                                    qos.SENSOR_QOS)
+            # the detector reads the camera's colour too (and masks it itself)
+            self.topics['color'] = (Image, 'camera/color/image_raw', qos.SENSOR_QOS)
             self.topics['depth'] = (Image, 'camera/depth/image_raw' if camera
                                     else 'pose4d/foreground/depth', qos.SENSOR_QOS)
             self.topics['info'] = (CameraInfo, 'camera/color/camera_info', qos.SENSOR_QOS)

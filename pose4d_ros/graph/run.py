@@ -30,8 +30,8 @@ RECORDED = ('pose4d/skeleton', 'pose4d/skeletons', 'pose4d/parts', 'pose4d/parts
 PIPELINE_CONNECTIONS = {
     'camera/color/image_raw': 1, 'camera/depth/image_raw': 1, 'pose4d/skeleton': 2}
 CONNECTIONS = {
-    'camera/color/image_raw': 1, 'camera/depth/image_raw': 1,
-    'pose4d/foreground/color': 1, 'pose4d/foreground/depth': 2, 'pose4d/foreground/mask': 1,
+    'camera/color/image_raw': 2, 'camera/depth/image_raw': 2,
+    'pose4d/foreground/depth': 2, 'pose4d/foreground/mask': 1,
     'pose4d/parts': 2, 'pose4d/parts/tracked': 2, 'pose4d/skeleton': 2,
 }
 

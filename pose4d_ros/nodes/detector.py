@@ -8,7 +8,8 @@ frames (at most two waiting, `common.STAGE_QUEUE`) and drops the others (counted
 of falling behind.
 
 Subscriptions
-    pose4d/foreground/color (sensor_msgs/Image, rgb8/bgr8)
+    camera/color/image_raw (sensor_msgs/Image, rgb8/bgr8/mono8: the camera's; each person's
+    search sees only their own mask's pixels)
     pose4d/foreground/depth (sensor_msgs/Image, 16UC1 mm or 32FC1 m)
     pose4d/foreground/mask (sensor_msgs/Image, mono8 labels, one value > 127 per person)
     camera/color/camera_info (sensor_msgs/CameraInfo; the latest)
@@ -223,14 +224,18 @@ class DetectorNode(Node):
         self.pub_people = self.create_publisher(SkeletonArray, 'pose4d/parts/people',
                                                 qos.OUTPUT_QOS)
         self.pub = self.create_publisher(JointArray, 'pose4d/parts', qos.OUTPUT_QOS)
+        # the camera's colour, masked here person by person (`PeopleDetector`): the
+        # foreground publishes its mask and depth, not a masked copy of the colour image
         self.inputs = PairedInputs(
-            self, [(Image, f'pose4d/foreground/{name}', qos.SENSOR_QOS)
-                   for name in ('color', 'depth', 'mask')], self.process, self.monitor)
+            self, [(Image, topic, qos.SENSOR_QOS) for topic in (
+                'camera/color/image_raw', 'pose4d/foreground/depth', 'pose4d/foreground/mask')],
+            self.process, self.monitor)
         net = Path(str(p['detector.colour_net'])).name
         self.get_logger().info(
             f'detecting {len(self.template.names)} parts with '
             f'{Path(str(p["detector.model"])).name} ({self.template.model.channels}'
             f'{", colour net " + net if net else ""}) in '
+            f'{self.resolve_topic_name("camera/color/image_raw")} masked by '
             f'{self.resolve_topic_name("pose4d/foreground")} -> '
             f'{self.resolve_topic_name("pose4d/parts")}(/people), up to '
             f'{p["detector.max_people"]} people')

@@ -16,7 +16,8 @@ Publications (all with the colour image's header)
     pose4d/foreground/mask (mono8 labels: 0 = background, 255 = the best person, 254 the next
     one, ... (`core.people.people_labels`): `mask > 0` is everyone, and one person's mask is
     255 = person as before)
-    pose4d/foreground/color (rgb8, 0 outside the people)
+    pose4d/foreground/color (rgb8, 0 outside the people; only while it has a subscriber: the
+    detector reads the camera's colour and masks it itself)
     pose4d/foreground/depth (the input's encoding; 0 / NaN outside the people)
     pose4d/foreground/points (sensor_msgs/PointCloud2 of the people, if
     foreground.publish_cloud and while it has a subscriber)
@@ -108,14 +109,11 @@ def foreground_stage(p: dict[str, Any]) -> ForegroundStage:
     return ForegroundStage(**foreground_settings(p))
 
 
-def foreground_messages(labels: np.ndarray, color_m: np.ndarray, depth_m: np.ndarray,
-                        encoding: str, header: Header) -> tuple[bytes, bytes, bytes]:
-    """Mask (mono8 labels, `core.people.people_labels`), masked colour (rgb8) and masked depth
-    (in the input's `encoding`), as the serialised Image messages (`wire.image_to_cdr`)."""
-    depth = (image_to_cdr(depth_m, '32FC1', header) if encoding == '32FC1'
-             else image_to_cdr(depth_to_millimetres(depth_m), '16UC1', header))
-    return (image_to_cdr(labels, 'mono8', header),
-            image_to_cdr(color_m, 'rgb8', header), depth)
+def depth_to_cdr(depth_m: np.ndarray, encoding: str, header: Header) -> bytes:
+    """The masked depth as a serialised Image in the input's `encoding` (32FC1 metres, else
+    16UC1 millimetres; `wire.image_to_cdr`)."""
+    return (image_to_cdr(depth_m, '32FC1', header) if encoding == '32FC1'
+            else image_to_cdr(depth_to_millimetres(depth_m), '16UC1', header))
 
 
 class ForegroundNode(Node):
@@ -166,10 +164,10 @@ class ForegroundNode(Node):
         self.monitor.values['people'] = found
         header = color_msg.header
         labels = people_labels(people, depth_m.shape)
-        for pub, msg in zip((self.pub_mask, self.pub_color, self.pub_depth),
-                            foreground_messages(labels, color_m, depth_m,
-                                                depth_msg.encoding, header), strict=True):
-            pub.publish(msg)
+        self.pub_mask.publish(image_to_cdr(labels, 'mono8', header))
+        self.pub_depth.publish(depth_to_cdr(depth_m, depth_msg.encoding, header))
+        if self.pub_color.get_subscription_count():  # the detector reads the camera's colour
+            self.pub_color.publish(image_to_cdr(color_m, 'rgb8', header))
         if self.pub_cloud is not None and self.pub_cloud.get_subscription_count():
             rows, cols = np.nonzero(labels[::self.cloud_step, ::self.cloud_step])
             rows, cols = rows * self.cloud_step, cols * self.cloud_step

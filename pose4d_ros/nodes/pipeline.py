@@ -41,6 +41,7 @@ from pose4d_ros.nodes.params import NodeParams, Param
 from pose4d_ros.wire import (
     color_from_msg,
     depth_from_msg,
+    image_to_cdr,
     intrinsics_from_msg,
     joints_to_cdr,
     stamp_to_ns,
@@ -126,13 +127,15 @@ class PipelineNode(Node):
                 self.pubs[name].publish(joints_to_cdr(joints, header))
         wanted = [name for name in ('mask', 'color', 'depth')
                   if self.publish_foreground and self.pubs[name].get_subscription_count()]
-        if wanted:  # the foreground images: on demand too
-            labels = people_labels(out.foregrounds, out.depth_masked.shape)
-            msgs = dict(zip(('mask', 'color', 'depth'), foreground.foreground_messages(
-                labels, out.color_masked, out.depth_masked, depth_msg.encoding, header),
-                strict=True))
-            for name in wanted:
-                self.pubs[name].publish(msgs[name])
+        # the foreground images: on demand too, each built only when wanted
+        build = {'mask': lambda: image_to_cdr(people_labels(out.foregrounds,
+                                                            out.depth_masked.shape),
+                                              'mono8', header),
+                 'color': lambda: image_to_cdr(out.color_masked, 'rgb8', header),
+                 'depth': lambda: foreground.depth_to_cdr(out.depth_masked,
+                                                          depth_msg.encoding, header)}
+        for name in wanted:
+            self.pubs[name].publish(build[name]())
         self.monitor.frame(stamp, time.perf_counter() - t0)
 
 
