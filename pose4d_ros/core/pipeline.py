@@ -92,7 +92,6 @@ class FramePipeline:
         self.detector = detector
         self.tracker = tracker or TrackerStage()
         self.ik = ik or IkStage()
-        self.people = people
         self.multi = PeopleStages(self.detector, self.tracker, self.ik, people or ONE_PERSON)
         # stamps that jump start every stage anew, as the nodes do
         self._jumps = StampJumps(TIME_JUMP_S)
@@ -115,7 +114,7 @@ class FramePipeline:
             if settings is not None:
                 many.configure(**settings)
         if people is not None:
-            self.people = multi.config = multi.detector.config = multi.tracker.config = people
+            multi.config = multi.detector.config = multi.tracker.config = people
 
     def reset(self) -> None:
         """Forget the previous frames (the next one starts a new track)."""
@@ -135,7 +134,7 @@ class FramePipeline:
         if depth_m is not None:
             return self._step_people(color, depth_m, intrinsics, stamp_s)
         clock = self._lap([])
-        self._lap(clock)
+        self._lap(clock)  # no foreground: its time is nil
         parts = self.detector.step(color, None, intrinsics, stamp_s=stamp_s)
         self._lap(clock)
         tracked = self.tracker.step(parts, stamp_s, intrinsics)

@@ -31,6 +31,7 @@ Parameters (config/foreground.yaml)
 from __future__ import annotations
 
 import time
+from collections.abc import Callable
 from dataclasses import replace
 from typing import Any
 
@@ -109,11 +110,25 @@ def foreground_stage(p: dict[str, Any]) -> ForegroundStage:
     return ForegroundStage(**foreground_settings(p))
 
 
-def depth_to_cdr(depth_m: np.ndarray, encoding: str, header: Header) -> bytes:
-    """The masked depth as a serialised Image in the input's `encoding` (32FC1 metres, else
-    16UC1 millimetres; `wire.image_to_cdr`)."""
-    return (image_to_cdr(depth_m, '32FC1', header) if encoding == '32FC1'
-            else image_to_cdr(depth_to_millimetres(depth_m), '16UC1', header))
+def publish_images(pubs: dict[str, Any], labels: Callable[[], np.ndarray],
+                   color_m: np.ndarray, depth_m: np.ndarray, encoding: str, header: Header, *,
+                   always: tuple[str, ...] = ()) -> None:
+    """Publish the foreground images on `pubs` ('mask', 'color', 'depth': the publishers
+    there are): those named in `always` every frame, the others only while something
+    subscribes, each serialised only when published (`wire.image_to_cdr`). `labels()`: the
+    people's label image (`core.people.people_labels`); the depth goes out in the input's
+    `encoding` (32FC1 metres, else 16UC1 millimetres)."""
+    for name, pub in pubs.items():
+        if name not in always and not pub.get_subscription_count():
+            continue
+        if name == 'mask':
+            pub.publish(image_to_cdr(labels(), 'mono8', header))
+        elif name == 'color':
+            pub.publish(image_to_cdr(color_m, 'rgb8', header))
+        elif encoding == '32FC1':
+            pub.publish(image_to_cdr(depth_m, '32FC1', header))
+        else:
+            pub.publish(image_to_cdr(depth_to_millimetres(depth_m), '16UC1', header))
 
 
 class ForegroundNode(Node):
@@ -128,11 +143,9 @@ class ForegroundNode(Node):
         self.cloud_step = p['foreground.cloud_step']
         self.stage.warm_up(cad60_intrinsics())  # compile before the first camera frame
         self.monitor = StageMonitor(self, 'foreground')
-        self.pub_mask = self.create_publisher(Image, 'pose4d/foreground/mask', qos.OUTPUT_QOS)
-        self.pub_color = self.create_publisher(Image, 'pose4d/foreground/color',
-                                               qos.OUTPUT_QOS)
-        self.pub_depth = self.create_publisher(Image, 'pose4d/foreground/depth',
-                                               qos.OUTPUT_QOS)
+        self.pubs = {name: self.create_publisher(Image, f'pose4d/foreground/{name}',
+                                                 qos.OUTPUT_QOS)
+                     for name in ('mask', 'color', 'depth')}
         self.pub_cloud = (self.create_publisher(PointCloud2, 'pose4d/foreground/points',
                                                 qos.OUTPUT_QOS) if self.publish_cloud else None)
         self.inputs = PairedInputs(self, CAMERA_TOPICS, self.process, self.monitor,
@@ -164,10 +177,9 @@ class ForegroundNode(Node):
         self.monitor.values['people'] = found
         header = color_msg.header
         labels = people_labels(people, depth_m.shape)
-        self.pub_mask.publish(image_to_cdr(labels, 'mono8', header))
-        self.pub_depth.publish(depth_to_cdr(depth_m, depth_msg.encoding, header))
-        if self.pub_color.get_subscription_count():  # the detector reads the camera's colour
-            self.pub_color.publish(image_to_cdr(color_m, 'rgb8', header))
+        # the masked colour only on demand: the detector reads the camera's and masks it
+        publish_images(self.pubs, lambda: labels, color_m, depth_m, depth_msg.encoding, header,
+                       always=('mask', 'depth'))
         if self.pub_cloud is not None and self.pub_cloud.get_subscription_count():
             rows, cols = np.nonzero(labels[::self.cloud_step, ::self.cloud_step])
             rows, cols = rows * self.cloud_step, cols * self.cloud_step

@@ -41,7 +41,6 @@ from pose4d_ros.nodes.params import NodeParams, Param
 from pose4d_ros.wire import (
     color_from_msg,
     depth_from_msg,
-    image_to_cdr,
     intrinsics_from_msg,
     joints_to_cdr,
     stamp_to_ns,
@@ -125,17 +124,11 @@ class PipelineNode(Node):
         for name, joints in (('parts', out.parts), ('tracked', out.tracked)):
             if self.pubs[name].get_subscription_count():  # intermediate results: on demand
                 self.pubs[name].publish(joints_to_cdr(joints, header))
-        wanted = [name for name in ('mask', 'color', 'depth')
-                  if self.publish_foreground and self.pubs[name].get_subscription_count()]
-        # the foreground images: on demand too, each built only when wanted
-        build = {'mask': lambda: image_to_cdr(people_labels(out.foregrounds,
-                                                            out.depth_masked.shape),
-                                              'mono8', header),
-                 'color': lambda: image_to_cdr(out.color_masked, 'rgb8', header),
-                 'depth': lambda: foreground.depth_to_cdr(out.depth_masked,
-                                                          depth_msg.encoding, header)}
-        for name in wanted:
-            self.pubs[name].publish(build[name]())
+        if self.publish_foreground:  # the foreground images: on demand too
+            foreground.publish_images(
+                {name: self.pubs[name] for name in ('mask', 'color', 'depth')},
+                lambda: people_labels(out.foregrounds, out.depth_masked.shape),
+                out.color_masked, out.depth_masked, depth_msg.encoding, header)
         self.monitor.frame(stamp, time.perf_counter() - t0)
 
 
