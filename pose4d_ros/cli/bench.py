@@ -40,7 +40,9 @@ cost that holds on any machine; pin the whole command to one core (`taskset -c 0
 With `--graph` (SOURCE a bag), the bag is then replayed at `--rate` through the node graph, one
 process per stage as `ros2 run` starts them (`nodes`), and through the one-process `pipeline`
 node: colour frames in and skeletons out are counted, and the latency from a frame's arrival to
-its skeleton's is measured in this process on one clock. The machine (cores,
+its skeleton's is measured in this process on one clock; each process's CPU a frame is set
+beside the core's and the peer's on every frame of the bag (`graph.bench`: the deployed
+cost). The machine (cores,
 CPU) and the thread settings are printed, because on a 2-core machine they decide the numbers:
 BLAS is set to `--blas-threads` (1 by default, the measured best; see `core.threads`).
 """
@@ -50,8 +52,6 @@ from __future__ import annotations
 import argparse
 import os
 from pathlib import Path
-
-import numpy as np
 
 from pose4d_ros.cli._args import factor_list, load_list
 from pose4d_ros.core.dpm.infer import SearchConfig
@@ -103,6 +103,11 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument('--load', type=load_list, default=(), metavar='busy,query',
                    help='--graph: beside the graph, a process keeping a core busy and/or the ros2 '
                    'command line querying the nodes (pose4d_ros.graph.load)')
+    p.add_argument('--repeat', type=int, default=1,
+                   help='--graph: runs of each graph (their median and spread are reported)')
+    p.add_argument('--profile', type=Path, metavar='DIR',
+                   help="--graph: run the nodes under cProfile (their files in DIR) and report "
+                        "each process's Python calls a frame")
     p.add_argument('--out', type=Path, default=Path('out/bench'),
                    help='where --graph writes its recordings and node logs')
     p.set_defaults(func=run)
@@ -119,6 +124,8 @@ def run(args: argparse.Namespace) -> int:
 
     threads = set_blas_threads(args.blas_threads)
     kind = source_kind(args.source)
+    if args.graph and kind != 'bag':
+        raise ValueError(f'{args.source}: --graph needs a bag (got a {kind} source)')
     # the stages time a part model; the photograph network's CPU per photo is `eval`'s cpu_ms
     model = load_model(model_path(args.model or ('lspet_rgb_14' if kind == 'lspet'
                                                  else default_models(kind)[0])))
@@ -150,6 +157,7 @@ def run(args: argparse.Namespace) -> int:
         peer_cpu, peer_wall = timed.pop('peer_cpu', None), timed.pop('peer_wall', None)
         calls, cells = count_calls(new_pipeline(), frames, args.warmup, use_depth) \
             if args.calls else (None, None)
+        graph = graph_bench(args, model, unary, peer) if args.graph else None
     finally:
         if peer is not None:
             peer.close()
@@ -189,43 +197,27 @@ def run(args: argparse.Namespace) -> int:
         print(f'detector search: {cells:.1f} filter positions scored a frame (counted)')
     if peer is not None:
         print(f"ours / {peer.name} (CPU p50): {out['ratio_to_peer']:.3f} ({out['peer']})")
-    if args.graph:
-        out['graph'] = graph_bench(Path(args.source), args)
+    if graph is not None:
+        from pose4d_ros.graph.bench import describe
+
+        out['graph'] = graph
+        print('\n'.join(describe(graph)))
     write_json(args.json, out)
     return 0
 
 
-def graph_bench(bag_path: Path, args: argparse.Namespace) -> dict:
-    """Replay a bag through the stage processes and through the pipeline node."""
-    from pose4d_ros.graph.run import run_graph
+def graph_bench(args: argparse.Namespace, model: object, unary: object, peer: object) -> dict:
+    """The bag through the stage processes and the pipeline node, beside the core and the
+    peer on every frame of it (`graph.bench`)."""
+    from pose4d_ros.core.people import TrackingConfig
+    from pose4d_ros.core.pipeline import FramePipeline
+    from pose4d_ros.core.stages import DetectorStage
+    from pose4d_ros.graph.bench import graph_bench as bench_graph
 
-    if (kind := source_kind(bag_path)) != 'bag':
-        raise ValueError(f'{bag_path}: --graph needs a bag (got a {kind} source)')
-    out = {}
-    for name, single in (('nodes', False), ('pipeline', True)):
-        r = run_graph(bag_path, args.out, rate=args.rate, model=args.model or 'rgbd_14',
-                      pipeline=single, best_effort=args.best_effort, load=args.load)
-        lat = r.latency_ms()
-        t_out = np.sort(np.fromiter(r.left.values(), float))
-        out_rate = (len(t_out) - 1) / (t_out[-1] - t_out[0]) if len(t_out) > 1 else None
-        out[name] = {'frames_in': r.frames, 'frames_replayed': len(r.entered),
-                     'frames_out': len(r.left), 'frames_dropped': r.frames - len(r.left),
-                     'input_rate_hz': round(r.input_rate_hz(), 2),
-                     'output_rate_hz': round(out_rate, 2) if out_rate else None,
-                     'latency_ms': ms_stats(lat.tolist()),
-                     # a backlog shows as latency growing over the run
-                     'latency_p50_ms_by_third': [ms_stats(part.tolist())['p50']
-                                                 for part in np.array_split(lat, 3)],
-                     'cpu_ms_per_frame': {exe: round(t * 1e3 / max(r.frames, 1), 2)
-                                          for exe, t in r.cpu_s.items()},
-                     # where frames were lost: each stage's count on /diagnostics
-                     'dropped_by_stage': r.dropped}
-        st = out[name]
-        print(f"graph {name:<9} {st['frames_replayed']}/{st['frames_in']} frames replayed, "
-              f"{st['frames_out']} out, in "
-              f"{st['input_rate_hz']} Hz, out {st['output_rate_hz']} Hz, latency p50 "
-              f"{st['latency_ms']['p50']} ms p95 {st['latency_ms']['p95']} ms (p50 by third of "
-              f"the run {st['latency_p50_ms_by_third']}); CPU ms per frame: "
-              + ', '.join(f'{k} {v}' for k, v in st['cpu_ms_per_frame'].items())
-              + '; dropped by stage: ' + ', '.join(f'{k} {v}' for k, v in r.dropped.items()))
-    return out
+    bag_path = Path(args.source)
+    frames = load_frames([args.source], labelled=False)
+    # as the nodes run it: the several-person path, every person region searched
+    pipeline = FramePipeline(DetectorStage(model, unary=unary), people=TrackingConfig())
+    return bench_graph(bag_path, pipeline, frames, args.out, peer=peer, repeat=args.repeat,
+                       profile=args.profile, rate=args.rate, model=args.model or 'rgbd_14',
+                       best_effort=args.best_effort, load=args.load)

@@ -45,8 +45,10 @@ def main(argv: list[str] | None = None) -> int:
     if args.verb is None:
         parser.print_help()
         return 0
+    from pose4d_ros.core.malloc import keep_freed_memory
     from pose4d_ros.core.threads import set_blas_threads
 
+    keep_freed_memory()  # the heap the nodes run with (core.malloc)
     set_blas_threads(1)  # one BLAS thread: the measured best on 2 shared cores (a verb may
     # choose otherwise, e.g. `pose4d bench --blas-threads`)
     try:

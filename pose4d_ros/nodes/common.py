@@ -15,12 +15,14 @@ such frames out of its latency figures.
 
 from __future__ import annotations
 
+import cProfile
 import gc
 import os
 import threading
 import time
 from collections import deque
 from collections.abc import Callable
+from pathlib import Path
 
 import numpy as np
 import rclpy
@@ -40,6 +42,7 @@ from std_msgs.msg import Header
 
 from pose4d_ros import wire
 from pose4d_ros.core.camera import Intrinsics
+from pose4d_ros.core.malloc import keep_freed_memory
 from pose4d_ros.core.sync import TIME_JUMP_S, StampJumps, StampSync
 from pose4d_ros.core.threads import set_blas_threads
 from pose4d_ros.nodes import qos
@@ -58,6 +61,33 @@ class InputFailure(Exception):
 
 # POSE4D_EXECUTOR=single: rclpy's SingleThreadedExecutor instead of its events executor
 EXECUTOR_ENV = 'POSE4D_EXECUTOR'
+# POSE4D_PROFILE=DIR: each thread of the node runs under cProfile, written at exit to
+# DIR/<node>.<thread>.prof (`pose4d bench --graph --profile` reads them: calls per frame)
+PROFILE_ENV = 'POSE4D_PROFILE'
+
+
+class _Profiled:
+    """The cProfile of one thread of a node while POSE4D_PROFILE is set (else nothing)."""
+
+    def __init__(self, node_name: str, thread: str) -> None:
+        folder = os.environ.get(PROFILE_ENV)
+        self._path = (Path(folder) / f'{node_name}.{thread.replace(" ", "_")}.prof'
+                      if folder else None)
+        self._profile = cProfile.Profile() if folder else None
+
+    def __enter__(self) -> _Profiled:
+        if self._profile is not None:
+            self._profile.enable()
+        return self
+
+    def __exit__(self, *_: object) -> None:
+        if self._profile is None:
+            return
+        self._profile.disable()
+        self._path.parent.mkdir(parents=True, exist_ok=True)
+        tmp = self._path.with_suffix('.tmp')
+        self._profile.dump_stats(tmp)
+        tmp.replace(self._path)
 
 
 def executor(node: Node) -> Executor:
@@ -96,6 +126,7 @@ def run(factory: Callable[[], Node], args: list[str] | None = None,
     # One owner of parallelism: the graph's processes share the cores, and OpenBLAS threads
     # spin-waiting for a core make the detector's GEMM several times slower (core.threads).
     set_blas_threads(1)
+    keep_freed_memory()  # a frame's blocks reused, not mapped afresh (core.malloc)
     rclpy.init(args=args, signal_handler_options=None if signal_handlers
                else SignalHandlerOptions.NO)
     node = None
@@ -107,7 +138,8 @@ def run(factory: Callable[[], Node], args: list[str] | None = None,
         # fps, whenever enough objects had survived since the last one
         gc.collect()
         gc.freeze()
-        body(node)
+        with _Profiled(node.get_name(), 'main'):
+            body(node)
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
     except _rclpy.RCLError:
@@ -332,6 +364,7 @@ class FrameQueue:
         self._size = size
         self._ready = threading.Condition()
         self._closed = False
+        self._profiled = _Profiled(node.get_name(), f'{monitor.stage} frames')
         self._worker = threading.Thread(target=self._work, name=f'{monitor.stage} frames',
                                         daemon=True)
         # the node's queues, for `run` to close
@@ -354,6 +387,10 @@ class FrameQueue:
         self._worker.join(timeout=10.0)
 
     def _work(self) -> None:
+        with self._profiled:
+            self._serve()
+
+    def _serve(self) -> None:
         while True:
             with self._ready:
                 while not self._waiting and not self._closed:
