@@ -84,9 +84,7 @@ def soak(bag_path: Path, seconds: float, work: Path) -> dict[str, object]:
         for exe in STAGES:
             graph.start(exe, {})
         deadline = time.monotonic() + 120.0
-        # the recorder takes only the skeleton here
-        connections = {**CONNECTIONS, 'pose4d/parts': 1, 'pose4d/parts/tracked': 1}
-        while any(node.count_subscribers(t) < n for t, n in connections.items()):
+        while any(node.count_subscribers(t) < n for t, n in CONNECTIONS.items()):
             graph.check_alive()
             if time.monotonic() > deadline:
                 raise OSError('the graph did not connect within 120 s')

@@ -45,6 +45,8 @@ def test_best_effort_vga_frames_reach_the_foreground_node(ros, tmp_path, width, 
             (Image, 'camera/color/image_raw'), (Image, 'camera/depth/image_raw'),
             (CameraInfo, 'camera/color/camera_info'))]
         masks = ros.collect(Image, 'pose4d/foreground/mask', qos.OUTPUT_QOS)
+        # the masked colour wanted: the node reads the camera's colour (the largest frame) too
+        colours = ros.collect(Image, 'pose4d/foreground/color', qos.OUTPUT_QOS)
         for pub in pubs:
             ros.wait_for_subscribers(pub)
         ros.wait_for_publishers('pose4d/foreground/mask')
@@ -66,9 +68,11 @@ def test_best_effort_vga_frames_reach_the_foreground_node(ros, tmp_path, width, 
         for k in range(20):  # 10 frames per second: the node keeps up even on a loaded machine
             sent.append(send(100 + k))
             ros.spin_for(0.1)
-        ros.wait(lambda: all(h in [m.header for m in masks] for h in sent), 5.0)
+        ros.wait(lambda: all(h in [m.header for m in masks] and h in [m.header for m in colours]
+                             for h in sent), 5.0)
     finally:
         assert node.stop() == 0, node.output()
-    got = [h for h in sent if h in [m.header for m in masks]]
-    assert len(got) == len(sent), f'{len(got)} of {len(sent)} {width}x{height} frames came out'
+    for name, out in (('masks', masks), ('masked colours', colours)):
+        got = [h for h in sent if h in [m.header for m in out]]
+        assert len(got) == len(sent), f'{len(got)} of {len(sent)} {width}x{height} {name}'
     assert (masks[-1].width, masks[-1].height) == (width, height)

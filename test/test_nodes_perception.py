@@ -145,9 +145,9 @@ def test_foreground_and_detector_nodes_find_the_parts(ros, frames, tmp_path, det
     try:
         pubs = _camera_publishers(ros)
         parts = ros.collect(JointArray, 'pose4d/parts', qos.OUTPUT_QOS)
-        for pub in pubs:  # the detector reads the camera's colour and info too
-            ros.wait_for_subscribers(pub, count=1 if pub.topic_name.endswith('depth/image_raw')
-                                     else 2, timeout=30.0)
+        for pub in pubs:  # the foreground reads the depth, the detector the colour, both info
+            ros.wait_for_subscribers(pub, count=2 if pub.topic_name.endswith('camera_info')
+                                     else 1, timeout=30.0)
         ros.wait_for_publishers('pose4d/parts', timeout=30.0)
         headers = [Header(stamp=ns_to_stamp(10**18 + k * 33_333_334), frame_id='cam')
                    for k in range(len(frames))]

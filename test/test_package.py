@@ -147,7 +147,7 @@ LAYERS = {'core': set(), 'util': {'core'}, 'wire': {'core'}, 'datasets': {'core'
           'nodes': {'core', 'datasets', 'models', 'wire'},
           'training': {'core', 'datasets', 'models', 'util'},
           'evaluation': {'core', 'datasets', 'synth', 'peer', 'models', 'util', 'wire'},
-          'graph': {'core', 'datasets', 'models', 'nodes', 'util', 'wire'}}
+          'graph': {'core', 'datasets', 'models', 'nodes', 'peer', 'util', 'wire'}}
 
 
 def test_every_subpackage_has_its_layer():

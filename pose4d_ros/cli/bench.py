@@ -60,11 +60,11 @@ from pose4d_ros.core.dpm.scale import ScaleConfig
 from pose4d_ros.core.files import write_json
 from pose4d_ros.core.threads import set_blas_threads
 from pose4d_ros.datasets.sources import load_frames, source_kind
-from pose4d_ros.evaluation.pipeline import ms_stats
 from pose4d_ros.evaluation.tables import default_models
 from pose4d_ros.models import model_path
 from pose4d_ros.peer import PEERS, make_peer
 from pose4d_ros.util.machine import machine
+from pose4d_ros.util.stats import ms_stats
 
 
 def add_parser(subparsers: argparse._SubParsersAction) -> None:

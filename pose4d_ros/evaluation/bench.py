@@ -13,9 +13,9 @@ from collections.abc import Callable, Sequence
 from pose4d_ros.core.dpm.infer import SearchWork
 from pose4d_ros.core.pipeline import STAGES, FramePipeline
 from pose4d_ros.datasets.frame import Frame
-from pose4d_ros.evaluation.pipeline import ms_stats
 from pose4d_ros.peer import Peer
 from pose4d_ros.util.progress import progress
+from pose4d_ros.util.stats import ms_stats
 
 
 def _step(pipeline: FramePipeline, f: Frame, use_depth: bool):

@@ -47,18 +47,9 @@ from pose4d_ros.core.stages import DetectorStage, ForegroundStage, TrackerStage
 from pose4d_ros.datasets.frame import Frame
 from pose4d_ros.evaluation.tracking_metrics import score_people, seen_share, seen_table
 from pose4d_ros.peer import Peer
-
+from pose4d_ros.util.stats import ms_stats
 
 # A model's rows (suffixes of its channels) and the stages each one's CPU time counts
-def ms_stats(ms: Iterable[float]) -> dict[str, float | None]:
-    """p50 and p95 of per-frame times in ms (None for none)."""
-    a = np.asarray(list(ms), np.float64)
-    if not a.size:
-        return {'p50': None, 'p95': None}
-    return {'p50': round(float(np.percentile(a, 50)), 3),
-            'p95': round(float(np.percentile(a, 95)), 3)}
-
-
 ROW_STAGES = {'': STAGES[:2], '_t': STAGES[:2], '_kf': STAGES[:3], '_kf_ik': STAGES}
 
 

@@ -36,10 +36,10 @@ import numpy as np
 from pose4d_ros.core.pipeline import STAGES, FramePipeline
 from pose4d_ros.datasets import bag, cad60_bag
 from pose4d_ros.datasets.frame import Frame
-from pose4d_ros.evaluation.pipeline import ms_stats
 from pose4d_ros.graph.run import run_graph
 from pose4d_ros.peer import Peer
 from pose4d_ros.util.progress import progress
+from pose4d_ros.util.stats import ms_stats
 
 GRAPHS = {'nodes': STAGES, 'pipeline': ('pipeline',)}
 

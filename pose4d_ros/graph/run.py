@@ -24,15 +24,15 @@ from pose4d_ros.datasets import bag, cad60_bag
 from pose4d_ros.wire import joints_from_msg, stamp_to_ns
 
 STAGES = ('foreground', 'detector', 'tracker', 'ik')
-RECORDED = ('pose4d/skeleton', 'pose4d/skeletons', 'pose4d/parts', 'pose4d/parts/tracked',
-            '/tf')
+# what a user of the skeletons subscribes to: the intermediate topics are published on demand
+RECORDED = ('pose4d/skeleton', 'pose4d/skeletons', '/tf')
 # topic -> subscribers that must be connected before the bag plays
 PIPELINE_CONNECTIONS = {
     'camera/color/image_raw': 1, 'camera/depth/image_raw': 1, 'pose4d/skeleton': 2}
 CONNECTIONS = {
-    'camera/color/image_raw': 2, 'camera/depth/image_raw': 2,
-    'pose4d/foreground/depth': 2, 'pose4d/foreground/mask': 1,
-    'pose4d/parts': 2, 'pose4d/parts/tracked': 2, 'pose4d/skeleton': 2,
+    'camera/color/image_raw': 1, 'camera/depth/image_raw': 2, 'camera/color/camera_info': 5,
+    'pose4d/foreground/depth': 2, 'pose4d/foreground/mask': 1, 'pose4d/parts/people': 1,
+    'pose4d/parts/tracked/people': 1, 'pose4d/skeleton': 2,
 }
 
 

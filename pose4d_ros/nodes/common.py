@@ -47,7 +47,7 @@ from pose4d_ros.core.sync import TIME_JUMP_S, StampJumps, StampSync
 from pose4d_ros.core.threads import set_blas_threads
 from pose4d_ros.nodes import qos
 from pose4d_ros.nodes.params import ParameterError
-from pose4d_ros.wire import depth_from_msg, intrinsics_from_msg, stamp_to_ns
+from pose4d_ros.wire import intrinsics_from_msg, stamp_to_ns
 
 DIAGNOSTICS_TOPIC = '/diagnostics'
 # A stamp farther than this from the node's clock was taken on another clock, seconds
@@ -469,24 +469,61 @@ class LatestIntrinsics:
             self._monitor.bad_input(f'camera_info refused: {exc}')
 
 
-class RecentDepth:
-    """The camera's depth images of the last few stamps, for a stage that uses the one of its
-    frame's stamp when it has come but never waits for it (the tracker's free-space check):
-    `at(stamp_ns)` is that image in metres (the nearest stamp within `slop_ns`), or None.
+class SubscribedWhile:
+    """A subscription that exists only while `wanted()` says it is needed: `wanted` is asked
+    at start and every `period_s` on the steady clock (in the executor's thread), and the
+    subscription made (`make()`) or destroyed when the answer changes. For inputs of outputs
+    that are built on demand, and for a fallback input while its better source is missing:
+    a message never taken costs nothing, while one received to be thrown away costs its
+    transport and its bytes."""
+
+    def __init__(self, node: Node, wanted: Callable[[], bool],
+                 make: Callable[[], Subscription], *, period_s: float = 0.5) -> None:
+        self._node = node
+        self._wanted = wanted
+        self._make = make
+        self.subscription: Subscription | None = None
+        self.update()
+        node.create_timer(period_s, self.update, clock=Clock(clock_type=ClockType.STEADY_TIME))
+
+    def update(self) -> None:
+        want = self._wanted()
+        if want and self.subscription is None:
+            self.subscription = self._make()
+        elif not want and self.subscription is not None:
+            self._node.destroy_subscription(self.subscription)
+            self.subscription = None
+
+
+class RecentImages:
+    """A camera's images of the last few stamps, for a stage that uses the one of its frame's
+    stamp when it has come but never waits for it (the tracker's free-space check, the
+    foreground's masked colour): `at(stamp_ns)` is that image read by `read` (the nearest
+    stamp within `slop_ns`), or None.
 
     Only the stamps are read as the images arrive (`wire.cdr_header`); an image is
-    deserialised when it is used."""
+    deserialised when it is used. With `wanted`, the topic is subscribed only while
+    `wanted()` (`SubscribedWhile`)."""
 
     KEEP = 8
 
-    def __init__(self, node: Node, monitor: StageMonitor, topic: str, *,
-                 slop_ns: int = 0) -> None:
+    def __init__(self, node: Node, monitor: StageMonitor, topic: str,
+                 read: Callable[[Image], np.ndarray], *, slop_ns: int = 0,
+                 wanted: Callable[[], bool] | None = None) -> None:
         self._recent: deque[tuple[int, bytes]] = deque(maxlen=self.KEEP)
+        self._read = read
         self._slop_ns = slop_ns
         self._monitor = monitor
         self._name = node.resolve_topic_name(topic)
-        subscribe(node, Image, topic, self._recent.append, qos.SENSOR_QOS, monitor,
-                  decode=lambda data: (_stamp_ns(data), data))
+
+        def make() -> Subscription:
+            return subscribe(node, Image, topic, self._recent.append, qos.SENSOR_QOS, monitor,
+                             decode=lambda data: (_stamp_ns(data), data))
+
+        if wanted is None:
+            make()
+        else:
+            self.follow = SubscribedWhile(node, wanted, make)
 
     def at(self, stamp_ns: int) -> np.ndarray | None:
         recent = list(self._recent)
@@ -496,7 +533,7 @@ class RecentDepth:
         if abs(near - stamp_ns) > self._slop_ns:
             return None
         try:
-            return depth_from_msg(deserialize_message(data, Image))
+            return self._read(deserialize_message(data, Image))
         except ValueError as exc:
             self._monitor.bad_input(f'{self._name} at {near} ns refused: {exc}')
             return None
@@ -513,9 +550,13 @@ class PeopleInputs:
     Subscribes `people_topic` (pose4d_msgs/SkeletonArray: every person of a frame) and
     `single_topic` (JointArray: one person); with `extra` topics, each frame is paired by stamp
     with their messages (as `PairedInputs`). `process(people, header, extra_msgs)` gets a list
-    of JointSets. A single-person message is taken as a list of one, unless a several-person
-    message came in the last `PEOPLE_FRESH_S` seconds: then the upstream stage publishes both,
-    and the single-person one (its primary person) is left out.
+    of JointSets. The single-person topic is the fallback for an upstream stage that publishes
+    only one person: it is subscribed only while nothing publishes the several-person topic
+    (`SubscribedWhile`; our stages publish their single-person topic only while subscribed,
+    so between two of ours each frame crosses once). A single-person message is taken as a
+    list of one, unless a several-person message came in the last `PEOPLE_FRESH_S` seconds:
+    then the upstream stage publishes both, and the single-person one (its primary person) is
+    left out.
 
     Frames are processed in a `FrameQueue`'s worker, never in the executor's thread: a stage
     slower than its input works on the newest frame and drops the older ones (counted on the
@@ -545,8 +586,11 @@ class PeopleInputs:
 
         subscribe(node, SkeletonArray, people_topic, on_people, qos.INPUT_QOS, monitor,
                   decode=lambda data: _Pivot.of_bytes(data, SkeletonArray))
-        subscribe(node, JointArray, single_topic, on_single, qos.INPUT_QOS, monitor,
-                  decode=lambda data: _Pivot.of_bytes(data, JointArray))
+        people_name = node.resolve_topic_name(people_topic)
+        self.single = SubscribedWhile(
+            node, lambda: node.count_publishers(people_name) == 0,
+            lambda: subscribe(node, JointArray, single_topic, on_single, qos.INPUT_QOS, monitor,
+                              decode=lambda data: _Pivot.of_bytes(data, JointArray)))
 
     def _pivot(self, pivot: _Pivot) -> None:
         if self._paired is not None:

@@ -22,7 +22,8 @@ for a tracker whose `tracker.max_unseen_s` / `tracker.max_hidden_s` were changed
 Publications (input header)
     pose4d/parts/people (pose4d_msgs/SkeletonArray: every person's parts, DETECTED or MISSING,
     track_id 0; in the mask's order, the best region first)
-    pose4d/parts (pose4d_msgs/JointArray: the first person's, all MISSING when nobody)
+    pose4d/parts (pose4d_msgs/JointArray: the first person's, all MISSING when nobody; only
+    while it has a subscriber: the tracker reads pose4d/parts/people)
     /diagnostics (also: people, people_over_limit: people in view beyond max_people, counted)
 Parameters (config/detector.yaml)
     detector.model, detector.n_levels, detector.margin, detector.person_scales,
@@ -268,10 +269,11 @@ class DetectorNode(Node):
         values['people'] = len(parts)
         values['people_over_limit'] += max(len(people) - len(parts), 0)
         header = color_msg.header
-        # everyone first: a tracker that hears both then leaves the single person out
+        # everyone first: a tracker that hears both leaves the single person out
         self.pub_people.publish(skeletons_to_cdr(parts, header))
-        self.pub.publish(joints_to_cdr(parts[0] if parts else
-                                       JointSet.missing(self.template.names), header))
+        if self.pub.get_subscription_count():  # the primary person alone: on demand
+            self.pub.publish(joints_to_cdr(parts[0] if parts else
+                                           JointSet.missing(self.template.names), header))
         self.monitor.frame(stamp, time.perf_counter() - t0)
 
 

@@ -1,14 +1,17 @@
 """`foreground`: the person's mask from the depth image (floor removal + MSER), applied.
 
-Colour, depth and camera_info are paired by stamp (exact, or nearest within
-`foreground.slop_s`), never "the latest depth", and processed in order; two frames at most
-wait to be processed (`common.STAGE_QUEUE`), so a stage slower than the camera works on the
-newest frames and drops the older ones (counted on /diagnostics).
+The people are found on the depth image alone. The colour camera's camera_info (its stamp
+and frame are the colour image's) and the depth image are paired by stamp (exact, or nearest
+within `foreground.slop_s`), never "the latest depth", and processed in order; two frames at
+most wait to be processed (`common.STAGE_QUEUE`), so a stage slower than the camera works on
+the newest frames and drops the older ones (counted on /diagnostics).
 
 Subscriptions
-    camera/color/image_raw (sensor_msgs/Image, rgb8/bgr8/mono8)
-    camera/depth/image_raw (sensor_msgs/Image, 16UC1 mm or 32FC1 m, registered to colour)
     camera/color/camera_info (sensor_msgs/CameraInfo)
+    camera/depth/image_raw (sensor_msgs/Image, 16UC1 mm or 32FC1 m, registered to colour)
+    camera/color/image_raw (sensor_msgs/Image, rgb8/bgr8/mono8; only while the masked colour
+    or the point cloud has a subscriber: the image of a frame's stamp if it has come, never
+    waited for, `common.RecentImages`)
 Every person region is a candidate (`core.foreground.segment_people`, at most `MAX_PEOPLE`,
 best first); the mask tells them apart.
 
@@ -16,8 +19,9 @@ Publications (all with the colour image's header)
     pose4d/foreground/mask (mono8 labels: 0 = background, 255 = the best person, 254 the next
     one, ... (`core.people.people_labels`): `mask > 0` is everyone, and one person's mask is
     255 = person as before)
-    pose4d/foreground/color (rgb8, 0 outside the people; only while it has a subscriber: the
-    detector reads the camera's colour and masks it itself)
+    pose4d/foreground/color (rgb8, 0 outside the people; only while it has a subscriber, and
+    for a frame whose colour image has come: the detector reads the camera's colour and masks
+    it itself)
     pose4d/foreground/depth (the input's encoding; 0 / NaN outside the people)
     pose4d/foreground/points (sensor_msgs/PointCloud2 of the people, if
     foreground.publish_cloud and while it has a subscriber)
@@ -45,7 +49,7 @@ from pose4d_ros.core.foreground import ForegroundConfig
 from pose4d_ros.core.people import people_labels
 from pose4d_ros.core.stages import ForegroundStage
 from pose4d_ros.nodes import qos
-from pose4d_ros.nodes.common import PairedInputs, StageMonitor, run
+from pose4d_ros.nodes.common import PairedInputs, RecentImages, StageMonitor, run
 from pose4d_ros.nodes.convert import cloud_to_msg
 from pose4d_ros.nodes.params import NodeParams, Param
 from pose4d_ros.wire import (
@@ -87,10 +91,12 @@ PARAMS = (
 )
 
 
-# colour, depth and camera_info of one stamp (the pivot, colour, first)
+# colour, depth and camera_info of one stamp (the pivot, colour, first): the pipeline node's
 CAMERA_TOPICS = [(Image, 'camera/color/image_raw', qos.SENSOR_QOS),
                  (Image, 'camera/depth/image_raw', qos.SENSOR_QOS),
                  (CameraInfo, 'camera/color/camera_info', qos.SENSOR_QOS)]
+# the foreground node's: the colour camera's calibration (the pivot) and the depth image
+DEPTH_TOPICS = [CAMERA_TOPICS[2], CAMERA_TOPICS[1]]
 
 
 def foreground_settings(p: dict[str, Any]) -> dict[str, Any]:
@@ -148,8 +154,11 @@ class ForegroundNode(Node):
                      for name in ('mask', 'color', 'depth')}
         self.pub_cloud = (self.create_publisher(PointCloud2, 'pose4d/foreground/points',
                                                 qos.OUTPUT_QOS) if self.publish_cloud else None)
-        self.inputs = PairedInputs(self, CAMERA_TOPICS, self.process, self.monitor,
-                                   slop_ns=int(p['foreground.slop_s'] * 1e9))
+        slop_ns = int(p['foreground.slop_s'] * 1e9)
+        self.inputs = PairedInputs(self, DEPTH_TOPICS, self.process, self.monitor,
+                                   slop_ns=slop_ns)
+        self.color = RecentImages(self, self.monitor, 'camera/color/image_raw', color_from_msg,
+                                  slop_ns=slop_ns, wanted=self._colour_wanted)
         self.get_logger().info(
             f'masking {self.resolve_topic_name("camera/color/image_raw")} + '
             f'{self.resolve_topic_name("camera/depth/image_raw")} -> '
@@ -157,17 +166,22 @@ class ForegroundNode(Node):
             f'{self.stage.config.max_region_area_px} px, floor removal '
             f'{self.stage.config.floor_remove})')
 
+    def _colour_wanted(self) -> bool:
+        """The colour image is read only for the masked colour and the point cloud."""
+        return bool(self.pubs['color'].get_subscription_count() or (
+            self.pub_cloud is not None and self.pub_cloud.get_subscription_count()))
+
     def process(self, items: Any) -> None:
         if (p := self.params.changes()) is not None:
             self.stage.configure(**foreground_settings(p))
             self.cloud_step = p['foreground.cloud_step']
-        color_msg, depth_msg, info_msg = items
+        info_msg, depth_msg = items
         t0 = time.perf_counter()
-        stamp = stamp_to_ns(color_msg.header.stamp)
+        stamp = stamp_to_ns(info_msg.header.stamp)
         if self.monitor.time_jumped(stamp):
             self.stage.reset()
         try:
-            color = color_from_msg(color_msg)
+            color = self.color.at(stamp) if self._colour_wanted() else None
             intrinsics = intrinsics_from_msg(info_msg)
             people, found, color_m, depth_m = self.stage.step_people(
                 color, depth_from_msg(depth_msg), intrinsics, MAX_PEOPLE)
@@ -175,12 +189,15 @@ class ForegroundNode(Node):
             self.monitor.bad_input(f'frame at {stamp} ns refused: {exc}')
             return
         self.monitor.values['people'] = found
-        header = color_msg.header
+        header = info_msg.header
         labels = people_labels(people, depth_m.shape)
         # the masked colour only on demand: the detector reads the camera's and masks it
-        publish_images(self.pubs, lambda: labels, color_m, depth_m, depth_msg.encoding, header,
+        pubs = self.pubs if color_m is not None else {
+            k: pub for k, pub in self.pubs.items() if k != 'color'}
+        publish_images(pubs, lambda: labels, color_m, depth_m, depth_msg.encoding, header,
                        always=('mask', 'depth'))
-        if self.pub_cloud is not None and self.pub_cloud.get_subscription_count():
+        if (color is not None and self.pub_cloud is not None
+                and self.pub_cloud.get_subscription_count()):
             rows, cols = np.nonzero(labels[::self.cloud_step, ::self.cloud_step])
             rows, cols = rows * self.cloud_step, cols * self.cloud_step
             xyz = backproject(np.stack([cols, rows], axis=1), depth_m[rows, cols], intrinsics)

@@ -12,7 +12,8 @@ the older ones (counted as `dropped` on /diagnostics), never queueing them.
 
 Subscriptions
     pose4d/parts/tracked/people (pose4d_msgs/SkeletonArray, every tracked person), or from a
-    tracker that publishes only one person, pose4d/parts/tracked (pose4d_msgs/JointArray)
+    tracker that publishes only one person, pose4d/parts/tracked (pose4d_msgs/JointArray;
+    subscribed only while nothing publishes pose4d/parts/tracked/people)
     pose4d/foreground/depth (sensor_msgs/Image, 16UC1 or 32FC1; only when ik.use_depth)
     camera/color/camera_info (sensor_msgs/CameraInfo; the latest)
 Publications

@@ -9,7 +9,8 @@ on /diagnostics; the filters predict through them from the stamps), never queuei
 Subscriptions
     pose4d/parts/people (pose4d_msgs/SkeletonArray, every person's detected parts), or, from a
     detector that publishes only one person, pose4d/parts (pose4d_msgs/JointArray, the
-    detector's 10 or 14 parts, DETECTED or MISSING)
+    detector's 10 or 14 parts, DETECTED or MISSING; subscribed only while nothing publishes
+    pose4d/parts/people, `common.PeopleInputs`)
     camera/color/camera_info (sensor_msgs/CameraInfo; the latest, for 3-D positions)
     camera/depth/image_raw (sensor_msgs/Image, 16UC1 or 32FC1, registered to colour; only
     when tracker.free_space_m > 0: the image of a frame's stamp, `tracker.depth_slop_s`, if it
@@ -19,7 +20,8 @@ Publications (with the input header)
     pose4d/parts/tracked/people (pose4d_msgs/SkeletonArray: every confirmed track's parts,
     DETECTED / TRACKED / MISSING, track_id set; the primary person first; empty: nobody)
     pose4d/parts/tracked (pose4d_msgs/JointArray: the primary person's, all MISSING with
-    track_id 0 when nobody is tracked)
+    track_id 0 when nobody is tracked; only while it has a subscriber: the IK reads
+    pose4d/parts/tracked/people)
     /diagnostics (also: people, tracks_born, tracks_ended)
 Parameters (config/tracker.yaml)
     tracker.kind, tracker.coupling, tracker.process_noise, tracker.measurement_noise_px,
@@ -46,12 +48,12 @@ from pose4d_ros.nodes import qos
 from pose4d_ros.nodes.common import (
     LatestIntrinsics,
     PeopleInputs,
-    RecentDepth,
+    RecentImages,
     StageMonitor,
     run,
 )
 from pose4d_ros.nodes.params import NodeParams, Param
-from pose4d_ros.wire import joints_to_cdr, skeletons_to_cdr, stamp_to_ns
+from pose4d_ros.wire import depth_from_msg, joints_to_cdr, skeletons_to_cdr, stamp_to_ns
 
 _D = SlqeConfig()
 PARAMS = (
@@ -149,8 +151,8 @@ class TrackerNode(Node):
         self.pub_people = self.create_publisher(SkeletonArray, 'pose4d/parts/tracked/people',
                                                 qos.OUTPUT_QOS)
         self.pub = self.create_publisher(JointArray, 'pose4d/parts/tracked', qos.OUTPUT_QOS)
-        self.depth = (RecentDepth(self, self.monitor, 'camera/depth/image_raw',
-                                  slop_ns=int(p['tracker.depth_slop_s'] * 1e9))
+        self.depth = (RecentImages(self, self.monitor, 'camera/depth/image_raw',
+                                   depth_from_msg, slop_ns=int(p['tracker.depth_slop_s'] * 1e9))
                       if p['tracker.free_space_m'] > 0 else None)
         self.inputs = PeopleInputs(self, 'pose4d/parts/people', 'pose4d/parts', [],
                                    self.process, self.monitor)
@@ -182,9 +184,10 @@ class TrackerNode(Node):
         values['tracks_born'] += len(self.people.born)
         values['tracks_ended'] += len(self.people.ended)
         self.pub_people.publish(skeletons_to_cdr(tracked, header))
-        primary = tracked[0] if tracked else JointSet.missing(
-            detections[0].names if detections else self.template.tree.names)
-        self.pub.publish(joints_to_cdr(primary, header))
+        if self.pub.get_subscription_count():  # the primary person alone: on demand
+            primary = tracked[0] if tracked else JointSet.missing(
+                detections[0].names if detections else self.template.tree.names)
+            self.pub.publish(joints_to_cdr(primary, header))
         self.monitor.frame(stamp, time.perf_counter() - t0)
 
 

@@ -167,7 +167,8 @@ def apply_mask(color: NDArray[np.uint8], depth_m: NDArray[np.floating],
     depth_masked = np.empty(mask.shape, np.float32)
     depth_masked.fill(np.nan)
     h, w = mask.shape
-    _blank_outside(color.reshape(h, w, -1), color_masked.reshape(h, w, -1), depth,
+    c = color.shape[2] if color.ndim == 3 else 1  # 0: no colour (`ForegroundStage`)
+    _blank_outside(color.reshape(h, w, c), color_masked.reshape(h, w, c), depth,
                    depth_masked, mask, 0.001 if depth.dtype == np.uint16 else 1.0, MAX_DEPTH_M)
     return color_masked, depth_masked
 

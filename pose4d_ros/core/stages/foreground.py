@@ -63,6 +63,7 @@ class ForegroundStage:
             for _ in range(2):
                 self.step(color, depth, k)
                 self.step_people(color, depth, k, 4)
+                self.step_people(None, depth, k, 4)
             self.reset()
         # the blanking kernel for the arrays a node gets: views of a message's buffer are
         # read-only (a new numba signature each, else compiled at the first camera frame)
@@ -96,14 +97,18 @@ class ForegroundStage:
             self.previous = None
         return (fg, *apply_mask(color, depth_m, fg.mask))
 
-    def step_people(self, color: NDArray[np.uint8], depth_m: NDArray[np.floating],
+    def step_people(self, color: NDArray[np.uint8] | None, depth_m: NDArray[np.floating],
                     intrinsics: Intrinsics, max_people: int
-                    ) -> tuple[list[ForegroundResult], int, NDArray[np.uint8],
+                    ) -> tuple[list[ForegroundResult], int, NDArray[np.uint8] | None,
                                NDArray[np.float32]]:
         """Every person of one frame (`core.foreground.segment_people`, at most `max_people`,
         best first), how many the rules found, and the colour and depth blanked outside all
-        of them. Held like `step`'s person when a frame finds nobody."""
-        color, depth_m = np.asarray(color), np.asarray(depth_m, np.float32)
+        of them. Held like `step`'s person when a frame finds nobody. The people are found on
+        the depth alone: `color` None gives None for the blanked colour."""
+        depth_m = np.asarray(depth_m, np.float32)
+        without = color is None
+        # no colour: a colour image of no channels, blanked by the same kernel at no cost
+        color = np.empty((*depth_m.shape, 0), np.uint8) if without else np.asarray(color)
         if color.shape[:2] != depth_m.shape:
             raise ValueError(f'colour is {color.shape[1]}x{color.shape[0]} but depth is '
                              f'{depth_m.shape[1]}x{depth_m.shape[0]} (not registered?)')
@@ -120,4 +125,5 @@ class ForegroundStage:
         union = np.zeros(depth_m.shape, bool)
         for person in people:
             union |= person.mask
-        return (people, found, *apply_mask(color, depth_m, union))
+        color_m, depth_masked = apply_mask(color, depth_m, union)
+        return people, found, None if without else color_m, depth_masked
