@@ -31,6 +31,7 @@ PKG_SOURCES := setup.py setup.cfg package.xml resource/pose4d_ros \
 MSG_SOURCES := pose4d_msgs/CMakeLists.txt pose4d_msgs/package.xml pose4d_msgs/cmake/wheel_include_dirs.cmake \
 	$(wildcard pose4d_msgs/msg/*.msg)
 TF2_SOURCES := $(wildcard ros_wheels/tf2_msgs/*.* ros_wheels/tf2_msgs/msg/*.msg) pose4d_msgs/cmake/wheel_include_dirs.cmake
+HRI_SOURCES := $(wildcard ros_wheels/hri_msgs/*.* ros_wheels/hri_msgs/msg/*.msg) pose4d_msgs/cmake/wheel_include_dirs.cmake
 
 .PHONY: fuzz soak help setup test lint demo bench results peer train-env sample-bag clean
 
@@ -70,8 +71,18 @@ $(VENV)/.stamp-tf2: $(VENV)/.stamp-env $(TF2_SOURCES)
 	fi
 	touch $@
 
+# 2c. hri_msgs (ROS4HRI, REP 155: what /humans/bodies/... carry), likewise: the four body
+# messages we publish, built from hri_msgs' definitions only where the environment has none
+$(VENV)/.stamp-hri: $(VENV)/.stamp-env $(HRI_SOURCES)
+	if $(PY) -c 'import hri_msgs.msg' 2>/dev/null && test ! -d build/hri_msgs; then \
+		echo 'hri_msgs: the environment has it'; \
+	else \
+		$(call build_interfaces,ros_wheels/hri_msgs,hri_msgs); \
+	fi
+	touch $@
+
 # 3. pose4d_ros itself, with its executables where `ros2 run` looks (<prefix>/lib/pose4d_ros)
-$(VENV)/.stamp-pkg: $(VENV)/.stamp-msgs $(VENV)/.stamp-tf2 $(PKG_SOURCES) tools/install_executables.py tools/warm_up.py
+$(VENV)/.stamp-pkg: $(VENV)/.stamp-msgs $(VENV)/.stamp-tf2 $(VENV)/.stamp-hri $(PKG_SOURCES) tools/install_executables.py tools/warm_up.py
 	$(PY) -m pip install --quiet --no-deps --no-build-isolation .
 	$(PY) tools/install_executables.py
 	$(PY) tools/warm_up.py

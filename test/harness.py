@@ -173,7 +173,8 @@ class RosPeer:
 def check_tf(skeletons: list, tf_messages: list, prefix: str = 'pose4d') -> int:
     """Check /tf against the skeletons: for each skeleton message, one TFMessage of its stamp
     with one transform per located joint (not MISSING, finite 3-D), from the skeleton's frame
-    to `<prefix>/<track_id>/<joint>` at the joint's position. Returns the transforms seen."""
+    to `<prefix>/<track_id>/<joint>` at the joint's position (the message's other transforms,
+    the REP 155 body frames, are not looked at here). Returns the transforms seen."""
     import math
 
     from pose4d_ros.core.joints import MISSING
@@ -187,7 +188,8 @@ def check_tf(skeletons: list, tf_messages: list, prefix: str = 'pose4d') -> int:
                    if j.source != MISSING and all(math.isfinite(c) for c in
                                                   (j.position.x, j.position.y, j.position.z))}
         assert located, f'skeleton at {stamp} ns has no located joint'
-        transforms = by_stamp[stamp].transforms
+        transforms = [t for t in by_stamp[stamp].transforms
+                      if t.child_frame_id.startswith(f'{prefix}/')]
         assert sorted(t.child_frame_id for t in transforms) == sorted(located)
         for t in transforms:
             assert t.header == skeleton.header

@@ -285,13 +285,15 @@ def tf_per_skeleton(recorded: Path, skeletons: dict[int, JointSet], *,
                     prefix: str = 'pose4d') -> dict[str, int]:
     """The recorded /tf against the recorded skeletons: `matching` counts the skeletons whose
     stamp has exactly one transform per located joint (`<prefix>/<track>/<joint>`) of every
-    person of that frame (/pose4d/skeletons, where recorded; else the skeleton's own) on /tf."""
+    person of that frame (/pose4d/skeletons, where recorded; else the skeleton's own) on /tf
+    (the other frames there, REP 155's body frames, are not counted)."""
     from pose4d_ros.wire import joint_frame
 
     frames: dict[int, list[str]] = {}
     for m in bag.read_messages(recorded, ['/tf']):
         for t in bag.deserialize(m).transforms:
-            frames.setdefault(stamp_to_ns(t.header.stamp), []).append(t.child_frame_id)
+            if t.child_frame_id.startswith(f'{prefix}/'):
+                frames.setdefault(stamp_to_ns(t.header.stamp), []).append(t.child_frame_id)
     everyone: dict[int, list[JointSet]] = {}
     if '/pose4d/skeletons' in bag.topics(recorded):
         for m in bag.read_messages(recorded, ['/pose4d/skeletons']):

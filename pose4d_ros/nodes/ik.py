@@ -25,12 +25,14 @@ Publications
     people each in the namespace pose4d/<track_id>, bones in the id's colour)
     /tf (tf2_msgs/TFMessage: each located joint as the frame <tf.prefix>/<track_id>/<joint>
     in the image's frame, stamped like the skeleton; when tf.publish)
+    humans/bodies/tracked, humans/bodies/<id>/{skeleton2d,roi} and the body_<id> frames on /tf:
+    the ROS4HRI (REP 155) bodies (`nodes.hri`; when hri.publish)
     /diagnostics
-    (markers and /tf are built and sent only while they have a subscriber)
+    (markers, /tf and the REP 155 bodies are built and sent only while they have a subscriber)
 Parameters (config/ik.yaml)
     ik.use_depth, ik.method, ik.learn_lengths, ik.upper_arm_length_m, ik.forearm_length_m,
     ik.thigh_length_m, ik.shin_length_m, ik.depth_slop_s, ik.marker_lifetime_s, tf.publish,
-    tf.prefix
+    tf.prefix, hri.publish, hri.body_id_prefix, hri.forget_after_s
 """
 
 from __future__ import annotations
@@ -45,13 +47,13 @@ from std_msgs.msg import Header
 from tf2_msgs.msg import TFMessage
 from visualization_msgs.msg import MarkerArray
 
-from pose4d_ros.core.camera import cad60_intrinsics
+from pose4d_ros.core.camera import Intrinsics, cad60_intrinsics
 from pose4d_ros.core.joints import MISSING, JointSet
 from pose4d_ros.core.kinematics import DEFAULT_LIMB_LENGTHS_M
 from pose4d_ros.core.people import PeopleIk
 from pose4d_ros.core.skeleton import SKELETON_14, limb_bones
 from pose4d_ros.core.stages import IkStage
-from pose4d_ros.nodes import qos
+from pose4d_ros.nodes import hri, qos
 from pose4d_ros.nodes.common import LatestIntrinsics, PeopleInputs, StageMonitor, run
 from pose4d_ros.nodes.convert import people_markers, skeleton_markers
 from pose4d_ros.nodes.params import NodeParams, Param
@@ -90,6 +92,7 @@ PARAMS = (
     Param('tf.publish', True, 'Publish each located joint of the skeleton on /tf.', live=True),
     Param('tf.prefix', 'pose4d', 'First part of the joints\' TF frame names, '
           '<prefix>/<track_id>/<joint>.', check=_frame_prefix, live=True),
+    *hri.PARAMS,
 )
 
 
@@ -109,7 +112,8 @@ def ik_stage(p: dict[str, Any]) -> IkStage:
 
 class SkeletonOutputs:
     """The skeletons' publications, the same in the ik and pipeline nodes: pose4d/skeletons
-    (everyone), pose4d/skeleton (the primary person), their RViz markers and joints on /tf."""
+    (everyone), pose4d/skeleton (the primary person), their RViz markers and joints on /tf,
+    and the REP 155 bodies (`nodes.hri`)."""
 
     def __init__(self, node: Node, p: dict[str, Any]) -> None:
         self.bones = limb_bones()
@@ -119,16 +123,21 @@ class SkeletonOutputs:
         self.markers = node.create_publisher(MarkerArray, 'pose4d/skeleton/markers',
                                              qos.OUTPUT_QOS)
         self.tf = node.create_publisher(TFMessage, '/tf', qos.TF_QOS)
+        self.hri = hri.HriOutputs(node, p) if p['hri.publish'] else None
         self.configure(p)
 
     def configure(self, p: dict[str, Any]) -> None:
         self.marker_lifetime_s = p['ik.marker_lifetime_s']
         self.publish_tf = p['tf.publish']
         self.tf_prefix = p['tf.prefix']
+        if self.hri is not None:
+            self.hri.configure(p)
 
-    def publish(self, people: list[JointSet], header: Header) -> None:
+    def publish(self, people: list[JointSet], header: Header,
+                intrinsics: Intrinsics | None = None) -> None:
         """Every person's skeleton (the primary first); nobody: an empty SkeletonArray and an
-        all-MISSING skeleton of track 0 on pose4d/skeleton."""
+        all-MISSING skeleton of track 0 on pose4d/skeleton. `intrinsics`: the colour image's
+        (its size normalises the REP 155 keypoints; without it they are not published)."""
         self.skeletons.publish(skeletons_to_cdr(people, header))
         primary = people[0] if people else JointSet.missing(SKELETON_14)
         self.skeleton.publish(joints_to_cdr(primary, header))
@@ -140,8 +149,11 @@ class SkeletonOutputs:
                                  lifetime_s=self.marker_lifetime_s) if len(people) <= 1
                 else people_markers(people, self.bones, header,
                                     lifetime_s=self.marker_lifetime_s))
-        if self.publish_tf and self.tf.get_subscription_count():
-            frames = tf_to_cdr(people, header, self.tf_prefix)
+        if self.hri is not None:
+            self.hri.publish(people, header, intrinsics)
+        if (self.publish_tf or self.hri is not None) and self.tf.get_subscription_count():
+            bodies = self.hri.transforms(people, header.frame_id) if self.hri is not None else ()
+            frames = tf_to_cdr(people if self.publish_tf else [], header, self.tf_prefix, bodies)
             if frames is not None:
                 self.tf.publish(frames)
 
@@ -196,7 +208,7 @@ class IkNode(Node):
             self.monitor.bad_input(f'frame at {stamp} ns refused: {exc}')
             return
         self.monitor.values['people'] = len(skeletons)
-        self.outputs.publish(skeletons, header)
+        self.outputs.publish(skeletons, header, intrinsics)
         self.monitor.frame(stamp, time.perf_counter() - t0)
 
 

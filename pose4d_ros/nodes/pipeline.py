@@ -15,7 +15,7 @@ region searched (at most detector.max_people), one SLQE and one IK per track.
 Publications (all with the colour image's header)
     pose4d/skeletons (pose4d_msgs/SkeletonArray, everyone), pose4d/skeleton (pose4d_msgs/
     JointArray, 14 joints, the primary person), pose4d/skeleton/markers, /tf (the joints, as
-    the ik node publishes them),
+    the ik node publishes them), humans/bodies/... (the REP 155 bodies, as the ik node does),
     pose4d/parts, pose4d/parts/tracked (JointArray, the model's parts; while subscribed),
     pose4d/foreground/{mask,color,depth} (if pipeline.publish_foreground; while subscribed),
     /diagnostics
@@ -107,8 +107,9 @@ class PipelineNode(Node):
         t0 = time.perf_counter()
         stamp = stamp_to_ns(color_msg.header.stamp)
         try:
+            intrinsics = intrinsics_from_msg(info_msg)
             out = self.pipeline.step(color_from_msg(color_msg), depth_from_msg(depth_msg),
-                                     intrinsics_from_msg(info_msg), stamp * 1e-9)
+                                     intrinsics, stamp * 1e-9)
         except ValueError as exc:
             self.monitor.bad_input(f'frame at {stamp} ns refused: {exc}')
             return
@@ -120,7 +121,7 @@ class PipelineNode(Node):
         values['people_over_limit'] += max(out.candidates - len(out.foregrounds), 0)
         values['tracks_born'] += len(out.born)
         values['tracks_ended'] += len(out.ended)
-        self.outputs.publish(list(out.people), header)
+        self.outputs.publish(list(out.people), header, intrinsics)
         for name, joints in (('parts', out.parts), ('tracked', out.tracked)):
             if self.pubs[name].get_subscription_count():  # intermediate results: on demand
                 self.pubs[name].publish(joints_to_cdr(joints, header))

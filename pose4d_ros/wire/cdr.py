@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import struct
 import sys
+from collections.abc import Sequence
 from typing import Any, Protocol
 
 import numpy as np
@@ -224,18 +225,29 @@ def joint_frame(prefix: str, track_id: int, name: str) -> str:
     return f'{prefix}/{track_id}/{name}' if prefix else f'{track_id}/{name}'
 
 
-def tf_to_cdr(people: list[JointSet], header: HeaderLike, prefix: str) -> bytes | None:
+def tf_to_cdr(people: list[JointSet], header: HeaderLike, prefix: str,
+              extra: Sequence[tuple[str, str, Sequence[float]]] = ()) -> bytes | None:
     """Every person's joints on /tf: a `tf2_msgs/TFMessage` serialised (little-endian CDR, as
     `rclpy.serialization.serialize_message` gives it), built without the message classes;
     None when no joint is located. One transform per joint with a known 3-D position (not
     MISSING, finite), from the image's frame (`header.frame_id`) to
     `joint_frame(prefix, track_id, name)`, stamped with `header.stamp`; the joint's position is
     the translation, the rotation is the identity. Building the ~30 `TransformStamped` objects
-    of two people and serialising them cost the IK node more CPU than the IK itself."""
+    of two people and serialising them cost the IK node more CPU than the IK itself.
+    `extra` transforms, (parent, child, (x, y, z, qx, qy, qz, qw)), follow in the same message
+    with the same stamp (the REP 155 body frames, `core.hri.body_transforms`)."""
     out = bytearray()
     out += CDR_U32.pack(0)  # the count, written once known
     count = 0
     stamp = CDR_TIME.pack(int(header.stamp.sec), int(header.stamp.nanosec))
+    for parent, child, pose in extra:
+        out += bytes(-len(out) % 4)
+        out += stamp
+        _cdr_string(out, parent)
+        _cdr_string(out, child)
+        out += bytes(-len(out) % 8)
+        out += _TRANSFORM.pack(*pose)
+        count += 1
     for joints in people:
         located = (joints.source != MISSING) & np.isfinite(joints.xyz).all(axis=1)
         xyz = joints.xyz.tolist()
