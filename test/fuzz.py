@@ -248,7 +248,8 @@ class Target:
         camera = name in ('foreground', 'pipeline')
         self.topics: dict[str, tuple[type, str, object]] = {}
         if name in ('foreground', 'pipeline', 'detector'):
-            # the detector reads the camera's colour too (and masks it itself)
+            # the detector reads the camera's colour too (and masks it itself), the foreground
+            # while its masked colour is subscribed (below)
             self.topics['color'] = (Image, 'camera/color/image_raw', qos.SENSOR_QOS)
             self.topics['depth'] = (Image, 'camera/depth/image_raw' if camera
                                     else 'pose4d/foreground/depth', qos.SENSOR_QOS)
@@ -271,6 +272,8 @@ class Target:
         self.pubs = {k: ros.node.create_publisher(t, topic, q)
                      for k, (t, topic, q) in self.topics.items()}
         self.answers = ros.collect(self.out_type, self.out_topic, qos.OUTPUT_QOS)
+        if name == 'foreground':  # the masked colour wanted: the node reads the colour too
+            self.colours = ros.collect(Image, 'pose4d/foreground/color', qos.OUTPUT_QOS)
 
         def valid(header) -> dict[str, object]:
             msgs = {}

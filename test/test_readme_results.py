@@ -61,6 +61,28 @@ def test_every_figure_of_the_readme_summary_is_the_jsons() -> None:
             assert ratio is None, name
 
 
+def test_the_headline_cost_is_the_deployed_graphs() -> None:
+    """The README's first CPU figure is the node graph's as deployed, against MediaPipe in the
+    same run, as `docs/results/bench_graph300.json` holds it."""
+    block = summary_block((ROOT / 'README.md').read_text())
+    path = RESULTS / 'bench_graph300.json'
+    graph = json.loads(path.read_text()).get('graph', {}) if path.exists() else {}
+    found = re.search(r'CPU per frame as deployed.*?the four stage nodes together ([0-9.]+) ms = '
+                      r"([0-9.]+)x MediaPipe's ([0-9.]+) ms.*?the one-process `pipeline` node "
+                      r'([0-9.]+) ms = ([0-9.]+)x MediaPipe', block, re.S)
+    if 'peer_ms_per_frame' not in graph:
+        assert found is None
+        pytest.skip('docs/results/bench_graph300.json has no MediaPipe (make peer, then '
+                    'make results RESULTS_ONLY=bench_graph300)')
+    assert found, 'the README summary does not give the deployed cost'
+    nodes, one = graph['nodes'], graph['pipeline']
+    assert [float(x) for x in found.groups()] == pytest.approx(
+        [nodes['stages_ms_per_frame'], nodes['to_peer'], graph['peer_ms_per_frame'],
+         one['stages_ms_per_frame'], one['to_peer']], abs=5e-3)
+    # it comes before the core's own ratio
+    assert block.index('as deployed') < block.index('in one process (the core)')
+
+
 def test_the_summary_is_what_the_generator_writes() -> None:
     block = summary_block((ROOT / 'README.md').read_text())
     assert block.strip() == doc.summary(RESULTS).strip()

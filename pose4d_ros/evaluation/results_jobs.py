@@ -431,10 +431,13 @@ JOBS: tuple[Job, ...] = (
         lambda c: [['pose4d', 'bench', 'bags/sample', '--json',
                     str(RESULTS / 'bench_graph.json'), '--frames', '20', '--graph']]),
     Job('bench_graph300', 'both graphs replaying 300 frames at 30 fps (1x) while the ros2 command '
-        'line queries the nodes (topic hz, param get): frames in and out, latency',
+        'line queries the nodes (topic hz, param get), three runs each: frames in and out, '
+        "latency, each graph's CPU a frame against the core's and MediaPipe's (the README's "
+        'headline cost)',
         ('bench300',), lambda c: [['pose4d', 'bench', str(DATA / 'bench300_bag'), '--json',
                                    str(RESULTS / 'bench_graph300.json'), '--frames', '20',
-                                   '--graph', '--load', 'query']]),
+                                   '--graph', '--load', 'query', '--repeat', '3',
+                                   *(['--peer', 'mediapipe'] if c.peer else [])]]),
     Job('bench_graph_people2', 'both graphs replaying the two-person demo bag '
         '(bags/sample_people2, 50 frames) at 30 fps (1x): frames in and out, latency', (),
         lambda c: [['pose4d', 'bench', 'bags/sample_people2', '--json',
