@@ -177,6 +177,39 @@ def test_image_to_cdr_is_the_serialised_message(encoding, shape, dtype, frame_id
         image_to_cdr(img[..., None], encoding, header)
 
 
+@pytest.mark.parametrize('encoding,shape,dtype', [
+    ('rgb8', (5, 7, 3), np.uint8), ('bgr8', (3, 2, 3), np.uint8), ('mono8', (4, 3), np.uint8),
+    ('16UC1', (3, 5), np.uint16), ('32FC1', (2, 3), np.float32)])
+@pytest.mark.parametrize('frame_id', ['', 'cam', 'camera_depth_optical_frame'])
+def test_image_from_cdr_reads_what_the_message_holds(encoding, shape, dtype, frame_id):
+    """An Image read in place from its bytes gives the arrays and header the deserialised
+    message gives (a padded row stride included), and damaged bytes are refused."""
+    from builtin_interfaces.msg import Time
+    from rclpy.serialization import deserialize_message, serialize_message
+    from sensor_msgs.msg import Image
+    from std_msgs.msg import Header
+
+    from pose4d_ros.nodes.convert import array_to_image
+    from pose4d_ros.wire import image_from_cdr, image_to_array
+
+    rng = np.random.default_rng(len(frame_id))
+    msg = array_to_image((rng.random(shape) * 200).astype(dtype), encoding,
+                         Header(frame_id=frame_id, stamp=Time(sec=7, nanosec=8)))
+    msg.step += 4  # rows padded, as some drivers send them
+    msg.data = bytes(msg.step * msg.height)
+    data = serialize_message(msg)
+    view, full = image_from_cdr(data), deserialize_message(data, Image)
+    assert_array_equal(image_to_array(view), image_to_array(full))
+    assert (view.header.stamp.sec, view.header.stamp.nanosec, view.header.frame_id) == (
+        7, 8, frame_id)
+    assert (view.height, view.width, view.encoding, view.step) == (
+        full.height, full.width, full.encoding, full.step)
+    for bad, reason in ((data[:-1], 'announced'), (data[:30], 'too short|bad string'),
+                        (b'\x00\x00\x00\x00' + data[4:], 'not little-endian')):
+        with pytest.raises(ValueError, match=reason):
+            image_from_cdr(bad)
+
+
 @pytest.mark.parametrize('frame_id', ['', 'c', 'camera_color_optical_frame'])
 @pytest.mark.parametrize('n', [0, 1, 10, 14])
 def test_joints_to_cdr_is_the_serialised_message(frame_id, n):

@@ -303,6 +303,21 @@ class StageMonitor:
                 raise
 
 
+def _header(sec: int, nanosec: int, frame_id: str) -> Header:
+    return Header(stamp=Time(sec=sec, nanosec=nanosec), frame_id=frame_id)
+
+
+def image_of_bytes(data: bytes) -> object:
+    """A serialised `sensor_msgs/Image` read in place (`wire.image_from_cdr`: its pixels stay in
+    the bytes until an array is made of them, its header an rclpy `Header`); bytes in another
+    encapsulation, or that are no Image, are deserialised the general way (which says why
+    it refuses them)."""
+    try:
+        return wire.image_from_cdr(data, _header)
+    except ValueError:
+        return deserialize_message(data, Image)
+
+
 def subscribe(node: Node, msg_type: type, topic: str, callback: Callable[[object], None],
               profile: object, monitor: StageMonitor,
               decode: Callable[[bytes], object] | None = None) -> Subscription:
@@ -311,13 +326,16 @@ def subscribe(node: Node, msg_type: type, topic: str, callback: Callable[[object
     It takes the serialized bytes (`raw=True`) and deserializes them here: rclpy's typed take
     drops such a message silently (no callback, nothing counted), so a broken driver's bytes
     would go unseen. Here each is counted as a bad input on `monitor` and warned about
-    (throttled), and the next valid message is served as usual. (A 0-byte message never gets
-    this far: Fast DDS drops it on arrival, which is why stage inputs are best effort,
-    `qos.INPUT_QOS`.) `decode`: reads the bytes instead of `deserialize_message` (a ValueError
-    for bytes it refuses); `callback` gets what it returns, unless None.
+    (throttled), and the next valid message is served as usual. An Image is read in place
+    (`image_of_bytes`). (A 0-byte message never gets this far: Fast DDS drops it on arrival,
+    which is why stage inputs are best effort, `qos.INPUT_QOS`.) `decode`: reads the bytes
+    instead of `deserialize_message` (a ValueError for bytes it refuses); `callback` gets what
+    it returns, unless None.
     """
     name = node.resolve_topic_name(topic)
     kind = f'{msg_type.__module__.split(".")[0]}/{msg_type.__name__}'
+    if decode is None and msg_type is Image:
+        decode = image_of_bytes
 
     def on_bytes(data: bytes) -> None:
         try:
@@ -533,7 +551,7 @@ class RecentImages:
         if abs(near - stamp_ns) > self._slop_ns:
             return None
         try:
-            return self._read(deserialize_message(data, Image))
+            return self._read(image_of_bytes(data))
         except ValueError as exc:
             self._monitor.bad_input(f'{self._name} at {near} ns refused: {exc}')
             return None

@@ -13,7 +13,8 @@ a job:
 - `msgs`: message objects (rclpy's or rosbags', read by their fields) -> arrays
   (`color_from_msg`, `depth_from_msg`, `image_to_array`, the compressed images',
   `intrinsics_from_msg`, `joints_from_msg`, `skeletons_from_msg`, `stamp_to_ns`);
-- `cdr`: serialised bytes, read and written side by side (`cdr_header`, `joints_from_cdr`,
+- `cdr`: serialised bytes, read and written side by side (`cdr_header`, `image_from_cdr`,
+  `joints_from_cdr`,
   `skeletons_from_cdr`; `joints_to_cdr`, `skeletons_to_cdr`, `image_to_cdr`, `tf_to_cdr`, whose
   header is any object with `stamp.sec`, `stamp.nanosec` and `frame_id`);
 - `hri`: the ROS4HRI (REP 155) body messages' bytes (`ids_list_to_cdr`, `skeleton2d_to_cdr`,
@@ -24,8 +25,10 @@ stamp from nanoseconds) are built in `nodes/convert.py`: they need rclpy's messa
 """
 
 from pose4d_ros.wire.cdr import (
+    CdrImage,
     HeaderLike,
     cdr_header,
+    image_from_cdr,
     image_to_cdr,
     joint_frame,
     joints_from_cdr,
@@ -49,9 +52,10 @@ from pose4d_ros.wire.msgs import (
 )
 from pose4d_ros.wire.pixels import ENCODINGS, as_encoding, decode
 
-__all__ = ['ENCODINGS', 'as_encoding', 'cdr_header', 'color_from_compressed', 'color_from_msg',
-           'decode', 'depth_from_compressed', 'depth_from_msg', 'HeaderLike', 'ids_list_to_cdr',
-           'image_to_array', 'image_to_cdr', 'intrinsics_from_msg', 'is_compressed_depth',
-           'joint_frame', 'joints_from_cdr', 'joints_from_msg', 'joints_to_cdr', 'roi_to_cdr',
-           'skeleton2d_to_cdr', 'skeletons_from_cdr', 'skeletons_from_msg', 'skeletons_to_cdr',
-           'stamp_to_ns', 'tf_to_cdr']
+__all__ = ['CdrImage', 'ENCODINGS', 'as_encoding', 'cdr_header', 'color_from_compressed',
+           'color_from_msg', 'decode', 'depth_from_compressed', 'depth_from_msg', 'HeaderLike',
+           'ids_list_to_cdr', 'image_from_cdr', 'image_to_array', 'image_to_cdr',
+           'intrinsics_from_msg', 'is_compressed_depth', 'joint_frame', 'joints_from_cdr',
+           'joints_from_msg', 'joints_to_cdr', 'roi_to_cdr', 'skeleton2d_to_cdr',
+           'skeletons_from_cdr', 'skeletons_from_msg', 'skeletons_to_cdr', 'stamp_to_ns',
+           'tf_to_cdr']

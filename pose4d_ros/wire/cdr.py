@@ -3,7 +3,8 @@
 side without a message object:
 
 - reading: `cdr_header` (a message that starts with a `std_msgs/Header`: its stamp, frame_id
-  and where its payload goes on), `joints_from_cdr` (`pose4d_msgs/JointArray` ->
+  and where its payload goes on), `image_from_cdr` (`sensor_msgs/Image`, its pixels left in
+  the bytes), `joints_from_cdr` (`pose4d_msgs/JointArray` ->
   `core.joints.JointSet`), `skeletons_from_cdr` (`pose4d_msgs/SkeletonArray` -> a tuple of
   them), as `msgs.joints_from_msg` and `msgs.skeletons_from_msg` read the message objects;
 - writing, for `Publisher.publish` (which takes the bytes as it takes a message): `joints_to_cdr`,
@@ -20,7 +21,8 @@ from __future__ import annotations
 
 import struct
 import sys
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
 from typing import Any, Protocol
 
 import numpy as np
@@ -83,6 +85,59 @@ def cdr_header(data: bytes) -> tuple[int, int, str, int]:
     sec, nanosec = CDR_TIME.unpack_from(buf, 0)
     frame_id, at = _string(buf, 8)
     return sec, nanosec, frame_id, at
+
+
+@dataclass(frozen=True)
+class CdrStamp:
+    sec: int
+    nanosec: int
+
+
+@dataclass(frozen=True)
+class CdrHeader:
+    """A `std_msgs/Header` read from bytes (what `HeaderLike` asks of one)."""
+    stamp: CdrStamp
+    frame_id: str
+
+
+@dataclass(frozen=True)
+class CdrImage:
+    """A serialised `sensor_msgs/Image` read in place (`image_from_cdr`): the fields
+    `msgs.image_to_array`, `color_from_msg` and `depth_from_msg` read, `data` a view of the
+    serialised bytes (no copy)."""
+    header: Any
+    height: int
+    width: int
+    encoding: str
+    is_bigendian: int
+    step: int
+    data: memoryview
+
+
+def image_from_cdr(data: bytes, header: Callable[[int, int, str], Any] | None = None
+                   ) -> CdrImage:
+    """A serialised `sensor_msgs/Image` (little-endian CDR) as a `CdrImage` whose pixels are
+    the bytes themselves: read into an array by `msgs.color_from_msg` / `depth_from_msg`, the
+    pixels are copied once (deserialising the message object first copies them twice and
+    builds the object). `header(sec, nanosec, frame_id)` makes its header (default
+    `CdrHeader`). ValueError for bytes that are not such an Image (other encapsulations
+    included: the caller deserialises those the general way)."""
+    sec, nanosec, frame_id, at = cdr_header(data)
+    buf = memoryview(data)[4:]
+    try:
+        at += -at % 4
+        height, width = _SIZE.unpack_from(buf, at)
+        encoding, at = _string(buf, at + 8)
+        is_bigendian = buf[at]
+        at += 1 + (-(at + 1) % 4)
+        step, n = _SIZE.unpack_from(buf, at)
+    except (struct.error, IndexError) as exc:
+        raise ValueError(f'{len(data)} bytes too short for an Image') from exc
+    at += 8
+    if at + n > len(buf):
+        raise ValueError(f'Image data of {n} bytes announced, {len(buf) - at} there')
+    made = (header or (lambda s, ns, f: CdrHeader(CdrStamp(s, ns), f)))(sec, nanosec, frame_id)
+    return CdrImage(made, height, width, encoding, is_bigendian, step, buf[at:at + n])
 
 
 def _joints_at(buf: memoryview, at: int) -> tuple[JointSet, int]:
