@@ -31,9 +31,9 @@ AUTOSTART = Param(
 
 
 class _Made:
-    """What a node had before a lifecycle step (its attributes, publishers, subscriptions,
-    timers and frame queues), to undo what the step made, and whatever was made after it
-    (a `SubscribedWhile`'s subscription)."""
+    """What a node had before a lifecycle step (its attributes, publishers, subscriptions and
+    timers), to undo what the step made and whatever was made after it (a `SubscribedWhile`'s
+    subscription, a REP 155 body's publishers)."""
 
     def __init__(self, node: Node) -> None:
         self.attributes = set(node.__dict__)
@@ -43,9 +43,9 @@ class _Made:
 
     def undo(self, node: Node, *, publishers: bool = True) -> None:
         """Destroy what was made since: timers first (no `SubscribedWhile` subscribes again),
-        then subscriptions (no message is taken any more), then the frame queues (each
-        finishes the frame in hand), then (with `publishers`) the publishers; forget the
-        attributes set since."""
+        then subscriptions (no message is taken any more), then close the node's frame queues
+        (each finishes the frame in hand), then (with `publishers`) destroy the publishers;
+        forget the attributes set since."""
         for timer in [t for t in node.timers if t not in self.timers]:
             node.destroy_timer(timer)
         for sub in [s for s in node.subscriptions if s not in self.subscriptions]:
