@@ -271,6 +271,8 @@ class Target:
         self.pubs = {k: ros.node.create_publisher(t, topic, q)
                      for k, (t, topic, q) in self.topics.items()}
         self.answers = ros.collect(self.out_type, self.out_topic, qos.OUTPUT_QOS)
+        if name == 'foreground':  # it reads the colour only for its masked colour's readers
+            ros.collect(Image, 'pose4d/foreground/color', qos.OUTPUT_QOS)
 
         def valid(header) -> dict[str, object]:
             msgs = {}
