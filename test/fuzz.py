@@ -363,9 +363,13 @@ def fuzz_node(name: str, n: int, log_dir: Path, *, seed: int = 0,
 
         def launch():
             started = start(name, {}, log_dir=log_dir)
-            for pub in target.pubs.values():
-                ros.wait_for_subscribers(pub, timeout=60.0)
-            ros.wait_for_publishers(target.out_topic, timeout=60.0)
+            try:
+                for pub in target.pubs.values():
+                    ros.wait_for_subscribers(pub, timeout=60.0)
+                ros.wait_for_publishers(target.out_topic, timeout=60.0)
+            except AssertionError:
+                started.kill()  # never left running: the caller has no handle on it yet
+                raise
             return started
 
         def answered(header) -> bool:

@@ -162,12 +162,42 @@ class RosPeer:
             parameters=[Parameter(k, value=v).to_parameter_msg() for k, v in values.items()])
         return self.call(SetParameters, f'/{node}/set_parameters', request, timeout).results
 
+    def lifecycle_get(self, node: str, timeout: float = 10.0) -> str:
+        """The node's lifecycle state, as `ros2 lifecycle get <node>` asks it (its get_state
+        service): 'unconfigured', 'inactive', 'active' or 'finalized'."""
+        from lifecycle_msgs.srv import GetState
+
+        return self.call(GetState, f'/{node}/get_state', GetState.Request(),
+                         timeout).current_state.label
+
+    def lifecycle_set(self, node: str, transition: str, timeout: float = 60.0) -> bool:
+        """`ros2 lifecycle set <node> <transition>` ('configure', 'activate', 'deactivate',
+        'cleanup', 'shutdown'): as ros2lifecycle does, the label is looked up among the
+        node's available transitions (False, as its 'Unknown transition requested', when it
+        is not one of them), then requested by change_state; whether it succeeded."""
+        from lifecycle_msgs.srv import ChangeState, GetAvailableTransitions
+
+        available = self.call(GetAvailableTransitions, f'/{node}/get_available_transitions',
+                              GetAvailableTransitions.Request()).available_transitions
+        # 'shutdown' is one label for three transitions, one from each primary state
+        match = [t.transition for t in available if t.transition.label == transition]
+        if not match:
+            return False
+        return self.call(ChangeState, f'/{node}/change_state',
+                         ChangeState.Request(transition=match[0]), timeout).success
+
     def close(self) -> None:
         import rclpy
 
         self.executor.shutdown()
         self.node.destroy_node()
         rclpy.try_shutdown(context=self.context)
+
+
+def cpu_seconds(pid: int) -> float:
+    """The CPU time (user + system, every thread) that process `pid` has used so far."""
+    fields = Path(f'/proc/{pid}/stat').read_text().rpartition(')')[2].split()
+    return (int(fields[11]) + int(fields[12])) / os.sysconf('SC_CLK_TCK')
 
 
 def check_tf(skeletons: list, tf_messages: list, prefix: str = 'pose4d') -> int:

@@ -29,7 +29,8 @@ def test_set_parameters_through_the_service_take_effect_on_the_next_frame(ros, t
     from pose4d_ros.nodes.convert import intrinsics_to_msg
     from pose4d_ros.wire import stamp_to_ns
 
-    node = start('ik', {'ik.use_depth': False}, log_dir=tmp_path)
+    # hri.publish off: the REP 155 body frames go on /tf whatever tf.publish says
+    node = start('ik', {'ik.use_depth': False, 'hri.publish': False}, log_dir=tmp_path)
     try:
         info = ros.node.create_publisher(CameraInfo, 'camera/color/camera_info', qos.OUTPUT_QOS)
         pub = ros.node.create_publisher(JointArray, 'pose4d/parts/tracked', qos.OUTPUT_QOS)

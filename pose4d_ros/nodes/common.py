@@ -1,4 +1,5 @@
-"""What every pose4d node shares: its `main()`, throttled error counting, and diagnostics.
+"""What every pose4d node shares: its `main()`, throttled error counting, and diagnostics
+(and, in `nodes.lifecycle`, the managed node that each stage node is).
 
 Each stage publishes a `diagnostic_msgs/DiagnosticArray` on `/diagnostics` once a second (the
 diagnostics aggregator listens on that absolute name): frames in and out, rate, processing
@@ -107,8 +108,9 @@ def spin(node: Node) -> None:
     """Serve the node's callbacks until the context shuts down (Ctrl-C, SIGTERM)."""
     ex = executor(node)
     try:
-        # the events executor's spin() does not return on shutdown (rclpy 7.1.6): poll
-        while rclpy.ok(context=node.context):
+        # the events executor's spin() does not return on shutdown (rclpy 7.1.6): poll; a
+        # managed node whose lifecycle was shut down (finalized) has nothing left to serve
+        while rclpy.ok(context=node.context) and not getattr(node, 'finalized', False):
             ex.spin_once(timeout_sec=0.2)
     finally:
         ex.shutdown()
@@ -133,6 +135,8 @@ def run(factory: Callable[[], Node], args: list[str] | None = None,
     code = 0
     try:
         node = factory()
+        if getattr(node, 'autostart', False):
+            node.start()  # a managed node as a plain one: configured and active
         # what start-up made (modules, kernels, the model: some 150,000 objects) is kept out of
         # the collector's passes: a full collection walking it took 64 ms, two frames at 30
         # fps, whenever enough objects had survived since the last one
@@ -156,7 +160,7 @@ def run(factory: Callable[[], Node], args: list[str] | None = None,
         code = 1
     finally:
         if node is not None:
-            for queue in node.__dict__.get('frame_queues', []):
+            for queue in list(node.__dict__.get('frame_queues', [])):
                 queue.close()
             close = getattr(node, 'close', None)
             if close is not None:
@@ -385,8 +389,9 @@ class FrameQueue:
         self._profiled = _Profiled(node.get_name(), f'{monitor.stage} frames')
         self._worker = threading.Thread(target=self._work, name=f'{monitor.stage} frames',
                                         daemon=True)
-        # the node's queues, for `run` to close
-        node.__dict__.setdefault('frame_queues', []).append(self)
+        # the node's queues, for `run` (and a lifecycle deactivation) to close
+        self._queues = node.__dict__.setdefault('frame_queues', [])
+        self._queues.append(self)
         self._worker.start()
 
     def submit(self, item: object) -> None:
@@ -403,6 +408,8 @@ class FrameQueue:
             self._closed = True
             self._ready.notify()
         self._worker.join(timeout=10.0)
+        if self in self._queues:
+            self._queues.remove(self)
 
     def _work(self) -> None:
         with self._profiled:

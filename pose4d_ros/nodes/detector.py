@@ -30,7 +30,7 @@ Parameters (config/detector.yaml)
     detector.scale_warm_up_frames, detector.scale_probe_every, detector.min_confidence,
     detector.max_people, detector.quiet_frames, detector.keep_unseen_s, detector.arm_prior,
     detector.occluded_quantile, detector.colour_net, detector.colour_net_weight,
-    detector.colour_hog_weight
+    detector.colour_hog_weight, lifecycle.autostart (`nodes.lifecycle`: a managed node)
     (a part's depth look-up is the model's: `core.lifting.lift_parts`)
 """
 
@@ -42,7 +42,6 @@ from typing import Any
 
 import numpy as np
 from pose4d_msgs.msg import JointArray, SkeletonArray
-from rclpy.node import Node
 from sensor_msgs.msg import Image
 
 from pose4d_ros.core.camera import cad60_intrinsics
@@ -63,7 +62,8 @@ from pose4d_ros.nodes.common import (
     StageMonitor,
     run,
 )
-from pose4d_ros.nodes.params import NodeParams, Param, ParameterError
+from pose4d_ros.nodes.lifecycle import AUTOSTART, ManagedNode
+from pose4d_ros.nodes.params import Param, ParameterError
 from pose4d_ros.wire import (
     color_from_msg,
     depth_from_msg,
@@ -159,6 +159,7 @@ PARAMS = (
           "person's own pixels, so a hidden part may lie behind the nearer person instead of "
           'the whole pose being pulled onto the visible half; 0 = off.', range=(0.0, 1.0),
           live=True),
+    AUTOSTART,
 )
 
 
@@ -203,13 +204,13 @@ def people_config(p: dict[str, Any]) -> TrackingConfig:
                           detector_keep_s=p['detector.keep_unseen_s'])
 
 
-class DetectorNode(Node):
+class DetectorNode(ManagedNode):
     """Detects every person's parts; see the module docstring."""
 
     def __init__(self) -> None:
-        super().__init__('detector')
-        self.params = NodeParams(self, PARAMS, check=detector_settings)
-        p = self.params.values
+        super().__init__('detector', PARAMS, check=detector_settings)
+
+    def configure(self, p: dict[str, Any]) -> None:
         self.template = detector_stage(p)
         self.template.warm_up(cad60_intrinsics())  # compile before the first camera frame
         self.people = PeopleDetector(self.template, people_config(p))
@@ -221,10 +222,12 @@ class DetectorNode(Node):
         self.people.reset()
         self.monitor = StageMonitor(self, 'detector')
         self.monitor.values.update(people=0, people_over_limit=0)
-        self.camera = LatestIntrinsics(self, self.monitor)
         self.pub_people = self.create_publisher(SkeletonArray, 'pose4d/parts/people',
                                                 qos.OUTPUT_QOS)
         self.pub = self.create_publisher(JointArray, 'pose4d/parts', qos.OUTPUT_QOS)
+
+    def activate(self, p: dict[str, Any]) -> None:
+        self.camera = LatestIntrinsics(self, self.monitor)
         # the camera's colour, masked here person by person (`PeopleDetector`): the
         # foreground publishes its mask and depth, not a masked copy of the colour image
         self.inputs = PairedInputs(

@@ -29,7 +29,8 @@ Publications (all with the colour image's header)
 Parameters (config/foreground.yaml)
     foreground.max_region_area_px, foreground.mser_delta, foreground.mser_max_variation,
     foreground.depth_near_m, foreground.depth_far_m, foreground.floor_remove,
-    foreground.temporal, foreground.slop_s, foreground.publish_cloud, foreground.cloud_step
+    foreground.temporal, foreground.slop_s, foreground.publish_cloud, foreground.cloud_step,
+    lifecycle.autostart (`nodes.lifecycle`: a managed node)
 """
 
 from __future__ import annotations
@@ -40,7 +41,6 @@ from dataclasses import replace
 from typing import Any
 
 import numpy as np
-from rclpy.node import Node
 from sensor_msgs.msg import CameraInfo, Image, PointCloud2
 from std_msgs.msg import Header
 
@@ -49,9 +49,15 @@ from pose4d_ros.core.foreground import ForegroundConfig
 from pose4d_ros.core.people import people_labels
 from pose4d_ros.core.stages import ForegroundStage
 from pose4d_ros.nodes import qos
-from pose4d_ros.nodes.common import PairedInputs, RecentImages, StageMonitor, run
+from pose4d_ros.nodes.common import (
+    PairedInputs,
+    RecentImages,
+    StageMonitor,
+    run,
+)
 from pose4d_ros.nodes.convert import cloud_to_msg
-from pose4d_ros.nodes.params import NodeParams, Param
+from pose4d_ros.nodes.lifecycle import AUTOSTART, ManagedNode
+from pose4d_ros.nodes.params import Param
 from pose4d_ros.wire import (
     color_from_msg,
     depth_from_msg,
@@ -88,6 +94,7 @@ PARAMS = (
           restart='it decides at start-up whether the cloud has a publisher'),
     Param('foreground.cloud_step', 2, 'Pixel stride of the point cloud.', range=(1, 16),
           live=True),
+    AUTOSTART,
 )
 
 
@@ -137,13 +144,13 @@ def publish_images(pubs: dict[str, Any], labels: Callable[[], np.ndarray],
             pub.publish(image_to_cdr(depth_to_millimetres(depth_m), '16UC1', header))
 
 
-class ForegroundNode(Node):
+class ForegroundNode(ManagedNode):
     """Masks the person in each RGB-D frame; see the module docstring."""
 
     def __init__(self) -> None:
-        super().__init__('foreground')
-        self.params = NodeParams(self, PARAMS, check=foreground_settings)
-        p = self.params.values
+        super().__init__('foreground', PARAMS, check=foreground_settings)
+
+    def configure(self, p: dict[str, Any]) -> None:
         self.stage = foreground_stage(p)
         self.publish_cloud = p['foreground.publish_cloud']
         self.cloud_step = p['foreground.cloud_step']
@@ -154,6 +161,8 @@ class ForegroundNode(Node):
                      for name in ('mask', 'color', 'depth')}
         self.pub_cloud = (self.create_publisher(PointCloud2, 'pose4d/foreground/points',
                                                 qos.OUTPUT_QOS) if self.publish_cloud else None)
+
+    def activate(self, p: dict[str, Any]) -> None:
         slop_ns = int(p['foreground.slop_s'] * 1e9)
         self.inputs = PairedInputs(self, DEPTH_TOPICS, self.process, self.monitor,
                                    slop_ns=slop_ns)

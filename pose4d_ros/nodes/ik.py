@@ -32,7 +32,8 @@ Publications
 Parameters (config/ik.yaml)
     ik.use_depth, ik.method, ik.learn_lengths, ik.upper_arm_length_m, ik.forearm_length_m,
     ik.thigh_length_m, ik.shin_length_m, ik.depth_slop_s, ik.marker_lifetime_s, tf.publish,
-    tf.prefix, hri.publish, hri.body_id_prefix, hri.forget_after_s
+    tf.prefix, hri.publish, hri.body_id_prefix, hri.forget_after_s, lifecycle.autostart
+    (`nodes.lifecycle`: a managed node)
 """
 
 from __future__ import annotations
@@ -54,9 +55,15 @@ from pose4d_ros.core.people import PeopleIk
 from pose4d_ros.core.skeleton import SKELETON_14, limb_bones
 from pose4d_ros.core.stages import IkStage
 from pose4d_ros.nodes import hri, qos
-from pose4d_ros.nodes.common import LatestIntrinsics, PeopleInputs, StageMonitor, run
+from pose4d_ros.nodes.common import (
+    LatestIntrinsics,
+    PeopleInputs,
+    StageMonitor,
+    run,
+)
 from pose4d_ros.nodes.convert import people_markers, skeleton_markers
-from pose4d_ros.nodes.params import NodeParams, Param
+from pose4d_ros.nodes.lifecycle import AUTOSTART, ManagedNode
+from pose4d_ros.nodes.params import Param
 from pose4d_ros.wire import depth_from_msg, joints_to_cdr, skeletons_to_cdr, stamp_to_ns, tf_to_cdr
 
 
@@ -93,6 +100,7 @@ PARAMS = (
     Param('tf.prefix', 'pose4d', 'First part of the joints\' TF frame names, '
           '<prefix>/<track_id>/<joint>.', check=_frame_prefix, live=True),
     *hri.PARAMS,
+    AUTOSTART,
 )
 
 
@@ -158,21 +166,23 @@ class SkeletonOutputs:
                 self.tf.publish(frames)
 
 
-class IkNode(Node):
+class IkNode(ManagedNode):
     """Completes every person's tracked parts to a 14-joint skeleton; see the module
     docstring."""
 
     def __init__(self) -> None:
-        super().__init__('ik')
-        self.params = NodeParams(self, PARAMS, check=ik_settings)
-        p = self.params.values
+        super().__init__('ik', PARAMS, check=ik_settings)
+
+    def configure(self, p: dict[str, Any]) -> None:
         self.template = ik_stage(p)
         self.template.warm_up(cad60_intrinsics())  # compile before the first frame
         self.people = PeopleIk(self.template)
         self.monitor = StageMonitor(self, 'ik')
         self.monitor.values['people'] = 0
-        self.camera = LatestIntrinsics(self, self.monitor)
         self.outputs = SkeletonOutputs(self, p)
+
+    def activate(self, p: dict[str, Any]) -> None:
+        self.camera = LatestIntrinsics(self, self.monitor)
         depth = ([(Image, 'pose4d/foreground/depth', qos.SENSOR_QOS)]
                  if self.template.use_depth else [])
         self.inputs = PeopleInputs(self, 'pose4d/parts/tracked/people', 'pose4d/parts/tracked',

@@ -20,7 +20,8 @@ Publications (all with the colour image's header)
     pose4d/foreground/{mask,color,depth} (if pipeline.publish_foreground; while subscribed),
     /diagnostics
 Parameters (config/pipeline.yaml)
-    those of the foreground, detector, tracker and ik nodes, and pipeline.publish_foreground
+    those of the foreground, detector, tracker and ik nodes, pipeline.publish_foreground and
+    lifecycle.autostart (`nodes.lifecycle`: a managed node)
 """
 
 from __future__ import annotations
@@ -29,7 +30,6 @@ import time
 from typing import Any
 
 from pose4d_msgs.msg import JointArray
-from rclpy.node import Node
 from sensor_msgs.msg import Image
 
 from pose4d_ros.core.camera import cad60_intrinsics
@@ -37,7 +37,8 @@ from pose4d_ros.core.people import people_labels
 from pose4d_ros.core.pipeline import FramePipeline
 from pose4d_ros.nodes import detector, foreground, ik, qos, tracker
 from pose4d_ros.nodes.common import PairedInputs, StageMonitor, run
-from pose4d_ros.nodes.params import NodeParams, Param
+from pose4d_ros.nodes.lifecycle import AUTOSTART, ManagedNode
+from pose4d_ros.nodes.params import Param
 from pose4d_ros.wire import (
     color_from_msg,
     depth_from_msg,
@@ -47,10 +48,12 @@ from pose4d_ros.wire import (
 )
 
 PARAMS = (
-    *foreground.PARAMS, *detector.PARAMS, *tracker.PARAMS, *ik.PARAMS,
+    *(p for stage in (foreground, detector, tracker, ik) for p in stage.PARAMS
+      if p is not AUTOSTART),
     Param('pipeline.publish_foreground', True, 'Also publish the foreground mask and the '
           'masked colour and depth images.',
           restart='it decides at start-up whether the foreground images have publishers'),
+    AUTOSTART,
 )
 
 
@@ -60,13 +63,13 @@ def _settings(p: dict[str, Any]) -> tuple:
             tracker.tracker_settings(p), ik.ik_settings(p))
 
 
-class PipelineNode(Node):
+class PipelineNode(ManagedNode):
     """All stages on each RGB-D frame; see the module docstring."""
 
     def __init__(self) -> None:
-        super().__init__('pipeline')
-        self.params = NodeParams(self, PARAMS, check=_settings)
-        p = self.params.values
+        super().__init__('pipeline', PARAMS, check=_settings)
+
+    def configure(self, p: dict[str, Any]) -> None:
         self.pipeline = FramePipeline(
             detector.detector_stage(p), foreground=foreground.foreground_stage(p),
             tracker=tracker.tracker_stage(p), ik=ik.ik_stage(p),
@@ -85,6 +88,8 @@ class PipelineNode(Node):
         if self.publish_foreground:
             for name in ('mask', 'color', 'depth'):
                 self.pubs[name] = pub(Image, f'pose4d/foreground/{name}', qos.OUTPUT_QOS)
+
+    def activate(self, p: dict[str, Any]) -> None:
         self.inputs = PairedInputs(self, foreground.CAMERA_TOPICS, self.process, self.monitor,
                                    slop_ns=int(p['foreground.slop_s'] * 1e9))
         self.get_logger().info(
@@ -92,7 +97,7 @@ class PipelineNode(Node):
             f'{self.resolve_topic_name("pose4d/skeleton")} (model {p["detector.model"]}, '
             f'tracker {p["tracker.kind"]}, IK {p["ik.method"]}, depth {p["ik.use_depth"]})')
 
-    def configure(self, p: dict[str, Any]) -> None:
+    def reconfigure(self, p: dict[str, Any]) -> None:
         """The live parameters' new values, between two frames."""
         self.pipeline.configure(foreground=foreground.foreground_settings(p),
                                 detector=detector.detector_settings(p),
@@ -102,7 +107,7 @@ class PipelineNode(Node):
 
     def process(self, items: Any) -> None:
         if (p := self.params.changes()) is not None:
-            self.configure(p)
+            self.reconfigure(p)
         color_msg, depth_msg, info_msg = items
         t0 = time.perf_counter()
         stamp = stamp_to_ns(color_msg.header.stamp)

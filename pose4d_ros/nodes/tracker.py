@@ -27,7 +27,8 @@ Parameters (config/tracker.yaml)
     tracker.kind, tracker.coupling, tracker.process_noise, tracker.measurement_noise_px,
     tracker.gate_chi2, tracker.max_missed_frames, tracker.max_dt_s, tracker.depth_std_m,
     tracker.confirm_frames, tracker.max_unseen_s, tracker.max_hidden_s, tracker.max_held_s,
-    tracker.free_space_m, tracker.depth_slop_s
+    tracker.free_space_m, tracker.depth_slop_s, lifecycle.autostart (`nodes.lifecycle`: a
+    managed node)
 """
 
 from __future__ import annotations
@@ -37,7 +38,6 @@ import time
 from typing import Any
 
 from pose4d_msgs.msg import JointArray, SkeletonArray
-from rclpy.node import Node
 
 from pose4d_ros.core.camera import cad60_intrinsics
 from pose4d_ros.core.joints import JointSet
@@ -52,7 +52,8 @@ from pose4d_ros.nodes.common import (
     StageMonitor,
     run,
 )
-from pose4d_ros.nodes.params import NodeParams, Param
+from pose4d_ros.nodes.lifecycle import AUTOSTART, ManagedNode
+from pose4d_ros.nodes.params import Param
 from pose4d_ros.wire import depth_from_msg, joints_to_cdr, skeletons_to_cdr, stamp_to_ns
 
 _D = SlqeConfig()
@@ -98,6 +99,7 @@ PARAMS = (
     Param('tracker.depth_std_m', TrackerStage.DEPTH_STD_M,
           "Standard deviation of a tracked part's depth in its "
           'covariance, metres.', range=(0.0, 10.0), live=True),
+    AUTOSTART,
 )
 
 
@@ -135,22 +137,24 @@ def people_config(p: dict[str, Any]) -> TrackingConfig:
                           free_space_m=p['tracker.free_space_m'])
 
 
-class TrackerNode(Node):
+class TrackerNode(ManagedNode):
     """Tracks the parts of every person; see the module docstring."""
 
     def __init__(self) -> None:
-        super().__init__('tracker')
-        self.params = NodeParams(self, PARAMS, check=tracker_settings)
-        p = self.params.values
+        super().__init__('tracker', PARAMS, check=tracker_settings)
+
+    def configure(self, p: dict[str, Any]) -> None:
         self.template = tracker_stage(p)
         self.people = PeopleTracker(self.template, people_config(p))
         self.people.warm_up(cad60_intrinsics())
         self.monitor = StageMonitor(self, 'tracker')
         self.monitor.values.update(people=0, tracks_born=0, tracks_ended=0)
-        self.camera = LatestIntrinsics(self, self.monitor)
         self.pub_people = self.create_publisher(SkeletonArray, 'pose4d/parts/tracked/people',
                                                 qos.OUTPUT_QOS)
         self.pub = self.create_publisher(JointArray, 'pose4d/parts/tracked', qos.OUTPUT_QOS)
+
+    def activate(self, p: dict[str, Any]) -> None:
+        self.camera = LatestIntrinsics(self, self.monitor)
         self.depth = (RecentImages(self, self.monitor, 'camera/depth/image_raw',
                                    depth_from_msg, slop_ns=int(p['tracker.depth_slop_s'] * 1e9))
                       if p['tracker.free_space_m'] > 0 else None)
