@@ -113,6 +113,10 @@ def spin(node: Node) -> None:
         while rclpy.ok(context=node.context) and not getattr(node, 'finalized', False):
             ex.spin_once(timeout_sec=0.2)
     finally:
+        # the node out first: the events executor aborts the process when it is destroyed
+        # while the node's entities still hold its callbacks ("Destroying callback manager
+        # with callbacks remaining", rclpy 7.1.6; seen once at a node's stop in CI)
+        ex.remove_node(node)
         ex.shutdown()
 
 
