@@ -56,6 +56,16 @@ mkdir -p build && { cmake -S $(1) -B build/$(2) -DCMAKE_INSTALL_PREFIX=$(VENV) -
 	|| { tail -50 build/$(2).log; exit 1; }; }
 endef
 
+# A standard interface package the PyPI wheels lack, built from its definition in ros_wheels/
+# only where the environment has none of its own: $(call build_unless_present,NAME)
+define build_unless_present
+if $(PY) -c 'import $(1).msg' 2>/dev/null && test ! -d build/$(1); then \
+	echo '$(1): the environment has it'; \
+else \
+	$(call build_interfaces,ros_wheels/$(1),$(1)); \
+fi
+endef
+
 # 2. the pose4d_msgs interface package
 $(VENV)/.stamp-msgs: $(VENV)/.stamp-env $(MSG_SOURCES)
 	$(call build_interfaces,pose4d_msgs,pose4d_msgs)
@@ -64,21 +74,13 @@ $(VENV)/.stamp-msgs: $(VENV)/.stamp-env $(MSG_SOURCES)
 # 2b. tf2_msgs (TFMessage, what /tf carries): the PyPI wheels lack it, so it is built from its
 # standard definition (ros_wheels/tf2_msgs), but only where the environment has none of its own
 $(VENV)/.stamp-tf2: $(VENV)/.stamp-env $(TF2_SOURCES)
-	if $(PY) -c 'import tf2_msgs.msg' 2>/dev/null && test ! -d build/tf2_msgs; then \
-		echo 'tf2_msgs: the environment has it'; \
-	else \
-		$(call build_interfaces,ros_wheels/tf2_msgs,tf2_msgs); \
-	fi
+	$(call build_unless_present,tf2_msgs)
 	touch $@
 
 # 2c. hri_msgs (ROS4HRI, REP 155: what /humans/bodies/... carry), likewise: the four body
 # messages we publish, built from hri_msgs' definitions only where the environment has none
 $(VENV)/.stamp-hri: $(VENV)/.stamp-env $(HRI_SOURCES)
-	if $(PY) -c 'import hri_msgs.msg' 2>/dev/null && test ! -d build/hri_msgs; then \
-		echo 'hri_msgs: the environment has it'; \
-	else \
-		$(call build_interfaces,ros_wheels/hri_msgs,hri_msgs); \
-	fi
+	$(call build_unless_present,hri_msgs)
 	touch $@
 
 # 3. pose4d_ros itself, with its executables where `ros2 run` looks (<prefix>/lib/pose4d_ros)

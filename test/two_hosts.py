@@ -234,42 +234,19 @@ def probe_main(out: Path, ready: Path) -> int:
     /pose4d/skeleton reached it, and the stages' last /diagnostics; `ready` written once the
     pipeline's skeleton publisher is matched; the JSON written on SIGINT."""
     import rclpy
-    from diagnostic_msgs.msg import DiagnosticArray
-    from pose4d_msgs.msg import JointArray
-    from rclpy.qos import QoSProfile, ReliabilityPolicy
-    from sensor_msgs.msg import CameraInfo
 
-    from pose4d_ros.nodes import qos
-    from pose4d_ros.wire import stamp_to_ns
+    from pose4d_ros.graph.run import probe
 
     rclpy.init()
     node = rclpy.create_node('skeleton_consumer')
-    entered: dict[int, float] = {}
-    left: dict[int, float] = {}
-    skeleton = node.create_subscription(
-        JointArray, 'pose4d/skeleton',
-        lambda m: left.setdefault(stamp_to_ns(m.header.stamp), time.monotonic()),
-        qos.OUTPUT_QOS)
-    node.create_subscription(
-        CameraInfo, 'camera/color/camera_info',
-        lambda m: entered.setdefault(stamp_to_ns(m.header.stamp), time.monotonic()),
-        QoSProfile(depth=300, reliability=ReliabilityPolicy.BEST_EFFORT))
-    stages: dict[str, dict[str, str]] = {}
-
-    def on_diagnostics(msg: DiagnosticArray) -> None:
-        for status in msg.status:
-            if status.name.startswith('pose4d: '):
-                stages[status.name.removeprefix('pose4d: ')] = {
-                    kv.key: kv.value for kv in status.values}
-
-    node.create_subscription(DiagnosticArray, '/diagnostics', on_diagnostics, 100)
+    entered, left, stages = probe(node)
     stopping = []
     signal.signal(signal.SIGINT, lambda *_: stopping.append(1))
     signal.signal(signal.SIGTERM, lambda *_: stopping.append(1))
     try:
         while not stopping:
             rclpy.spin_once(node, timeout_sec=0.05)
-            if not ready.exists() and skeleton.get_publisher_count() > 0:
+            if not ready.exists() and node.count_publishers('/pose4d/skeleton') > 0:
                 ready.write_text('matched\n')
     finally:
         out.write_text(json.dumps({'entered': {str(k): v for k, v in entered.items()},

@@ -6,9 +6,10 @@ What is compared, each over every colour frame of the bag in its order:
   several-person path, every person region searched), a fresh pipeline like a node's after
   its start-up (compiled, nothing tracked yet): each stage's mean CPU ms a frame, and `total`;
 - `peer_ms_per_frame` (with a peer): the peer's mean CPU a frame (every process and thread of
-  it) plus `peer_decode_ms`, the CPU our detector node spends reading the bag's colour message
-  into an array (`deserialize_message` and `wire.color_from_msg`): what a node of the peer
-  would pay for its input too;
+  it) plus `peer_decode_ms`, the CPU of reading the bag's colour message into an array as a
+  node that takes `sensor_msgs/Image` messages does (`deserialize_message`, then
+  `wire.color_from_msg`): what a node of the peer would pay for its input too (ours read the
+  bytes in place, `nodes.common.image_of_bytes`, for less);
 - each graph run (`nodes`: one process per stage; `pipeline`: the one-process node): each
   process's CPU while the bag plays and drains, per frame; `stages_ms_per_frame`, the sum over
   the stage processes (the replay, recorder and load are not the graph's); `to_core` and
@@ -56,8 +57,8 @@ def core_cost(pipeline: FramePipeline, frames: Sequence[Frame]) -> dict[str, flo
 
 
 def colour_decode_ms(bag_path: Path) -> float:
-    """Mean CPU ms our detector node spends reading one of the bag's colour messages (its CDR
-    bytes as published) into an array."""
+    """Mean CPU ms of reading one of the bag's colour messages (its CDR bytes as published)
+    into an array through the message object, as a node taking `sensor_msgs/Image` does."""
     from rclpy.serialization import deserialize_message
     from sensor_msgs.msg import Image
 

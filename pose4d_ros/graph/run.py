@@ -166,11 +166,11 @@ class GraphRun:
         return (len(t) - 1) / (t[-1] - t[0]) if len(t) > 1 and t[-1] > t[0] else float('nan')
 
 
-def _probe(node: Any) -> tuple[dict[int, float], dict[int, float], dict[str, int]]:
-    """Subscribe `node` to what `run_graph` measures the graph by, filled as `node` spins:
-    {stamp: monotonic s} when each frame's colour camera_info reached this process (entered)
-    and when its skeleton did (left), and {stage: frames it dropped} from each stage's
-    /diagnostics."""
+def probe(node: Any) -> tuple[dict[int, float], dict[int, float], dict[str, dict[str, str]]]:
+    """Subscribe `node` to what a graph is measured by, filled as `node` spins: {stamp:
+    monotonic s} when each frame's colour camera_info reached this process (entered) and when
+    its skeleton did (left), and {stage: its last /diagnostics values} (`run_graph`, and the
+    two-host test's consumer)."""
     from diagnostic_msgs.msg import DiagnosticArray
     from pose4d_msgs.msg import JointArray
     from rclpy.qos import QoSProfile, ReliabilityPolicy
@@ -190,16 +190,16 @@ def _probe(node: Any) -> tuple[dict[int, float], dict[int, float], dict[str, int
         CameraInfo, 'camera/color/camera_info',
         lambda m: entered.setdefault(stamp_to_ns(m.header.stamp), time.monotonic()),
         QoSProfile(depth=300, reliability=ReliabilityPolicy.BEST_EFFORT))
-    dropped: dict[str, int] = {}
+    stages: dict[str, dict[str, str]] = {}
 
     def on_diagnostics(msg: DiagnosticArray) -> None:
         for status in msg.status:
             if status.name.startswith('pose4d: '):
-                values = {kv.key: kv.value for kv in status.values}
-                dropped[status.name.removeprefix('pose4d: ')] = int(values.get('dropped', 0))
+                stages[status.name.removeprefix('pose4d: ')] = {
+                    kv.key: kv.value for kv in status.values}
 
     node.create_subscription(DiagnosticArray, '/diagnostics', on_diagnostics, 100)
-    return entered, left, dropped
+    return entered, left, stages
 
 
 def run_graph(bag_path: Path, out: Path, *, rate: float = 1.0, model: str = 'rgbd_14',
@@ -223,7 +223,7 @@ def run_graph(bag_path: Path, out: Path, *, rate: float = 1.0, model: str = 'rgb
     graph = Graph(out)
     rclpy.init()
     node = rclpy.create_node('pose4d_demo')
-    entered, left, dropped = _probe(node)
+    entered, left, diagnostics = probe(node)
     ex = executor(node)
     stages = ('pipeline',) if pipeline else STAGES
     connections = PIPELINE_CONNECTIONS if pipeline else CONNECTIONS
@@ -278,7 +278,8 @@ def run_graph(bag_path: Path, out: Path, *, rate: float = 1.0, model: str = 'rgb
         rclpy.try_shutdown()
         codes = graph.stop()
     graph.raise_unless_clean(codes)
-    return GraphRun(recorded, frames, entered, left, dict(graph.logs), cpu, dict(dropped))
+    dropped = {stage: int(values.get('dropped', 0)) for stage, values in diagnostics.items()}
+    return GraphRun(recorded, frames, entered, left, dict(graph.logs), cpu, dropped)
 
 
 def tf_per_skeleton(recorded: Path, skeletons: dict[int, JointSet], *,
