@@ -6,6 +6,7 @@ is trained as (when PyTorch is installed) and the shipped model on real LSPET ph
 from __future__ import annotations
 
 import json
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -404,3 +405,47 @@ def test_train_convnet_adds_rendered_people_and_trains_in_bfloat16(tmp_path: Pat
     meta = cn.load_convnet(out).metadata
     assert meta['renders'] == {str(renders): 4} and meta['photographs'] == 8  # 2 x 4 / 2
     assert meta['precision'] == 'bf16' and meta['steps'] >= 1 and meta['cpu']
+
+
+def test_the_8_bit_twin_reads_photographs_as_the_float_graph_does(tmp_path: Path) -> None:
+    from pose4d_ros.cli.main import main
+
+    root = tiny_lspet(tmp_path / 'lspet', 24)
+    src, out = tmp_path / 'net.npz', tmp_path / 'net_int8.npz'
+    cn.save_convnet(random_net(input_px=64), src)
+    assert main(['quantize-convnet', str(src), str(root), '--range', '1-24',
+                 '--photographs', '12', '--out', str(out)]) == 0
+    net = cn.load_convnet(out)
+    assert net.quantized and net.precision == 'fp32'
+    assert net.metadata['quantized']['photographs'] == 12
+    assert net.metadata['quantized']['data'] == 'LSPET 1-24'
+    assert_array_equal(net.weights['stem'][0], cn.load_convnet(src).weights['stem'][0])
+    int8 = replace(net, precision='int8')
+    photo = np.random.default_rng(5).integers(0, 256, (80, 60, 3), dtype=np.uint8)
+    logp, m = net.heat_maps(photo)
+    logp8, m8 = int8.heat_maps(photo)
+    assert_array_equal(m, m8)
+    # the same distributions over the cells, not the same numbers: 8-bit activations
+    p, p8 = np.exp(logp), np.exp(logp8)
+    assert np.abs(p - p8).sum(axis=(1, 2)).max() < 0.5  # total variation x 2
+    assert not np.array_equal(logp, logp8)  # the twin, not the float graph, ran
+    # a network without a twin cannot run at int8, and says how to make one
+    with pytest.raises(ValueError, match='quantize-convnet'):
+        replace(cn.load_convnet(src), precision='int8')
+    with pytest.raises(ValueError, match='precision'):
+        replace(net, precision='int4')
+
+
+def test_the_shipped_network_s_8_bit_twin_places_what_the_float_graph_places(
+        shared_data: Path) -> None:
+    from pose4d_ros.datasets import lspet
+
+    net = cn.load_convnet(model_path('lspet_convnet'))
+    int8 = replace(net, precision='int8')
+    frames = list(lspet.read_frames(shared_data / 'lspet', 2501, 2520))
+    size = reference_size(np.array([f.truth.uv for f in frames]),
+                          np.array([f.truth.confidence > 0 for f in frames]))
+    moved = np.array([np.linalg.norm(net.detect(f.color)[0] - int8.detect(f.color)[0], axis=1)
+                      / s for f, s in zip(frames, size, strict=True)])
+    # most joints within a hundredth of the person's size; a few move to another peak
+    assert np.median(moved) < 0.01 and (moved < 0.05).mean() > 0.9

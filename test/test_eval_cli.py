@@ -53,8 +53,9 @@ def test_eval_writes_the_table_json(tiny_set: Path, tmp_path: Path, capsys) -> N
     save_model(random_model(PARTS_10, 'rgbd', 0), rgbd)
     save_model(random_model(PARTS_10, 'rgb', 1), rgb)
     out, plot = tmp_path / 'table.json', tmp_path / 'plots' / 'pck.png'
+    # random part models: the mechanics, without the photograph network in their unary
     code = pose4d_main(['eval', str(tiny_set), '--json', str(out), '--model', str(rgbd),
-                        '--model', str(rgb), '--plot', str(plot)])
+                        '--model', str(rgb), '--plot', str(plot), '--colour-net', 'none'])
     assert code == 0
     table = json.loads(out.read_text())
     assert table['frames'] == 8
@@ -217,11 +218,16 @@ def test_eval_on_an_lspet_layout_scores_elbows_and_knees(tmp_path: Path) -> None
     save_model(rgbd, tmp_path / 'both14.npz')
     save_model(colour, model)
     assert pose4d_main(['eval', str(root), '--range', '2-4', '--json', str(out),
-                        '--model', str(tmp_path / 'both14.npz'), '--model', str(model)]) == 0
+                        '--model', str(tmp_path / 'both14.npz'), '--model', str(model),
+                        '--colour-net', 'none']) == 0
     rows = json.loads(out.read_text())['rows']
     assert list(rows) == ['both14', 'rgb']
     for key in ('pck', 'pck@0.2', 'error_px'):
         assert rows['both14'][key] == rows['rgb'][key]
+    # by default, as the detector node, the photograph network joins the part model's unary
+    assert pose4d_main(['eval', str(root), '--range', '2-4', '--json', str(out),
+                        '--model', str(tmp_path / 'both14.npz')]) == 0
+    assert list(json.loads(out.read_text())['rows']) == ['both14+lspet_convnet']
 
 
 @pytest.mark.parametrize(('argv', 'message'), [
@@ -248,7 +254,7 @@ def test_eval_and_bench_with_the_peer_score_it_on_the_same_frames(tiny_set: Path
     save_model(random_model(PARTS_10, 'rgbd', 0), rgbd)
     out = tmp_path / 'table.json'
     assert pose4d_main(['eval', str(tiny_set), '--json', str(out), '--model', str(rgbd),
-                        '--peer', 'mediapipe']) == 0
+                        '--peer', 'mediapipe', '--colour-net', 'none']) == 0
     table = json.loads(out.read_text())
     assert table['frames'] == 8 and table['peer'] == 'fake 1.0'
     assert list(table['rows']) == ['rgbd', 'rgbd_t', 'rgbd_kf', 'rgbd_kf_ik', 'mediapipe']

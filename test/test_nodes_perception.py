@@ -128,8 +128,9 @@ def _camera_publishers(ros):
 
 
 @pytest.mark.parametrize('detector_params', [
-    {}, {'detector.colour_net': 'lspet_convnet', 'detector.colour_net_weight': 0.1}],
-    ids=['hog', 'colour_net'])
+    {}, {'detector.colour_net': ''},
+    {'detector.colour_net_precision': 'fp32', 'detector.colour_net_weight': 0.1}],
+    ids=['default', 'hog', 'colour_net_fp32'])
 def test_foreground_and_detector_nodes_find_the_parts(ros, frames, tmp_path, detector_params):
     from pose4d_msgs.msg import JointArray
     from std_msgs.msg import Header
@@ -157,8 +158,9 @@ def test_foreground_and_detector_nodes_find_the_parts(ros, frames, tmp_path, det
     finally:
         for node in nodes:
             assert node.stop() == 0, node.output()
-    # the network in the part model's colour unary is said at start-up
-    assert ('colour net lspet_convnet)' in nodes[1].output()) == bool(detector_params)
+    # the network in the part model's colour unary (by default) is said at start-up
+    assert ('colour net lspet_convnet)' in nodes[1].output()) == \
+        (detector_params.get('detector.colour_net') != '')
     answers = {m.header.stamp.nanosec: m for m in parts
                if np.isfinite(m.joints[head].position.z)}
     assert sorted(answers) == sorted(h.stamp.nanosec for h in headers)

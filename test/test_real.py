@@ -181,9 +181,9 @@ def test_eval_on_a_folder_without_labels_writes_people_and_drawings(tmp_path: Pa
     assert pose4d_main(['eval', str(root), '--json', str(out), '--fps', '10',
                         '--draw', str(tmp_path / 'draw')]) == 0
     result = json.loads(out.read_text())
-    row = result['real']['rgbd_14']
+    row = result['real']['rgbd_14+lspet_convnet']  # as the nodes run it: with the network
     assert result['frames'] == 3 and row['people_per_frame']['ours'] == 0.0  # a flat wall
-    assert len(list((tmp_path / 'draw' / 'rgbd_14').glob('*.jpg'))) == 3
+    assert len(list((tmp_path / 'draw' / 'rgbd_14+lspet_convnet').glob('*.jpg'))) == 3
 
 
 @pytest.mark.parametrize('folder', ['lab_walk', 'outdoor4', 'kinect2_masked'])
@@ -277,7 +277,7 @@ def test_a_cameras_recording_is_read_with_its_topics_picked(tmp_path: Path, ros1
     out = tmp_path / 'real.json'
     assert pose4d_main(['eval', str(path), '--json', str(out),
                         '--depth-topic', '/xtion/depth_registered/image_raw']) == 0
-    assert json.loads(out.read_text())['real']['rgbd_14']['frames'] == 3
+    assert json.loads(out.read_text())['real']['rgbd_14+lspet_convnet']['frames'] == 3
 
 
 def _compressed_bag(path: Path, ros1: bool, depth_format: str, n: int = 2) -> None:

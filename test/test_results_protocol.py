@@ -224,8 +224,10 @@ def test_the_colour_network_is_chosen_on_validation_and_reported_on_test(tmp_pat
     tests = next(j for j in r.JOBS if j.name == 'colour_net_test').commands(ctx)
     assert [c[2] for c in tests] == [f'data/synth/{s}' for s in ('test', 'test30', 'test30_msr')
                                      for _ in range(2)]
-    assert all(('unary.weight=2' in c) == ('--colour-net' in c) and '--peer' not in c
-               for c in tests) and sum('--colour-net' in c for c in tests) == 3
+    # each set with the network at the chosen weights, and without it ('none') in the run
+    assert all(('unary.weight=2' in c) == (c[c.index('--colour-net') + 1] == r.COLOUR_NET)
+               and '--peer' not in c for c in tests)
+    assert sum(c[c.index('--colour-net') + 1] == 'none' for c in tests) == 3
     (results_jobs.RESULTS / 'colour_net.json').write_text(json.dumps({**v, 'chosen': 'none'}))
     assert len(next(j for j in r.JOBS if j.name == 'lspet').commands(ctx)) == 1
     assert next(j for j in r.JOBS if j.name == 'colour_net_test').commands(ctx) == []

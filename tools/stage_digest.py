@@ -27,8 +27,8 @@ from pose4d_ros.core.people import TrackingConfig
 from pose4d_ros.core.pipeline import FramePipeline
 from pose4d_ros.core.stages import DetectorStage
 from pose4d_ros.datasets.sources import load_frames
-from pose4d_ros.evaluation.tables import default_models
-from pose4d_ros.models import model_path
+from pose4d_ros.evaluation.tables import colour_unary, default_models
+from pose4d_ros.models import DEFAULT_COLOUR_NET, model_path
 
 
 def _feed(h: hashlib._Hash, value: object) -> None:
@@ -51,14 +51,18 @@ def main() -> int:
     p = argparse.ArgumentParser(description=__doc__.split('\n\n')[0])
     p.add_argument('sources', nargs='+', metavar='SOURCE[:FRAMES[:people]]')
     p.add_argument('--model', default=None, help='part model (the CAD-60 default)')
+    p.add_argument('--colour-net', default=DEFAULT_COLOUR_NET,
+                   help="the photograph network in the colour unary, as the detector node runs "
+                        "it by default ('none': off)")
     args = p.parse_args()
     model = load_model(model_path(args.model or default_models('cad60')[0]))
+    unary = colour_unary(args.colour_net)
     total = hashlib.sha256()
     for spec in args.sources:
         source, frames, people = (spec.split(':') + ['', ''])[:3]
         frames = load_frames([source], max_frames=int(frames) if frames else None,
                              labelled=False)
-        pipeline = FramePipeline(DetectorStage(model),
+        pipeline = FramePipeline(DetectorStage(model, unary=unary),
                                  people=TrackingConfig() if people == 'people' else None)
         h = hashlib.sha256()
         for f in frames:

@@ -54,14 +54,15 @@ import os
 from pathlib import Path
 
 from pose4d_ros.cli._args import factor_list, load_list
+from pose4d_ros.core.convnet import PRECISIONS
 from pose4d_ros.core.dpm.infer import SearchConfig
 from pose4d_ros.core.dpm.model import load_model
 from pose4d_ros.core.dpm.scale import ScaleConfig
 from pose4d_ros.core.files import write_json
 from pose4d_ros.core.threads import set_blas_threads
 from pose4d_ros.datasets.sources import load_frames, source_kind
-from pose4d_ros.evaluation.tables import default_models
-from pose4d_ros.models import model_path
+from pose4d_ros.evaluation.tables import colour_unary, default_models
+from pose4d_ros.models import DEFAULT_COLOUR_NET, DEFAULT_NET_PRECISION, model_path
 from pose4d_ros.peer import PEERS, make_peer
 from pose4d_ros.util.machine import machine
 from pose4d_ros.util.stats import ms_stats
@@ -84,9 +85,12 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument('--person-scales', type=factor_list, default=ScaleConfig.factors,
                    metavar='F,F,...', help="factors on the depth-predicted person scale, one "
                    'chosen per track (core.dpm.scale); 1 = the predicted scale only')
-    p.add_argument('--colour-net', metavar='NETWORK',
+    p.add_argument('--colour-net', metavar='NETWORK', default=DEFAULT_COLOUR_NET,
                    help="the photograph network in the part model's colour unary (the detector "
-                        "node's detector.colour_net, its default weights), timed in the detector")
+                        "node's detector.colour_net, its default weights), timed in the "
+                        "detector; 'none': the part model's HOG filters alone")
+    p.add_argument('--net-precision', choices=PRECISIONS, default=DEFAULT_NET_PRECISION,
+                   help="the network's arithmetic (detector.colour_net_precision)")
     p.add_argument('--blas-threads', type=int, default=1, help='OpenBLAS threads')
     p.add_argument('--people', choices=('auto', 'one', 'several'), default='auto',
                    help='track one person (the paper) or several (core.people); auto: several '
@@ -129,12 +133,7 @@ def run(args: argparse.Namespace) -> int:
     # the stages time a part model; the photograph network's CPU per photo is `eval`'s cpu_ms
     model = load_model(model_path(args.model or ('lspet_rgb_14' if kind == 'lspet'
                                                  else default_models(kind)[0])))
-    unary = None
-    if args.colour_net:
-        from pose4d_ros.core.convnet import load_convnet
-        from pose4d_ros.core.dpm.net_unary import NetUnary
-
-        unary = NetUnary(load_convnet(model_path(args.colour_net)))
+    unary = colour_unary(args.colour_net, args.net_precision)
     peer = make_peer(args.peer) if args.peer else None  # without its venv, stop before any work
     try:
         frames = load_frames([args.source], frame_range=args.frame_range,

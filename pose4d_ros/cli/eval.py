@@ -35,10 +35,12 @@ cad60-to-bag`) or an LSPET root (with --range). Every row runs the live pipeline
   photographs gives one row named after it: its colour channel alone
   (`core.dpm.model.colour_channel`: the depth half of every filter dropped, the search without
   depth over its training people's scales), the real-appearance test of the nodes' detector.
-- `--colour-net NETWORK`: every part model's colour unary also takes the photograph network's
-  heat maps (`core.dpm.net_unary`, the detector node's `detector.colour_net`), weighted by
-  `--config unary.weight=W` and `unary.hog_weight=H`; an RGB-D model's row on photographs is
-  then `<model>+<network>`.
+- `--colour-net NETWORK` (default `lspet_convnet`, as the detector node runs; `none`: off):
+  every part model's colour unary also takes the photograph network's heat maps
+  (`core.dpm.net_unary`, the detector node's `detector.colour_net`), weighted by `--config
+  unary.weight=W` and `unary.hog_weight=H`; an RGB-D model's row on photographs is then
+  `<model>+<network>`. `--net-precision` (default int8, as the node) runs the networks'
+  8-bit twins (`pose4d quantize-convnet`) or their float graphs.
 
 Default models: the shipped `rgbd_14` (what the nodes run) and `rgb_10` for a CAD-60 set,
 `lspet_convnet` for LSPET; `--model` (repeatable) replaces them (`--model rgbd_10` gives the
@@ -56,7 +58,7 @@ from pathlib import Path
 import cv2
 
 from pose4d_ros.cli._args import factor_list
-from pose4d_ros.core.convnet import PHOTO_SCALES, ConvNet, valid_scales
+from pose4d_ros.core.convnet import PHOTO_SCALES, PRECISIONS, ConvNet, valid_scales
 from pose4d_ros.core.dpm.infer import SearchConfig
 from pose4d_ros.core.dpm.model import PartModel, colour_channel
 from pose4d_ros.core.dpm.net_unary import NetUnary, UnaryConfig
@@ -68,7 +70,7 @@ from pose4d_ros.core.people import TrackingConfig
 from pose4d_ros.core.slqe import SlqeConfig
 from pose4d_ros.core.threads import set_blas_threads
 from pose4d_ros.datasets.sources import load_frames, source_kind
-from pose4d_ros.evaluation import draw, overrides, plot, real
+from pose4d_ros.evaluation import draw, overrides, plot, real, tables
 from pose4d_ros.evaluation.peer_depth import (
     fit_depth_offsets,
     offset_row,
@@ -85,6 +87,7 @@ from pose4d_ros.evaluation.pipeline import (
     score_rows,
 )
 from pose4d_ros.evaluation.tables import clean_row, default_models, format_table, load_any
+from pose4d_ros.models import DEFAULT_COLOUR_NET, DEFAULT_NET_PRECISION
 from pose4d_ros.peer import PEERS, Peer, make_peer
 from pose4d_ros.util.progress import log, progress
 
@@ -125,10 +128,14 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
                         'foreground.person_min_cut_height_m=0.5, slqe.limb_parts=left_wrist,'
                         'right_wrist, scale.warm_up_frames=2 (sections: foreground, search, '
                         'scale, slqe, tracking, unary; evaluation.overrides)')
-    p.add_argument('--colour-net', metavar='NETWORK',
-                   help="the photograph network (shipped name or .npz, e.g. lspet_convnet) as a "
-                        "colour unary of every part model's tree (core.dpm.net_unary; its "
-                        'weights: --config unary.weight=W, unary.hog_weight=H)')
+    p.add_argument('--colour-net', metavar='NETWORK', default=DEFAULT_COLOUR_NET,
+                   help="the photograph network (shipped name or .npz) as a colour unary of "
+                        "every part model's tree, as the detector node runs it (core.dpm."
+                        "net_unary; its weights: --config unary.weight=W, unary.hog_weight=H); "
+                        "'none': the part models' HOG filters alone")
+    p.add_argument('--net-precision', choices=PRECISIONS, default=DEFAULT_NET_PRECISION,
+                   help="the photograph networks' arithmetic (rows and --colour-net): int8 runs "
+                        'their 8-bit twin (pose4d quantize-convnet)')
     p.add_argument('--no-single-frame', action='store_true',
                    help='skip the single-frame `rgbd` pass (the temporal rows only)')
     p.add_argument('--blas-threads', type=int, default=1)
@@ -175,8 +182,8 @@ def run(args: argparse.Namespace) -> int:
     offsets = read_offsets(args.peer_depth) if args.peer_depth else None
     real_recording = kind == 'frames' or args.labels is not None or _unlabelled_bag(args, kind)
     models = ({} if args.fit_peer_depth else
-              {m: load_any(m) for m in (args.model or default_models(
-                  'frames' if real_recording else kind))})
+              {m: load_any(m, args.net_precision)
+               for m in (args.model or default_models('frames' if real_recording else kind))})
     if not valid_scales(args.photo_scales):
         raise ValueError(f'--photo-scales {args.photo_scales}: must include 1 and lie within '
                          f'0.25..4')
@@ -272,14 +279,13 @@ def table_rows(args: argparse.Namespace, kind: str, models: dict[str, PartModel 
 
 def colour_unary(args: argparse.Namespace, settings: dict) -> NetUnary | None:
     """The photograph network as the part models' colour unary (`--colour-net`), or None."""
-    if args.colour_net is None:
-        if 'unary' in settings:
-            raise ValueError('--config unary.*: needs --colour-net')
-        return None
-    net = load_any(args.colour_net)
-    if not isinstance(net, ConvNet):
-        raise ValueError(f'--colour-net {args.colour_net}: not a photograph network')
-    return NetUnary(net, overrides.apply(UnaryConfig(), settings, 'unary'))
+    if args.colour_net == 'none' and 'unary' in settings:
+        raise ValueError('--config unary.*: needs a --colour-net')
+    try:
+        return tables.colour_unary(args.colour_net, args.net_precision,
+                                   overrides.apply(UnaryConfig(), settings, 'unary'))
+    except ValueError as exc:
+        raise ValueError(f'--colour-net {exc}') from None
 
 
 def stage_configs(args: argparse.Namespace, settings: dict, unary: NetUnary | None) -> dict:

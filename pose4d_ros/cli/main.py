@@ -15,8 +15,8 @@ import sys
 from pose4d_ros import __version__
 
 # Verb modules, in the order `pose4d --help` lists them.
-VERBS = ('synth', 'cad60_to_bag', 'train', 'train_convnet', 'eval', 'bench', 'demo', 'track_eval',
-         'bag_repair', 'results')
+VERBS = ('synth', 'cad60_to_bag', 'train', 'train_convnet', 'quantize_convnet', 'eval', 'bench',
+         'demo', 'track_eval', 'bag_repair', 'results')
 
 
 def build_parser() -> argparse.ArgumentParser:

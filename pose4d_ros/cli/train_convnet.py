@@ -10,6 +10,8 @@ weights are written for `core.convnet` (numpy, batch normalisation folded) with 
 data, seed, budget and times (wall and CPU) in the model's metadata. The budget is either wall
 time (`--minutes`) or this process's CPU time over all its threads (`--cpu-minutes`, reading
 the photographs included): the second does not depend on other processes sharing the machine.
+The file also holds the network's 8-bit twin, calibrated on the training photographs (`pose4d
+quantize-convnet`), which the detector runs by default.
 """
 
 from __future__ import annotations
@@ -21,7 +23,8 @@ from pathlib import Path
 
 import numpy as np
 
-from pose4d_ros.core.convnet import ConvNet, save_convnet
+from pose4d_ros.cli.quantize_convnet import calibration_batches
+from pose4d_ros.core.convnet import ConvNet, quantize, save_convnet
 from pose4d_ros.datasets import lspet
 from pose4d_ros.datasets.sources import open_source, parse_ranges, source_kind
 from pose4d_ros.training.convnet_torch import (
@@ -35,6 +38,8 @@ from pose4d_ros.training.convnet_torch import (
 from pose4d_ros.training.dpm.samples import mirror_index
 from pose4d_ros.util.machine import command_line, machine
 from pose4d_ros.util.progress import log
+
+QUANTIZE_PHOTOGRAPHS = 256  # calibrating the 8-bit twin (`pose4d quantize-convnet`)
 
 
 def add_parser(subparsers: argparse._SubParsersAction) -> None:
@@ -123,6 +128,9 @@ def run(args: argparse.Namespace) -> int:
         'torch': str(torch.__version__), 'cpu': str(machine()['cpu']),
     }
     model = ConvNet(names, tuple(mirror), args.input_px, export_weights(done.net), metadata)
+    # its 8-bit twin, the detector's default, calibrated on the training photographs
+    step = max(len(numbers) // QUANTIZE_PHOTOGRAPHS, 1)
+    model = quantize(model, calibration_batches(images[:len(numbers):step], args.input_px))
     save_convnet(model, args.out)
     log(f'wrote {args.out}: {done.steps} steps, {done.epochs} epochs, {minutes:.1f} wall min, '
         f'{cpu_minutes:.1f} CPU min')

@@ -89,19 +89,20 @@ def deployed_summary(bench: dict | None) -> list[str]:
 
 REAL_SUMMARY = ("**Real** recordings (development data, MediaPipe the reference, "
                 '`docs/results/real_*.json`): share of its joints where ours lie within 0.1 x '
-                "the person's height; hand-labelled people found; ghosts. As shipped / with the "
-                'photograph network in the detector (`detector.colour_net:=lspet_convnet`):')
+                "the person's height; hand-labelled people found; ghosts. As shipped (the "
+                'photograph network in the detector) / without it (`detector.colour_net:=\'\'`):')
 
 
 def real_summary(results: Path) -> list[str]:
-    """The README's line on real recordings: per recording, the default's and the network's
-    agreement with MediaPipe@0.1, people found and ghosts against the hand labels."""
+    """The README's line on real recordings: per recording, the default's (with the network)
+    and the part model's alone agreement with MediaPipe@0.1, people found and ghosts against
+    the hand labels."""
     parts = []
     for path in sorted(results.glob('real_*.json')):
-        if path.stem.endswith('_net'):
+        if path.stem.endswith('_nonet'):
             continue
-        runs = [json.loads(p.read_text()) for p in (path, path.with_name(path.stem + '_net.json'))
-                if p.exists()]
+        alone = path.with_name(f'{path.stem}_nonet.json')
+        runs = [json.loads(p.read_text()) for p in (path, alone) if p.exists()]
         rows = [next(v for k, v in r['real'].items() if k != 'mediapipe') for r in runs]
         peer = runs[0]['real'].get('mediapipe', {}).get('labels', {})
         lab = [t.get('labels', {}) for t in rows]

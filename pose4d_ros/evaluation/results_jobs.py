@@ -34,8 +34,9 @@ REAL = '../shared/data/real'
 # Separate frames are held 20 frames each (a still camera's stream, as a tracker sees it).
 REAL_SETS = {'lab_walk': ('--fps', '10'), 'outdoor4': ('--hold', '20'),
              'kinect2_masked': ('--hold', '20')}
-# each as the nodes run by default, and with the photograph network in the colour unary
-REAL_VARIANTS = {'': (), '_net': ('--colour-net', 'lspet_convnet')}
+# each as the nodes run by default (the photograph network in the colour unary), and without
+# the network (the part model's HOG filters alone)
+REAL_VARIANTS = {'': (), '_nonet': ('--colour-net', 'none')}
 
 
 @dataclass(frozen=True)
@@ -301,7 +302,7 @@ def colour_net_file(label: str, data: str) -> Path:
 def _colour_net(ctx: Context) -> list[list[str]]:
     cmds = []
     for label, items in COLOUR_NET_GRID.items():
-        net = ('--colour-net', COLOUR_NET) if items else ()
+        net = ('--colour-net', COLOUR_NET if items else 'none')
         config = [a for item in items for a in ('--config', item)]
         cmds.append(_eval(ctx, ctx.lspet, colour_net_file(label, 'lspet'), '--range',
                           COLOUR_NET_VALID, '--model', 'rgbd_14', *net, *config, peer=False))
@@ -313,7 +314,8 @@ def _colour_net(ctx: Context) -> list[list[str]]:
 
 def _lspet(ctx: Context) -> list[list[str]]:
     cmds = [_eval(ctx, ctx.lspet, RESULTS / 'lspet.json', '--range', '2501-3000', '--model',
-                  'lspet_convnet', '--model', 'lspet_rgb_14', '--model', 'rgbd_14')]
+                  'lspet_convnet', '--model', 'lspet_rgb_14', '--model', 'rgbd_14',
+                  '--colour-net', 'none')]
     chosen = chosen_colour_net()
     if chosen:
         cmds.append(_eval(ctx, ctx.lspet, RESULTS / 'lspet_colour_net.json', '--range',
@@ -335,7 +337,7 @@ def _colour_net_test(ctx: Context) -> list[list[str]]:
     cmds = []
     for s in COLOUR_NET_TESTS:
         cmds.append(_eval(ctx, str(DATA / s), RESULTS / f'colour_net_{s}_none.json', '--model',
-                          'rgbd_14', '--no-single-frame', peer=False))
+                          'rgbd_14', '--colour-net', 'none', '--no-single-frame', peer=False))
         cmds.append(_eval(ctx, str(DATA / s), RESULTS / f'colour_net_{s}.json', '--model',
                           'rgbd_14', '--colour-net', COLOUR_NET,
                           *(a for item in chosen for a in ('--config', item)),
@@ -424,7 +426,8 @@ JOBS: tuple[Job, ...] = (
         "in the detector's colour unary, and without it, in the same session, with MediaPipe",
         (), lambda c: [['pose4d', 'bench', 'bags/sample', '--json', str(RESULTS / name),
                         '--people', 'several', *net, *(['--peer', 'mediapipe'] if c.peer else [])]
-                       for name, net in (('bench_colour_net_none.json', []),
+                       for name, net in (('bench_colour_net_none.json',
+                                          ['--colour-net', 'none']),
                                          ('bench_colour_net.json',
                                           ['--colour-net', COLOUR_NET]))]),
     Job('bench_graph', 'the node graph on the demo bag: frames in and out, latency', (),

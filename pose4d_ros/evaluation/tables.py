@@ -3,13 +3,16 @@ as JSON rows."""
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 
 from pose4d_ros.core.convnet import ConvNet, is_convnet, load_convnet
 from pose4d_ros.core.dpm.model import PartModel, load_model
+from pose4d_ros.core.dpm.net_unary import NetUnary, UnaryConfig
 from pose4d_ros.core.skeleton import JOINT_GROUPS
 from pose4d_ros.evaluation.tracking_metrics import SEEN_BINS
-from pose4d_ros.models import model_path
+from pose4d_ros.models import DEFAULT_COLOUR_NET, DEFAULT_NET_PRECISION, model_path
 
 TABLE_METRICS = (('pck', 'PCK@0.1 (%)'), ('pck@0.2', 'PCK@0.2 (%)'), ('apk', 'APK (%)'),
                  ('error_px', 'error (px)'), ('error_mm', '3-D median error (mm)'),
@@ -81,7 +84,22 @@ def default_models(kind: str) -> list[str]:
     return {'lspet': ['lspet_convnet'], 'frames': ['rgbd_14']}.get(kind, ['rgbd_14', 'rgb_10'])
 
 
-def load_any(name: str) -> PartModel | ConvNet:
-    """A part model or a photograph network (`core.convnet`), by shipped name or path."""
+def load_any(name: str, precision: str = DEFAULT_NET_PRECISION) -> PartModel | ConvNet:
+    """A part model or a photograph network (`core.convnet`, run at `precision`), by shipped
+    name or path."""
     path = model_path(name)
-    return load_convnet(path) if is_convnet(path) else load_model(path)
+    return replace(load_convnet(path), precision=precision) if is_convnet(path) else \
+        load_model(path)
+
+
+def colour_unary(name: str = DEFAULT_COLOUR_NET, precision: str = DEFAULT_NET_PRECISION,
+                 config: UnaryConfig | None = None) -> NetUnary | None:
+    """The photograph network `name` as the part models' colour unary, as the detector node
+    runs it by default (`detector.colour_net`, `detector.colour_net_precision`); None for
+    'none'. ValueError when `name` is a part model."""
+    if name == 'none':
+        return None
+    net = load_any(name, precision)
+    if not isinstance(net, ConvNet):
+        raise ValueError(f'{name}: not a photograph network')
+    return NetUnary(net, config or UnaryConfig())

@@ -5,6 +5,10 @@ from __future__ import annotations
 from pathlib import Path
 
 MODELS_DIR = Path(__file__).resolve().parent
+# The photograph network the detector runs in its colour unary by default, and its arithmetic
+# (`core.dpm.net_unary`; the detector node's detector.colour_net, `pose4d eval --colour-net`)
+DEFAULT_COLOUR_NET = 'lspet_convnet'
+DEFAULT_NET_PRECISION = 'int8'
 
 
 def shipped_models() -> list[str]:

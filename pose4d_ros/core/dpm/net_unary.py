@@ -53,7 +53,12 @@ class UnaryConfig:
         `lspet_convnet` (`make results`' colour_net job, `docs/results/colour_net.json`).
     floor : log-probability below which a cell scores no worse.
     scales : the network's reading scales of the crop (`ConvNet.heat_maps`).
-    mirror : the crop's mirror image read too and the maps averaged (twice the work).
+    mirror : the crop's mirror image read too and the maps averaged (twice the network's
+        work). Off, chosen on validation for its cost (int8 network at weight 4, HOG weight 1;
+        `rgbd_kf_ik` average7 on `valid30` / `valid30_msr`, LSPET 8501-9000 PCK@0.2 by the
+        colour channel alone, the pipeline's CPU p50 a frame on `valid30`): with the mirror
+        98.45 / 94.77, 65.5, 16.4 ms; without 98.39 / 94.71, 64.4, 11.4 ms (no network:
+        98.75 / 93.46, 12.9, 6.6 ms).
     input_px : the size the crop is read at, pixels (a multiple of 32; 0 = the network's own
         `input_px`): the network is fully convolutional.
     score_scale, score_offset : the pose's score handed on (`Pose.score`) is
@@ -76,7 +81,7 @@ class UnaryConfig:
     hog_weight: float = 1.0
     floor: float = -10.0
     scales: tuple[float, ...] = (1.0,)
-    mirror: bool = True
+    mirror: bool = False
     input_px: int = 0
     score_scale: float = 1.0 / 3.0
     score_offset: float = 20.0 / 3.0
