@@ -784,3 +784,21 @@ def test_a_setting_changed_live_reaches_every_persons_stage_and_the_next_person(
         tr.step([person(-0.6), person(0.6), person(1.6, z=3.5)], k * DT, INTR)
     assert len(tr.tracks) == 3
     assert {t.stage.slqe_config.gate_chi2 for t in tr.tracks} == {20.0}
+
+
+@pytest.mark.parametrize('same_person_m', [0.0, 0.3])
+def test_an_unseen_track_on_a_person_seen_under_another_id_ends(same_person_m):
+    """Two tracks at one depth: the right one walks left onto where the left one, unseen from
+    frame 10, is predicted. A person at the same depth is not hidden behind the one seen
+    there: it is that person, under another id (two skeletons on one person). With
+    `same_person_m` the unseen track ends at once; off, it coasts on under the other."""
+    tr = tracker(same_person_m=same_person_m)
+    for k in range(10):
+        out = tr.step([person(0.03 * k), person(1.0 - 0.05 * k)], k * DT, INTR)
+    assert sorted(ids_by_x(out)) == [1, 2]
+    left = min(ids_by_x(out).items(), key=lambda kv: kv[1])[0]
+    out = tr.step([person(0.5)], 10 * DT, INTR)
+    right = next(t for t in out if t.track_id != left)
+    assert abs(torso(right)[0][0] - 0.5) < 0.05  # the seen one took the detection
+    assert (left in [t.track_id for t in out]) == (same_person_m == 0.0)
+    assert tr.ended == ([] if same_person_m == 0.0 else [left])

@@ -155,7 +155,8 @@ class PeopleTracker:
                 if not track.held:
                     track.held, track.held_s, track.behind = True, stamp_s, behind
                 track.last = _held(track.last)
-                if self._left(track.last, depth, intrinsics):
+                if self._left(track.last, depth, intrinsics) or self._duplicate(track.last,
+                                                                                stamp_s):
                     gone.append(track)
                 continue
             if i in seen and track.held:
@@ -175,7 +176,8 @@ class PeopleTracker:
             if hidden is not None:
                 out = _kept(out, track.last, hidden)
             track.names = out.names
-            if i not in seen and track.id and self._left(out, depth, intrinsics):
+            if i not in seen and track.id and (self._left(out, depth, intrinsics)
+                                               or self._duplicate(out, stamp_s)):
                 gone.append(track)
                 continue
             if i in seen:
@@ -201,6 +203,22 @@ class PeopleTracker:
         return (joints is not None and self.config.free_space_m > 0
                 and (depth_m := depth()) is not None
                 and free_space(joints, depth_m, intrinsics, self.config))
+
+    def _duplicate(self, joints: JointSet | None, stamp_s: float) -> bool:
+        """Whether an unseen track's person is one seen this frame under another id: its torso
+        pixel in the box of a confirmed track seen this frame (`_in_box`) and its torso's depth
+        within `same_person_m` of theirs (so not hidden behind them, `_behind`)."""
+        if joints is None or not self.config.same_person_m > 0:
+            return False
+        point, _ = torso(joints)
+        pixel, _ = torso_px(joints)
+        if not (_finite(point) and _finite(pixel)):
+            return False
+        return any(other.id and other.seen_s == stamp_s and other.last is not None
+                   and _finite(other.point)
+                   and abs(point[2] - other.point[2]) <= self.config.same_person_m
+                   and other.last.track_id != joints.track_id and _in_box(other.last, pixel)
+                   for other in self.tracks)
 
     def _match(self, detections: Sequence[JointSet], points: list[tuple[NDArray, NDArray]],
                cost: NDArray[np.float64], intrinsics: Intrinsics | None
