@@ -214,7 +214,7 @@ def write_all(results: Path, index: dict, *, readme: Path = Path('README.md'),
               'lspet_colour_net': "LSPET photographs 2501-3000: the nodes' model with the "
                                   'photograph network in its colour unary',
               **{f'colour_net_{s}{k}': f'Held-out {s} with the photograph network in the '
-                                        "colour unary (not the nodes' default)" + w
+                                        "colour unary (the nodes' default)" + w
                  for s in ('test', 'test30', 'test30_msr')
                  for k, w in (('_none', ': without it, the same run'), ('', ''))}}
     for stem, title in titles.items():
@@ -287,8 +287,8 @@ def colour_net_section(results: Path, jobs: dict) -> list[str]:
            f"`{v['network']}` in the part model's colour unary (`core.dpm.net_unary`, the "
            "detector node's `detector.colour_net`): the nodes' `rgbd_14` by its colour channel "
            f"alone on {v['photographs']} (no network saw them), and as the nodes run it on "
-           f"{v['renders']} (`rgbd_kf_ik`). `none` is the colour HOG alone (what the nodes "
-           'run by default).', '',
+           f"{v['renders']} (`rgbd_kf_ik`). `none` is the colour HOG alone (`detector.colour_net:="
+           "''`); the nodes run the network at the chosen weights by default.", '',
            '| weighting | photographs PCK@0.1 | photographs PCK@0.2 | CPU ms a photo | '
            'renders average7 (' + ', '.join(v['values'].get('none', {}).get('sets', {}))
            + ') | within 10 cm | CPU ms a frame |', '|---|---|---|---|---|---|---|']
@@ -312,10 +312,11 @@ def bench_section(results: Path, jobs: dict) -> list[str]:
     for name, title in (('bench', 'CPU per stage (demo bag)'),
                         ('bench_people', "CPU per stage as the nodes run them (demo bag, the "
                                          'several-person path: every person region searched)'),
-                        ('bench_colour_net_none', 'CPU per stage as the nodes run them, the '
+                        ('bench_colour_net_none', 'CPU per stage without the photograph '
+                                                  "network (`detector.colour_net:=''`), the "
                                                   "session of the colour network's bench"),
                         ('bench_colour_net', 'CPU per stage with the photograph network in '
-                                             "the detector's colour unary (not the nodes' "
+                                             "the detector's colour unary (the nodes' "
                                              'default)')):
         bench = load(results, name)
         if not bench:

@@ -324,13 +324,13 @@ def _lspet(ctx: Context) -> list[list[str]]:
     return cmds
 
 
-# the held-out RGB-D sets the chosen colour network is reported on (not the nodes' default)
+# the held-out RGB-D sets the chosen colour network is reported on beside the part model alone
 COLOUR_NET_TESTS = ('test', 'test30', 'test30_msr')
 
 
 def _colour_net_test(ctx: Context) -> list[list[str]]:
-    """Each held-out set with the network at the chosen weights, and without it in the same
-    run (the nodes' default, so that the two rows come from one machine and one render)."""
+    """Each held-out set with the network at the chosen weights (the nodes' default), and
+    without it in the same run (so that the two rows come from one machine and one render)."""
     chosen = chosen_colour_net()
     if not chosen:
         return []
@@ -402,7 +402,8 @@ JOBS: tuple[Job, ...] = (
         'photograph network in its colour unary (the weights chosen on validation)', (),
         _lspet, needs='lspet'),
     Job('colour_net_test', "the held-out RGB-D sets with the photograph network in the "
-        "detector's colour unary at the weights chosen on validation (not the nodes' default)",
+        "detector's colour unary at the weights chosen on validation (the nodes' default) and "
+        'without it, in the same run',
         COLOUR_NET_TESTS, _colour_net_test),
     Job('real', 'real RGB-D recordings (development data: Xtion lab walk, Kinect v2 outdoors '
         'and masked): agreement with MediaPipe, people found and ghosts against hand labels',
