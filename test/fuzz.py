@@ -322,9 +322,12 @@ class Target:
 
 
 def _sane(joint: object) -> bool:
-    """On the image, a confidence in [0, 1], and no 3-D position or a finite one within 20 m."""
+    """On the image (grown by a tenth of its size each side: the IK completes a limb of a person
+    cut by the image's border beyond it, e.g. an ankle a pixel below the bottom row), a
+    confidence in [0, 1], and no 3-D position or a finite one within 20 m."""
     xyz = np.array([joint.position.x, joint.position.y, joint.position.z])
-    return (0 <= joint.u < INTR.width and 0 <= joint.v < INTR.height
+    mu, mv = 0.1 * INTR.width, 0.1 * INTR.height
+    return (-mu <= joint.u < INTR.width + mu and -mv <= joint.v < INTR.height + mv
             and 0 <= joint.confidence <= 1
             and (np.isnan(xyz).all() or bool(np.isfinite(xyz).all() and abs(xyz[2]) < 20)))
 

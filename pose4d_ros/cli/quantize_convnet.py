@@ -14,28 +14,18 @@ from __future__ import annotations
 
 import argparse
 import time
-from collections.abc import Iterator, Sequence
 from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
 
-from pose4d_ros.core.convnet import (
-    crop_transform,
-    load_convnet,
-    normalise,
-    quantize,
-    save_convnet,
-    warp,
-)
+from pose4d_ros.core.convnet import calibration_batches, load_convnet, quantize, save_convnet
 from pose4d_ros.datasets import lspet
 from pose4d_ros.datasets.sources import open_source, parse_ranges, source_kind
 from pose4d_ros.models import model_path
 from pose4d_ros.training.convnet_torch import render_crops
 from pose4d_ros.util.machine import command_line
 from pose4d_ros.util.progress import log
-
-BATCH = 16
 
 
 def add_parser(subparsers: argparse._SubParsersAction) -> None:
@@ -55,15 +45,6 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
                    help='every N-th frame of each rendered video')
     p.add_argument('--out', required=True, type=Path, help='model file to write (.npz)')
     p.set_defaults(func=run)
-
-
-def calibration_batches(images: Sequence[np.ndarray], input_px: int) -> Iterator[np.ndarray]:
-    """The network's inputs of `images` (photographs or crops, RGB uint8) as the detector reads
-    them (`ConvNet.heat_maps` at scale 1) and their mirror images, in batches."""
-    for i in range(0, len(images), BATCH):
-        x = np.stack([normalise(warp(c, crop_transform(c.shape, input_px), input_px))
-                      for c in images[i:i + BATCH]])
-        yield np.concatenate([x, x[:, :, ::-1]])
 
 
 def run(args: argparse.Namespace) -> int:

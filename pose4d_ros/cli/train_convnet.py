@@ -23,8 +23,7 @@ from pathlib import Path
 
 import numpy as np
 
-from pose4d_ros.cli.quantize_convnet import calibration_batches
-from pose4d_ros.core.convnet import ConvNet, quantize, save_convnet
+from pose4d_ros.core.convnet import ConvNet, calibration_batches, quantize, save_convnet
 from pose4d_ros.datasets import lspet
 from pose4d_ros.datasets.sources import open_source, parse_ranges, source_kind
 from pose4d_ros.training.convnet_torch import (

@@ -27,7 +27,7 @@ from __future__ import annotations
 
 import json
 import threading
-from collections.abc import Iterable, Sequence
+from collections.abc import Iterable, Iterator, Sequence
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
@@ -377,6 +377,16 @@ def quantize(net: ConvNet, inputs: Iterable[NDArray[np.floating]]) -> ConvNet:
                         per_channel=True, activation_type=QuantType.QUInt8,
                         weight_type=QuantType.QInt8)
         return replace(net, quantized=out.read_bytes())
+
+
+def calibration_batches(images: Sequence[NDArray[np.uint8]], input_px: int, batch: int = 16
+                        ) -> Iterator[NDArray[np.float32]]:
+    """The network's inputs of `images` (photographs or crops, RGB uint8) as the detector reads
+    them (`ConvNet.heat_maps` at scale 1) and their mirror images, in batches."""
+    for i in range(0, len(images), batch):
+        x = np.stack([normalise(warp(c, crop_transform(c.shape, input_px), input_px))
+                      for c in images[i:i + batch]])
+        yield np.concatenate([x, x[:, :, ::-1]])
 
 
 def save_convnet(net: ConvNet, path: str | Path) -> None:

@@ -40,7 +40,7 @@ from pose4d_ros.evaluation.pipeline import (
     row_names,
     score_rows,
 )
-from pose4d_ros.evaluation.tables import format_table
+from pose4d_ros.evaluation.tables import colour_unary, format_table
 from pose4d_ros.wire import joints_from_msg, stamp_to_ns
 
 LIVE = 'graph'  # the live row's name in the tables
@@ -118,7 +118,9 @@ def score_run(frames: Sequence[Frame], rec: Recording, model: PartModel) -> dict
     offline `_kf_ik` row}."""
     several = several_people(frames)
     live = live_row(frames, rec)
-    offline = pipeline_rows(frames, model, people=TrackingConfig() if several else None)
+    # the nodes' default detector: the photograph network in the colour unary
+    offline = pipeline_rows(frames, model, people=TrackingConfig() if several else None,
+                            unary=colour_unary())
     tables = score_rows({LIVE: live, **offline}, frames)
     out = {LIVE: tables.pop(LIVE), 'offline': tables}
     if several:
