@@ -88,8 +88,12 @@ def load_any(name: str, precision: str = DEFAULT_NET_PRECISION) -> PartModel | C
     """A part model or a photograph network (`core.convnet`, run at `precision`), by shipped
     name or path."""
     path = model_path(name)
-    return replace(load_convnet(path), precision=precision) if is_convnet(path) else \
-        load_model(path)
+    if not is_convnet(path):
+        return load_model(path)
+    try:
+        return replace(load_convnet(path), precision=precision)
+    except ValueError as exc:
+        raise ValueError(f'{path}: {exc}') from None
 
 
 def colour_unary(name: str = DEFAULT_COLOUR_NET, precision: str = DEFAULT_NET_PRECISION,
