@@ -414,8 +414,9 @@ def is_convnet(path: str | Path) -> bool:
         return False
 
 
-def load_convnet(path: str | Path) -> ConvNet:
-    """Read a network written by `save_convnet`; ValueError naming the file when it is not one."""
+def load_convnet(path: str | Path, precision: str = 'fp32') -> ConvNet:
+    """Read a network written by `save_convnet`, to run at `precision` (`ConvNet.precision`);
+    ValueError naming the file when it is not one or cannot run so."""
     path = Path(path)
     arrays = read_npz(path, 'network model')
     try:
@@ -435,6 +436,8 @@ def load_convnet(path: str | Path) -> ConvNet:
         return ConvNet(tuple(header['joint_names']), tuple(header['mirror']),
                        int(header['input_px']), weights, dict(header.get('metadata', {})),
                        str(header.get('channels', 'rgb')),
-                       arrays[QUANTIZED].tobytes() if QUANTIZED in arrays else b'')
+                       arrays[QUANTIZED].tobytes() if QUANTIZED in arrays else b'', precision)
     except (KeyError, TypeError) as exc:
         raise ValueError(f'{path}: bad network header ({exc})') from exc
+    except ValueError as exc:
+        raise ValueError(f'{path}: {exc}') from None

@@ -3,8 +3,6 @@ as JSON rows."""
 
 from __future__ import annotations
 
-from dataclasses import replace
-
 import numpy as np
 
 from pose4d_ros.core.convnet import ConvNet, is_convnet, load_convnet
@@ -88,12 +86,7 @@ def load_any(name: str, precision: str = DEFAULT_NET_PRECISION) -> PartModel | C
     """A part model or a photograph network (`core.convnet`, run at `precision`), by shipped
     name or path."""
     path = model_path(name)
-    if not is_convnet(path):
-        return load_model(path)
-    try:
-        return replace(load_convnet(path), precision=precision)
-    except ValueError as exc:
-        raise ValueError(f'{path}: {exc}') from None
+    return load_convnet(path, precision) if is_convnet(path) else load_model(path)
 
 
 def colour_unary(name: str = DEFAULT_COLOUR_NET, precision: str = DEFAULT_NET_PRECISION,

@@ -38,7 +38,6 @@ Parameters (config/detector.yaml)
 from __future__ import annotations
 
 import time
-from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
@@ -201,7 +200,7 @@ def colour_net(p: dict[str, Any]) -> NetUnary | None:
         return None
     path = model_path(p['detector.colour_net'])
     try:
-        net = replace(load_convnet(path), precision=p['detector.colour_net_precision'])
+        net = load_convnet(path, p['detector.colour_net_precision'])
     except (OSError, ValueError) as exc:
         raise ParameterError(f'parameter detector.colour_net: {exc}') from None
     return NetUnary(net, UnaryConfig(weight=p['detector.colour_net_weight'],

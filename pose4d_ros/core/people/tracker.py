@@ -206,8 +206,8 @@ class PeopleTracker:
 
     def _duplicate(self, joints: JointSet | None, stamp_s: float) -> bool:
         """Whether an unseen track's person is one seen this frame under another id: its torso
-        pixel in the box of a confirmed track seen this frame (`_in_box`) and its torso's depth
-        within `same_person_m` of theirs (so not hidden behind them, `_behind`)."""
+        pixel in the box of a confirmed track seen this frame (`_in_box`; an unseen track is
+        not one) and its torso's depth within `same_person_m` of theirs."""
         if joints is None or not self.config.same_person_m > 0:
             return False
         point, _ = torso(joints)
@@ -217,8 +217,7 @@ class PeopleTracker:
         return any(other.id and other.seen_s == stamp_s and other.last is not None
                    and _finite(other.point)
                    and abs(point[2] - other.point[2]) <= self.config.same_person_m
-                   and other.last.track_id != joints.track_id and _in_box(other.last, pixel)
-                   for other in self.tracks)
+                   and _in_box(other.last, pixel) for other in self.tracks)
 
     def _match(self, detections: Sequence[JointSet], points: list[tuple[NDArray, NDArray]],
                cost: NDArray[np.float64], intrinsics: Intrinsics | None
