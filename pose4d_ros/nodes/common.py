@@ -585,7 +585,8 @@ class PeopleInputs:
     so between two of ours each frame crosses once). A single-person message is taken as a
     list of one, unless a several-person message came in the last `PEOPLE_FRESH_S` seconds:
     then the upstream stage publishes both, and the single-person one (its primary person) is
-    left out.
+    left out. A frame whose stamp was among the last few processed is not processed again
+    (both ways came in before the first several-person message did).
 
     Frames are processed in a `FrameQueue`'s worker, never in the executor's thread: a stage
     slower than its input works on the newest frame and drops the older ones (counted on the
@@ -600,6 +601,7 @@ class PeopleInputs:
                  slop_ns: int = 0) -> None:
         self._process = process
         self._last_people = -float('inf')
+        self._recent: deque[int] = deque(maxlen=4)  # stamps of the last frames processed
         self._monitor = monitor
         self._paired = (PairedInputs(node, [(None, people_topic, None), *extra],
                                      self._frame, monitor, slop_ns=slop_ns) if extra else None)
@@ -629,10 +631,16 @@ class PeopleInputs:
 
     def _frame(self, items: tuple) -> None:
         header = items[0].header
+        stamp = stamp_to_ns(header.stamp)
+        if stamp in self._recent:
+            # the frame came both ways (a restarted stage takes the single-person message
+            # before it has seen the upstream's several-person one): it is processed once
+            return
+        self._recent.append(stamp)
         try:
             people = items[0].people()
         except ValueError as exc:
-            self._monitor.bad_input(f'frame at {stamp_to_ns(header.stamp)} ns refused: {exc}')
+            self._monitor.bad_input(f'frame at {stamp} ns refused: {exc}')
             return
         self._process(people, header, items[1:])
 
