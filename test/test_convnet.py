@@ -385,9 +385,8 @@ def test_render_crops_cut_the_person_as_the_detector_sees_them() -> None:
             assert_allclose(pix[0, j], uv[i] - (80, 20))
 
 
-def test_train_convnet_adds_rendered_people_and_trains_in_bfloat16(tmp_path: Path) -> None:
-    pytest.importorskip('torch', reason='PyTorch trains the network only (make train-env); '
-                        'the suite runs without it')
+def _photographs_and_renders(tmp_path: Path, takes: str) -> tuple[Path, Path]:
+    """Eight tiny LSPET photographs and a rendered set of four frames a take."""
     from helpers import write_utkinect
 
     from pose4d_ros.cli.main import main
@@ -396,8 +395,17 @@ def test_train_convnet_adds_rendered_people_and_trains_in_bfloat16(tmp_path: Pat
     write_utkinect(tmp_path / 'ut')
     renders = tmp_path / 'renders'
     assert main(['synth', '--utkinect', str(tmp_path / 'ut'), '--out', str(renders), '--seed',
-                 '3', '--takes', 's01-s02', '--frames', '4', '--stride', '3',
+                 '3', '--takes', takes, '--frames', '4', '--stride', '3',
                  '--videos-per-take', '1', '--quiet']) == 0
+    return root, renders
+
+
+def test_train_convnet_adds_rendered_people_and_trains_in_bfloat16(tmp_path: Path) -> None:
+    pytest.importorskip('torch', reason='PyTorch trains the network only (make train-env); '
+                        'the suite runs without it')
+    from pose4d_ros.cli.main import main
+
+    root, renders = _photographs_and_renders(tmp_path, 's01-s02')
     out = tmp_path / 'net.npz'
     assert main(['train-convnet', str(root), '--range', '1-8', '--renders', str(renders),
                  '--render-stride', '2', '--input-px', '64', '--width', '4', '--threads', '1',
@@ -405,6 +413,39 @@ def test_train_convnet_adds_rendered_people_and_trains_in_bfloat16(tmp_path: Pat
     meta = cn.load_convnet(out).metadata
     assert meta['renders'] == {str(renders): 4} and meta['photographs'] == 8  # 2 x 4 / 2
     assert meta['precision'] == 'bf16' and meta['steps'] >= 1 and meta['cpu']
+
+
+def test_a_network_fine_tuned_starts_as_the_network_it_was(tmp_path: Path) -> None:
+    torch = pytest.importorskip('torch', reason='PyTorch trains the network only (make '
+                                'train-env); the suite runs without it')
+    from pose4d_ros.cli.main import main
+    from pose4d_ros.training.convnet_torch import export_weights, import_weights, network
+
+    before = random_net(width=4, seed=5)
+    net = network(torch, 4, len(before.joint_names))
+    import_weights(torch, net, before.weights)
+    for name, (w, b) in export_weights(net).items():  # the folded weights come back
+        assert_allclose(w, before.weights[name][0], atol=1e-6)
+        assert_allclose(b, before.weights[name][1], atol=1e-6)
+    x = np.random.default_rng(6).uniform(-0.5, 0.5, (1, 64, 64, 3)).astype(np.float32)
+    with torch.no_grad():
+        ours = net.eval()(torch.from_numpy(x).permute(0, 3, 1, 2)).numpy()
+    assert np.abs(ours - before.forward_batch(x)).max() <= 1e-4 * np.abs(ours).max()
+    with pytest.raises(ValueError, match='another --width'):
+        import_weights(torch, network(torch, 8, 14), before.weights)
+    # fine-tuned from a file, on renders that keep their background
+    root, renders = _photographs_and_renders(tmp_path, 's01')
+    first = tmp_path / 'first.npz'
+    cn.save_convnet(replace(before, metadata={'data': 'random'}), first)
+    out = tmp_path / 'tuned.npz'
+    assert main(['train-convnet', str(root), '--range', '1-8', '--renders', str(renders),
+                 '--render-background', '--init', str(first), '--lr', '1e-4', '--input-px',
+                 '64', '--width', '4', '--threads', '1', '--minutes', '0.05', '--out',
+                 str(out)]) == 0
+    meta = cn.load_convnet(out).metadata
+    assert meta['init'] == str(first) and meta['init_metadata'] == {'data': 'random'}
+    assert meta['render_background'] and meta['lr'] == 1e-4 and meta['steps'] >= 1
+    assert main(['train-convnet', str(root), '--init', str(first), '--out', str(out)]) == 2
 
 
 def test_the_8_bit_twin_reads_photographs_as_the_float_graph_does(tmp_path: Path) -> None:

@@ -39,6 +39,10 @@ def test_demo_runs_the_graph_and_scores_it(tmp_path):
     live, offline = results['graph']['pck'], results['offline']['rgbd_kf_ik']['pck']
     assert abs(live['average7'] - offline['average7']) <= 0.5, (live, offline)
     assert results['latency_ms']['n'] == results['skeletons_out']
+    # the first frames' latency alone (the new track's), and the rest's percentiles
+    lat = results['latency_ms']
+    assert len(lat['first_frames']) == 5 and lat['after_first']['p95'] is not None
+    assert 'the first 5 frames:' in run.stdout
     # every skeleton's located joints on /tf, stamped like it (read back from the recorded bag)
     assert results['tf']['matching'] == results['skeletons_out']
     assert results['tf']['transforms'] >= 10 * results['skeletons_out']

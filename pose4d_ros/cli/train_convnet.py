@@ -23,9 +23,16 @@ from pathlib import Path
 
 import numpy as np
 
-from pose4d_ros.core.convnet import ConvNet, calibration_batches, quantize, save_convnet
+from pose4d_ros.core.convnet import (
+    ConvNet,
+    calibration_batches,
+    load_convnet,
+    quantize,
+    save_convnet,
+)
 from pose4d_ros.datasets import lspet
 from pose4d_ros.datasets.sources import open_source, parse_ranges, source_kind
+from pose4d_ros.models import model_path
 from pose4d_ros.training.convnet_torch import (
     PRECISIONS,
     Budget,
@@ -55,6 +62,14 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
                         'convnet_torch.render_crops); repeatable')
     p.add_argument('--render-stride', type=int, default=1, metavar='N',
                    help='every N-th frame of each rendered video')
+    p.add_argument('--render-background', action='store_true',
+                   help='the rendered crops keep their background (default: blanked outside '
+                        'the person, as the foreground stage blanks them)')
+    p.add_argument('--init', type=Path, default=None, metavar='MODEL',
+                   help='fine-tune this network (.npz or shipped name) instead of training '
+                        'a new one (its batch normalisations frozen)')
+    p.add_argument('--lr', type=float, default=2e-3,
+                   help='the learning rate at the start (it falls along a cosine)')
     p.add_argument('--out', required=True, type=Path, help='model file to write (.npz)')
     budget = p.add_mutually_exclusive_group()
     budget.add_argument('--minutes', type=float, default=None,
@@ -81,6 +96,12 @@ def run(args: argparse.Namespace) -> int:
         raise ValueError(f'the budget ({budget_min} min) must be > 0, --input-px '
                          f'{args.input_px} a multiple of 32, --width {args.width} at least 4')
     ranges = parse_ranges(args.frame_range)
+    init = None
+    if args.init is not None:
+        init = load_convnet(model_path(str(args.init)))
+        if init.input_px != args.input_px or tuple(init.joint_names) != lspet.LSPET_JOINTS:
+            raise ValueError(f'--init {args.init}: a network of {init.input_px} px and joints '
+                             f'{init.joint_names}, not --input-px {args.input_px} and LSPET\'s')
     torch = import_torch()
     torch.manual_seed(args.seed)
     torch.set_num_threads(args.threads)
@@ -99,7 +120,8 @@ def run(args: argparse.Namespace) -> int:
     for root in args.renders:
         if source_kind(root) != 'cad60':
             raise ValueError(f'--renders {root}: not a CAD-60 directory (pose4d synth)')
-        crops, r_uv, r_vis = render_crops(open_source(root, stride=args.render_stride), names)
+        crops, r_uv, r_vis = render_crops(open_source(root, stride=args.render_stride), names,
+                                          background=args.render_background)
         if not crops:
             raise ValueError(f'--renders {root}: no frame with one person and a mask')
         images += crops
@@ -109,7 +131,8 @@ def run(args: argparse.Namespace) -> int:
     # wall time from here, as before; the process's CPU time from its start (reading counts)
     budget = Budget(minutes=args.minutes, cpu_minutes=args.cpu_minutes)
     done = train(torch, images, uv, vis, mirror, budget=budget,
-                 input_px=args.input_px, width=args.width, rng=rng, precision=args.precision)
+                 input_px=args.input_px, width=args.width, rng=rng, precision=args.precision,
+                 lr=args.lr, init=None if init is None else init.weights)
     minutes = (time.time() - started) / 60.0
     cpu_minutes = time.process_time() / 60.0
     data = ','.join(f'{a}-{b}' for a, b in ranges)
@@ -117,6 +140,9 @@ def run(args: argparse.Namespace) -> int:
         'command': command_line('train-convnet'),
         'data': f'LSPET {data}', 'photographs': len(numbers), 'seed': args.seed,
         **({'renders': rendered} if rendered else {}),
+        **({'render_background': True} if args.render_background else {}),
+        **({'init': str(args.init), 'init_metadata': init.metadata} if init else {}),
+        'lr': args.lr,
         'steps': done.steps, 'epochs': done.epochs,
         'final_loss': round(float(np.mean(done.losses[-200:])), 4) if done.losses else None,
         'budget': budget.text,

@@ -130,16 +130,25 @@ def score_run(frames: Sequence[Frame], rec: Recording, model: PartModel) -> dict
     return out
 
 
+# The first frames of a run, whose latency `run_results` also gives alone (a new track
+# searches every person scale: `core.dpm.scale.ScaleConfig.warm_up_frames`)
+FIRST_FRAMES = 5
+
+
 def run_results(frames_in: int, rec: Recording, latency_ms: dict[int, float], scores: dict,
                 **facts: object) -> dict:
     """results.json's entry of one run: `facts` (bag, rate, ...), frames in and out, the
-    latency (p50, p95 of `latency_ms`, {stamp: ms} colour frame in -> skeleton out), then
-    `score_run`'s `scores`."""
+    latency (p50, p95 of `latency_ms`, {stamp: ms} colour frame in -> skeleton out; and the
+    first `FIRST_FRAMES` frames' own, where a short run's tail is), then `score_run`'s
+    `scores`."""
     out = len(rec.skeleton)
+    ordered = [latency_ms[s] for s in sorted(latency_ms)]
     return {**facts, 'frames_in': frames_in, 'skeletons_out': out,
             'frames_lost': frames_in - out,
             **({'people_arrays_out': len(rec.people)} if 'people' in scores else {}),
-            'latency_ms': {**ms_stats(latency_ms.values()), 'n': len(latency_ms)}
+            'latency_ms': {**ms_stats(ordered), 'n': len(ordered),
+                           'first_frames': [round(v, 1) for v in ordered[:FIRST_FRAMES]],
+                           'after_first': ms_stats(ordered[FIRST_FRAMES:])}
             if latency_ms else None, **scores}
 
 
@@ -158,6 +167,12 @@ def format_run(results: dict) -> str:
         lat = results['latency_ms']
         lines.append(f'latency colour frame -> /pose4d/skeleton: p50 {lat["p50"]:.1f} ms, '
                      f'p95 {lat["p95"]:.1f} ms (n = {lat["n"]})')
+        after = lat['after_first']
+        if after['p95'] is not None:
+            lines.append(f'  the first {len(lat["first_frames"])} frames: '
+                         f'{", ".join(f"{v:.0f}" for v in lat["first_frames"])} ms (a new '
+                         f"track's scales searched); after them p50 {after['p50']:.1f} ms, "
+                         f'p95 {after["p95"]:.1f} ms')
     tf = results['tf']
     lines.append(f'/tf: {tf["transforms"]} transforms, one per located joint, stamped like the '
                  f'skeleton, for {tf["matching"]} of {tf["skeletons"]} skeletons')

@@ -96,6 +96,31 @@ def network(torch: Any, width: int, joints: int) -> Any:
     return Net(width)
 
 
+def import_weights(torch: Any, net: Any, weights: dict[str, tuple[np.ndarray, np.ndarray]]
+                   ) -> None:
+    """Load `core.convnet` weights (batch normalisation folded) into the PyTorch network, each
+    batch normalisation an identity around the folded bias (mean 0, variance 1 - eps, scale 1):
+    the same function, for fine-tuning (`train`'s `frozen_statistics`); `export_weights`
+    gives the weights back."""
+    modules = dict(net.named_modules())
+    with torch.no_grad():
+        for name in layer_names():
+            w, b = weights[name]
+            m = modules[name]
+            conv, bn = (m[0], m[1]) if hasattr(m, '__getitem__') else (m, None)
+            if tuple(conv.weight.shape) != (w.shape[3], w.shape[2], w.shape[0], w.shape[1]):
+                raise ValueError(f'layer {name}: weights {w.shape} do not fit the network '
+                                 f'({tuple(conv.weight.shape)}): another --width?')
+            conv.weight.copy_(torch.from_numpy(np.ascontiguousarray(w.transpose(3, 2, 0, 1))))
+            if bn is None:
+                conv.bias.copy_(torch.from_numpy(b))
+                continue
+            bn.weight.fill_(1.0)
+            bn.bias.copy_(torch.from_numpy(b))
+            bn.running_mean.zero_()
+            bn.running_var.fill_(1.0 - bn.eps)
+
+
 def export_weights(net: Any) -> dict[str, tuple[np.ndarray, np.ndarray]]:
     """`core.convnet` weights of the PyTorch network: (k, k, C_in, C_out) and (C_out,) per
     layer, each batch normalisation folded into the convolution before it."""
@@ -117,15 +142,16 @@ def export_weights(net: Any) -> dict[str, tuple[np.ndarray, np.ndarray]]:
     return out
 
 
-def render_crops(frames: Iterable[Frame], names: Sequence[str], *, margin: float = 0.12
+def render_crops(frames: Iterable[Frame], names: Sequence[str], *, margin: float = 0.12,
+                 background: bool = False
                  ) -> tuple[list[np.ndarray], np.ndarray, np.ndarray]:
     """Training photographs from rendered RGB-D frames, the person as the detector's crop shows
     them (`core.dpm.net_unary`): the colour blanked outside the person's ground-truth mask
-    (as the foreground stage blanks it), cut to the mask's box plus `margin` of its height on
-    every side; each joint of `names` at its pixel in the crop (the truth's `*_hand` and
-    `*_foot` for `*_wrist` and `*_ankle`), labelled where the truth has it inside the crop.
-    Frames without a mask, an empty one or several people are left out. Returns the crops,
-    (N, J, 2) pixels and (N, J) labelled flags."""
+    (as the foreground stage blanks it; kept as rendered when `background`), cut to the mask's
+    box plus `margin` of its height on every side; each joint of `names` at its pixel in the
+    crop (the truth's `*_hand` and `*_foot` for `*_wrist` and `*_ankle`), labelled where the
+    truth has it inside the crop. Frames without a mask, an empty one or several people are
+    left out. Returns the crops, (N, J, 2) pixels and (N, J) labelled flags."""
     images, uvs, labelled = [], [], []
     for f in frames:
         if f.mask is None or f.truth is None or f.people or not f.mask.any():
@@ -136,7 +162,8 @@ def render_crops(frames: Iterable[Frame], names: Sequence[str], *, margin: float
         h, w = f.mask.shape
         x0, y0 = max(int(cols[0] - pad), 0), max(int(rows[0] - pad), 0)
         x1, y1 = min(int(np.ceil(cols[-1] + 1 + pad)), w), min(int(np.ceil(rows[-1] + 1 + pad)), h)
-        color, _ = apply_mask(f.color, np.zeros(f.mask.shape, np.float32), f.mask)
+        color = f.color if background else \
+            apply_mask(f.color, np.zeros(f.mask.shape, np.float32), f.mask)[0]
         truth = f.truth
         index = {n: i for i, n in enumerate(truth.names)}
         uv = np.full((len(names), 2), np.nan)
@@ -214,18 +241,26 @@ PRECISIONS = ('fp32', 'bf16')
 
 def train(torch: Any, images: Sequence[np.ndarray], uv: np.ndarray, vis: np.ndarray,
           mirror: Sequence[int], *, budget: Budget, input_px: int, width: int,
-          rng: np.random.Generator, precision: str = 'fp32') -> Trained:
+          rng: np.random.Generator, precision: str = 'fp32', lr: float = 2e-3,
+          init: dict[str, tuple[np.ndarray, np.ndarray]] | None = None) -> Trained:
     """The network trained on `images` (their joints `uv`, visible where `vis`; `mirror` swaps
-    left and right) until `budget` is spent: the loop of the module docstring. `precision`
-    'bf16' runs the network's forward pass under CPU autocast to bfloat16 (the weights, the
-    optimiser and the loss stay float32): on a CPU with AMX or AVX512-BF16 about 3x the steps
-    in the same time."""
+    left and right) until `budget` is spent: the loop of the module docstring, the learning
+    rate falling from `lr` along a cosine. `precision` 'bf16' runs the network's forward pass
+    under CPU autocast to bfloat16 (the weights, the optimiser and the loss stay float32): on
+    a CPU with AMX or AVX512-BF16 about 3x the steps in the same time. `init`: a trained
+    network's weights (`core.convnet.ConvNet.weights`) to fine-tune, its batch
+    normalisations' statistics frozen (`import_weights`)."""
     if precision not in PRECISIONS:
         raise ValueError(f'precision must be one of {PRECISIONS}, got {precision!r}')
     cells = input_px // 4
     # channels-last tensors: the same arithmetic, 13 % less CPU a step (oneDNN's layout)
-    net = network(torch, width, len(mirror)).to(memory_format=torch.channels_last)
-    opt = torch.optim.AdamW(net.parameters(), lr=2e-3, weight_decay=1e-4)
+    net = network(torch, width, len(mirror))
+    norms = []
+    if init is not None:
+        import_weights(torch, net, init)
+        norms = [m for m in net.modules() if isinstance(m, torch.nn.BatchNorm2d)]
+    net = net.to(memory_format=torch.channels_last)
+    opt = torch.optim.AdamW(net.parameters(), lr=lr, weight_decay=1e-4)
     log(f'{len(images)} photographs, {sum(p.numel() for p in net.parameters()) / 1e6:.2f} M '
         f'weights, {budget.text}')
     t0, c0 = time.time(), time.process_time()
@@ -241,7 +276,10 @@ def train(torch: Any, images: Sequence[np.ndarray], uv: np.ndarray, vis: np.ndar
             if done >= 1:
                 break
             for group in opt.param_groups:
-                group['lr'] = 2e-3 * 0.5 * (1 + math.cos(math.pi * done))
+                group['lr'] = lr * 0.5 * (1 + math.cos(math.pi * done))
+            net.train()
+            for m in norms:  # fine-tuning: the statistics as imported
+                m.eval()
             xs, ts, ws = [], [], []
             for i in order[k:k + batch]:
                 x, p, v = _sample(rng, images[i], uv[i], vis[i], mirror, input_px)
