@@ -445,6 +445,7 @@ def test_a_network_fine_tuned_starts_as_the_network_it_was(tmp_path: Path) -> No
     meta = cn.load_convnet(out).metadata
     assert meta['init'] == str(first) and meta['init_metadata'] == {'data': 'random'}
     assert meta['render_background'] and meta['lr'] == 1e-4 and meta['steps'] >= 1
+    assert meta['renders'] == {str(renders): 8}  # 4 frames, blanked and as rendered
     assert main(['train-convnet', str(root), '--init', str(first), '--out', str(out)]) == 2
 
 

@@ -141,3 +141,30 @@ def test_a_strong_network_term_moves_a_part_to_its_peak_and_leaves_unknown_parts
 def test_bad_settings_are_refused_with_the_rule(field: str, value: object, words: str) -> None:
     with pytest.raises(ValueError, match=words):
         UnaryConfig(**{field: value})
+
+
+@pytest.mark.parametrize('masked', [True, False])
+def test_the_network_reads_the_blanked_crop_or_the_camera_s(monkeypatch, masked: bool) -> None:
+    """`UnaryConfig.masked`: the network reads the person's crop blanked outside their mask, as
+    the part model does, or, off, the camera's colour image (`photo`) as it is."""
+    rng = np.random.default_rng(2)
+    col, depth, mask = person_frame(rng)
+    model = replace(tenpart_model(), masked_input=True)
+    read: list[tuple[np.ndarray, tuple]] = []
+    original = NetUnary.maps
+
+    def recording(self, color, box):
+        read.append((np.asarray(color).copy(), box))
+        return original(self, color, box)
+
+    monkeypatch.setattr(NetUnary, 'maps', recording)
+    detector = Detector(model, SearchConfig(n_levels=1),
+                        NetUnary(random_net(), UnaryConfig(masked=masked)))
+    blanked = np.where(mask[:, :, None], col, 0).astype(np.uint8)
+    assert detector.detect(blanked, depth, mask=mask, blanked=True, photo=col)
+    (image, (x0, y0, x1, y1)), = read
+    crop, inside = image[y0:y1, x0:x1], mask[y0:y1, x0:x1]
+    assert (~inside).sum() > 1000  # the crop reaches beyond the person
+    assert_array_equal(crop[inside], col[y0:y1, x0:x1][inside])
+    # beyond the person: the camera's pixels only when the network is not masked
+    assert_array_equal(crop[~inside], 0 if masked else col[y0:y1, x0:x1][~inside])

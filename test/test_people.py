@@ -206,7 +206,8 @@ def test_work_is_bounded_by_max_people():
         def spawn(self):
             return type(self)()
 
-        def step(self, color, depth, intrinsics, *, mask, stamp_s, blanked, occluder=None):
+        def step(self, color, depth, intrinsics, *, mask, stamp_s, blanked, occluder=None,
+                     photo=None):
             searched.append(int(np.flatnonzero(mask.any(axis=0))[0]))
             return JointSet.missing(PARTS_10.names)
 
@@ -236,7 +237,8 @@ def test_a_person_is_searched_with_the_nearer_people_in_front_of_them():
         def spawn(self):
             return type(self)()
 
-        def step(self, color, depth, intrinsics, *, mask, stamp_s, blanked, occluder=None):
+        def step(self, color, depth, intrinsics, *, mask, stamp_s, blanked, occluder=None,
+                     photo=None):
             given[int(np.flatnonzero(mask.any(axis=0))[0])] = occluder
             return JointSet.missing(PARTS_10.names)
 
@@ -271,7 +273,8 @@ def test_a_persons_detector_state_lives_as_long_as_their_track():
             made.append(Stage())
             return made[-1]
 
-        def step(self, color, depth, intrinsics, *, mask, stamp_s, blanked, occluder=None):
+        def step(self, color, depth, intrinsics, *, mask, stamp_s, blanked, occluder=None,
+                     photo=None):
             return JointSet.missing(PARTS_10.names).with_(score=12.0)
 
     color = np.zeros((INTR.height, INTR.width, 3), np.uint8)
@@ -313,7 +316,8 @@ def test_a_still_region_that_scored_low_keeps_its_detection_a_few_frames():
         def spawn(self):
             return type(self)()
 
-        def step(self, color, depth, intrinsics, *, mask, stamp_s, blanked, occluder=None):
+        def step(self, color, depth, intrinsics, *, mask, stamp_s, blanked, occluder=None,
+                     photo=None):
             x = int(np.flatnonzero(mask.any(axis=0))[0])
             searched.append((round(stamp_s / DT), x))
             # the region at x < 100 is a wall's edge (score 1), the one at x 100 a person (12)

@@ -63,8 +63,9 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument('--render-stride', type=int, default=1, metavar='N',
                    help='every N-th frame of each rendered video')
     p.add_argument('--render-background', action='store_true',
-                   help='the rendered crops keep their background (default: blanked outside '
-                        'the person, as the foreground stage blanks them)')
+                   help='each rendered crop also as rendered, the room around the person '
+                        'kept (beside the crop blanked outside the person, as the foreground '
+                        'stage blanks it)')
     p.add_argument('--init', type=Path, default=None, metavar='MODEL',
                    help='fine-tune this network (.npz or shipped name) instead of training '
                         'a new one (its batch normalisations frozen)')
@@ -120,8 +121,12 @@ def run(args: argparse.Namespace) -> int:
     for root in args.renders:
         if source_kind(root) != 'cad60':
             raise ValueError(f'--renders {root}: not a CAD-60 directory (pose4d synth)')
-        crops, r_uv, r_vis = render_crops(open_source(root, stride=args.render_stride), names,
-                                          background=args.render_background)
+        crops, r_uv, r_vis = render_crops(open_source(root, stride=args.render_stride), names)
+        if args.render_background:
+            kept, k_uv, k_vis = render_crops(open_source(root, stride=args.render_stride), names,
+                                             background=True)
+            crops, r_uv, r_vis = crops + kept, np.concatenate([r_uv, k_uv]), \
+                np.concatenate([r_vis, k_vis])
         if not crops:
             raise ValueError(f'--renders {root}: no frame with one person and a mask')
         images += crops

@@ -30,7 +30,8 @@ Parameters (config/detector.yaml)
     detector.scale_warm_up_frames, detector.scale_probe_every, detector.min_confidence,
     detector.max_people, detector.quiet_frames, detector.keep_unseen_s, detector.arm_prior,
     detector.occluded_quantile, detector.colour_net, detector.colour_net_precision,
-    detector.colour_net_weight, detector.colour_hog_weight, lifecycle.autostart
+    detector.colour_net_weight, detector.colour_hog_weight, detector.colour_net_masked,
+    lifecycle.autostart
     (`nodes.lifecycle`: a managed node)
     (a part's depth look-up is the model's: `core.lifting.lift_parts`)
 """
@@ -129,6 +130,9 @@ PARAMS = (
           'filters when detector.colour_net is set (0 = the network is the whole colour '
           'unary; the depth filters keep theirs).', range=(0.0, 10.0),
           restart="the model's filters are prepared at start-up"),
+    Param('detector.colour_net_masked', _U.masked, 'The network reads each person blanked '
+          'outside their mask, as the part model does (false: the camera image around them '
+          'too).', restart='the network term is built at start-up'),
     Param('detector.n_levels', _S.n_levels, 'Pyramid levels searched around the scale the '
           "person's depth predicts.", range=(1, 9), live=True),
     Param('detector.margin', _S.margin, 'Search margin around the foreground box, in person '
@@ -204,7 +208,8 @@ def colour_net(p: dict[str, Any]) -> NetUnary | None:
     except (OSError, ValueError) as exc:
         raise ParameterError(f'parameter detector.colour_net: {exc}') from None
     return NetUnary(net, UnaryConfig(weight=p['detector.colour_net_weight'],
-                                     hog_weight=p['detector.colour_hog_weight']))
+                                     hog_weight=p['detector.colour_hog_weight'],
+                                     masked=p['detector.colour_net_masked']))
 
 
 def people_config(p: dict[str, Any]) -> TrackingConfig:

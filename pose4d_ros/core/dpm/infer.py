@@ -376,7 +376,8 @@ class Detector:
                mask: NDArray[np.bool_] | None = None, box: tuple | None = None,
                intrinsics: Intrinsics | None = None, top_k: int = 1, scale: float = 1.0,
                blanked: bool = False, prior: NDArray[np.floating] | None = None,
-               occluder: NDArray[np.bool_] | None = None) -> list[Pose]:
+               occluder: NDArray[np.bool_] | None = None,
+               photo: NDArray | None = None) -> list[Pose]:
         """The best `top_k` poses in a frame.
 
         Parameters
@@ -396,6 +397,8 @@ class Detector:
             unknown): its elbows and wrists guide the arms (`SearchConfig.arm_prior`).
         occluder : (H, W) bool pixels of nearer people in front of this one (with `mask`):
             a part may lie there, hidden (`SearchConfig.occluded_quantile`).
+        photo : the camera's colour image, not blanked: what the photograph network reads
+            when its `UnaryConfig.masked` is off (default: `color`).
 
         Returns
         -------
@@ -417,8 +420,11 @@ class Detector:
             if d is None or not (np.isfinite(d) & (d > 0)).any():
                 flags = ('no_depth',)
         levels = self.pyramid(color, depth_m, plan, mask=mask, blanked=blanked)
-        maps = None if self.unary is None else self.net_maps(color, plan, mask=mask,
-                                                             blanked=blanked)
+        maps = None
+        if self.unary is not None and photo is not None and not self.unary.config.masked:
+            maps = self.unary.maps(np.asarray(photo), (plan.x0, plan.y0, plan.x1, plan.y1))
+        elif self.unary is not None:
+            maps = self.net_maps(color, plan, mask=mask, blanked=blanked)
         floor = None
         if occluder is not None and mask is not None and self.config.occluded_quantile > 0:
             floor = OcclusionFloor(mask, occluder, self.config.occluded_quantile,

@@ -61,6 +61,9 @@ class UnaryConfig:
         98.75 / 93.46, 12.9, 6.6 ms).
     input_px : the size the crop is read at, pixels (a multiple of 32; 0 = the network's own
         `input_px`): the network is fully convolutional.
+    masked : the network reads the crop blanked outside the person's mask, as the part model
+        does (a model trained on masked frames); off: the camera's crop as it is, the
+        person's surroundings included, as the network's photographs show them.
     score_scale, score_offset : the pose's score handed on (`Pose.score`) is
         ``score_scale * s + score_offset``, s the part model's score at the pose the network
         chose: the network pulls the parts off the model's own maxima, more so where the
@@ -88,6 +91,7 @@ class UnaryConfig:
     scales: tuple[float, ...] = (1.0,)
     mirror: bool = False
     input_px: int = 0
+    masked: bool = True
     score_scale: float = 1.0 / 3.0
     score_offset: float = 6.0
 

@@ -102,7 +102,8 @@ class PeopleDetector:
             color_m, depth_mm = apply_mask(color, depth_m, person.mask)
             slot.last = slot.stage.step(color_m, depth_mm, intrinsics, mask=person.mask,
                                         stamp_s=stamp_s, blanked=True,
-                                        occluder=_in_front(people, j, cfg.torso_std_m))
+                                        occluder=_in_front(people, j, cfg.torso_std_m),
+                                        photo=color)
             slot.depth_m, slot.mask, slot.kept = person.depth_m, person.mask, 0
             out.append(slot.last)
         keep_s = cfg.detector_keep_s or max(cfg.max_unseen_s, cfg.max_hidden_s)

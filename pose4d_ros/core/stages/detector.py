@@ -103,12 +103,15 @@ class DetectorStage:
     def step(self, color: NDArray[np.uint8], depth_m: NDArray[np.floating] | None,
              intrinsics: Intrinsics | None, *, mask: NDArray[np.bool_] | None = None,
              stamp_s: float | None = None, blanked: bool = False,
-             occluder: NDArray[np.bool_] | None = None) -> JointSet:
+             occluder: NDArray[np.bool_] | None = None,
+             photo: NDArray[np.uint8] | None = None) -> JointSet:
         """The detected parts of one frame (all MISSING when there is no person to search).
 
         `blanked`: colour and depth are already blanked outside `mask` (as `ForegroundStage`
         returns them), so the detector need not blank them again. `occluder`: the pixels of
         nearer people, where a part may lie hidden (`SearchConfig.occluded_quantile`).
+        `photo`: the camera's colour, not blanked (for the photograph network:
+        `Detector.detect`).
 
         `stamp_s` (the frame's time, seconds) tells the person's scale when a new track starts
         (`core.dpm.scale.PersonScale`: the person unseen for a while); without it, only
@@ -126,7 +129,7 @@ class DetectorStage:
         prior = self._prior(stamp_s)
         found = {f: self.detector.detect(color, depth_m, mask=mask, intrinsics=intrinsics,
                                          scale=f, blanked=blanked, prior=prior,
-                                         occluder=occluder)
+                                         occluder=occluder, photo=photo)
                  for f in factors}
         if not any(found.values()):
             self.last_flags = ('no_person',)
