@@ -585,8 +585,8 @@ class PeopleInputs:
     so between two of ours each frame crosses once). A single-person message is taken as a
     list of one, unless a several-person message came in the last `PEOPLE_FRESH_S` seconds:
     then the upstream stage publishes both, and the single-person one (its primary person) is
-    left out. A frame whose stamp was among the last few processed is not processed again
-    (both ways came in before the first several-person message did).
+    left out. A frame whose stamp was among the last few processed the other way is not
+    processed again (both ways came in before the first several-person message did).
 
     Frames are processed in a `FrameQueue`'s worker, never in the executor's thread: a stage
     slower than its input works on the newest frame and drops the older ones (counted on the
@@ -601,7 +601,8 @@ class PeopleInputs:
                  slop_ns: int = 0) -> None:
         self._process = process
         self._last_people = -float('inf')
-        self._recent: deque[int] = deque(maxlen=4)  # stamps of the last frames processed
+        # (stamp, came as several people) of the last frames processed
+        self._recent: deque[tuple[int, bool]] = deque(maxlen=4)
         self._monitor = monitor
         self._paired = (PairedInputs(node, [(None, people_topic, None), *extra],
                                      self._frame, monitor, slop_ns=slop_ns) if extra else None)
@@ -631,12 +632,13 @@ class PeopleInputs:
 
     def _frame(self, items: tuple) -> None:
         header = items[0].header
-        stamp = stamp_to_ns(header.stamp)
-        if stamp in self._recent:
+        stamp, several = stamp_to_ns(header.stamp), items[0].several
+        if (stamp, not several) in self._recent:
             # the frame came both ways (a restarted stage takes the single-person message
-            # before it has seen the upstream's several-person one): it is processed once
+            # before it has seen the upstream's several-person one): it is processed once (a
+            # frame sent again the same way is processed again)
             return
-        self._recent.append(stamp)
+        self._recent.append((stamp, several))
         try:
             people = items[0].people()
         except ValueError as exc:
@@ -649,9 +651,10 @@ class _Pivot:
     """A frame's header and its people (`people()`: read as they arrived, or, for a message
     deserialised the general way, when the frame is processed)."""
 
-    def __init__(self, header: object, people: Callable[[], list]) -> None:
+    def __init__(self, header: object, people: Callable[[], list], several: bool) -> None:
         self.header = header
         self.people = people
+        self.several = several  # a SkeletonArray's (else a JointArray's: one person)
 
     @classmethod
     def of_bytes(cls, data: bytes, msg_type: type) -> _Pivot:
@@ -665,8 +668,8 @@ class _Pivot:
         except ValueError:
             msg = deserialize_message(data, msg_type)
             return cls(msg.header, (lambda: list(wire.skeletons_from_msg(msg))) if several
-                       else (lambda: [wire.joints_from_msg(msg)]))
+                       else (lambda: [wire.joints_from_msg(msg)]), several)
         people = (list(wire.skeletons_from_cdr(data, at)) if several
                   else [wire.joints_from_cdr(data)])
         return cls(Header(stamp=Time(sec=sec, nanosec=nanosec), frame_id=frame_id),
-                   lambda: people)
+                   lambda: people, several)
