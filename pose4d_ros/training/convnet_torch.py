@@ -100,7 +100,7 @@ def import_weights(torch: Any, net: Any, weights: dict[str, tuple[np.ndarray, np
                    ) -> None:
     """Load `core.convnet` weights (batch normalisation folded) into the PyTorch network, each
     batch normalisation an identity around the folded bias (mean 0, variance 1 - eps, scale 1):
-    the same function, for fine-tuning (`train`'s `frozen_statistics`); `export_weights`
+    the same function, for fine-tuning (`train`'s `init`, statistics frozen); `export_weights`
     gives the weights back."""
     modules = dict(net.named_modules())
     with torch.no_grad():
