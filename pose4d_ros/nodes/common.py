@@ -133,6 +133,7 @@ def run(factory: Callable[[], Node], args: list[str] | None = None,
     # spin-waiting for a core make the detector's GEMM several times slower (core.threads).
     set_blas_threads(1)
     keep_freed_memory()  # a frame's blocks reused, not mapped afresh (core.malloc)
+    wire.warm_up()  # the depth decoders' kernels, for message buffers (else the first frame's)
     rclpy.init(args=args, signal_handler_options=None if signal_handlers
                else SignalHandlerOptions.NO)
     node = None

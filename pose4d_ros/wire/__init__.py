@@ -17,6 +17,7 @@ a job:
   `joints_from_cdr`,
   `skeletons_from_cdr`; `joints_to_cdr`, `skeletons_to_cdr`, `image_to_cdr`, `tf_to_cdr`, whose
   header is any object with `stamp.sec`, `stamp.nanosec` and `frame_id`);
+- `warm`: its numba kernels compiled before a node's first frame (`warm_up`);
 - `hri`: the ROS4HRI (REP 155) body messages' bytes (`ids_list_to_cdr`, `skeleton2d_to_cdr`,
   `roi_to_cdr`), from `core.hri`'s values.
 
@@ -51,6 +52,7 @@ from pose4d_ros.wire.msgs import (
     stamp_to_ns,
 )
 from pose4d_ros.wire.pixels import ENCODINGS, as_encoding, decode
+from pose4d_ros.wire.warm import warm_up
 
 __all__ = ['CdrImage', 'ENCODINGS', 'as_encoding', 'cdr_header', 'color_from_compressed',
            'color_from_msg', 'decode', 'depth_from_compressed', 'depth_from_msg', 'HeaderLike',
@@ -58,4 +60,4 @@ __all__ = ['CdrImage', 'ENCODINGS', 'as_encoding', 'cdr_header', 'color_from_com
            'intrinsics_from_msg', 'is_compressed_depth', 'joint_frame', 'joints_from_cdr',
            'joints_from_msg', 'joints_to_cdr', 'roi_to_cdr', 'skeleton2d_to_cdr',
            'skeletons_from_cdr', 'skeletons_from_msg', 'skeletons_to_cdr', 'stamp_to_ns',
-           'tf_to_cdr']
+           'tf_to_cdr', 'warm_up']
