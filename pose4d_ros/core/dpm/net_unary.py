@@ -50,7 +50,10 @@ class UnaryConfig:
     weight : factor on the network's log-probability in a part's unary.
     hog_weight : factor on the model's colour HOG filters (the depth filters keep theirs).
         `weight` 4 and `hog_weight` 1 were chosen on validation for the shipped `rgbd_14` and
-        `lspet_convnet` (`make results`' colour_net job, `docs/results/colour_net.json`).
+        `lspet_convnet` (`make results`' colour_net job, `docs/results/colour_net.json`: the
+        best on LSPET photographs among the weightings losing at most 0.5 of average7 on
+        `valid30`, `valid30_msr` and `valid60_people3`; chosen again for the network
+        fine-tuned on renders in their rooms, weight 16 losing 1.1 on `valid60_people3`).
     floor : log-probability below which a cell scores no worse.
     scales : the network's reading scales of the crop (`ConvNet.heat_maps`).
     mirror : the crop's mirror image read too and the maps averaged (twice the network's
