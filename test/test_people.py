@@ -806,3 +806,22 @@ def test_an_unseen_track_on_a_person_seen_under_another_id_ends(same_person_m):
     assert abs(torso(right)[0][0] - 0.5) < 0.05  # the seen one took the detection
     assert (left in [t.track_id for t in out]) == (same_person_m == 0.0)
     assert tr.ended == ([] if same_person_m == 0.0 else [left])
+
+
+def test_a_track_spanning_more_than_a_body_is_kept_but_not_published():
+    """`max_span_m`: a skeleton whose located joints lie farther apart in 3-D than a body's
+    (a track coasting on after its person left, its predicted joints flung apart) is not
+    published; its track goes on, and is published again, with its id, once its joints span a
+    body's size. A standing person's skeleton spans well under the default."""
+    from pose4d_ros.core.people.tracker import span_m
+
+    body = span_m(person(0.0))
+    assert 1.0 < body < TrackingConfig().max_span_m
+    tr = tracker(max_span_m=0.9 * body)
+    for k in range(5):
+        assert tr.step([person(0.0)], k * DT, INTR) == []
+    (track,) = [t for t in tr.tracks if t.id]
+    tr.config = replace(tr.config, max_span_m=1.1 * body)
+    out = tr.step([person(0.0)], 5 * DT, INTR)
+    assert [t.track_id for t in out] == [track.id]
+    assert span_m(out[0]) == pytest.approx(body, rel=0.05)

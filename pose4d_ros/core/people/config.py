@@ -166,6 +166,12 @@ class TrackingConfig:
         27.8, 89.61 / 0.969 / 27.8; `valid60_people3d` 85.59 / 0.972 / 1.4, 85.57 /
         0.971 / 0 at 0.3 and 0.5; `valid60_people3`, `valid30_people2b`
         the same at every value. 0.3 m shipped (0.5 costs validation points).
+    max_span_m : a track whose located joints lie farther apart than this in 3-D is kept but
+        not published (no person's body spans it: a 2 m person's wrist raised above the head
+        is some 2.4 m from their ankle). On the real development recording lab_walk a track
+        coasting after its person had left put its predicted joints metres apart across the
+        empty floor, a ghost every frame; on validation renders no published skeleton spans
+        over 1.86 m (`valid60_people2`, 1396 skeletons), on lab_walk 9 of 151 over 2.5 m.
 
     `confirm_frames`, `birth_score` and `trust_score`, and the foreground's second look, were
     chosen on validation renders (training subjects s01-s06, seed 201: `valid60_people2`, two
@@ -200,6 +206,7 @@ class TrackingConfig:
     free_space_m: float = 1.5
     free_share: float = 0.9
     same_person_m: float = 0.3
+    max_span_m: float = 2.7
 
     def __post_init__(self) -> None:
         if self.max_people < 1 or self.confirm_frames < 1 or self.quiet_frames < 0:
@@ -210,6 +217,8 @@ class TrackingConfig:
                      'occluded_width_m', 'max_held_s', 'max_hidden_s'):
             if not getattr(self, name) > 0:
                 raise ValueError(f'{name} must be > 0, got {getattr(self, name)}')
+        if not self.max_span_m > 0:
+            raise ValueError(f'max_span_m must be > 0, got {self.max_span_m}')
         if not self.detector_keep_s >= 0:
             raise ValueError(f'detector_keep_s must be >= 0, got {self.detector_keep_s}')
         if math.isnan(self.trust_score):

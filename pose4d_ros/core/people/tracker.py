@@ -191,9 +191,11 @@ class PeopleTracker:
         self.tracks = [t for t in self.tracks
                        if (t.id or t.seen_s == stamp_s) and t not in gone]
         self.ended += [t.id for t in gone]
-        # a pose held too long is mostly where nobody is: kept, not published
+        # a pose held too long is mostly where nobody is, and no person spans more than
+        # `max_span_m`: kept, not published
         return [t.last for t in self._ordered(stamp_s)
-                if not (t.held and stamp_s - t.held_s > cfg.max_held_s)]
+                if not (t.held and stamp_s - t.held_s > cfg.max_held_s)
+                and span_m(t.last) <= cfg.max_span_m]
 
     def _left(self, joints: JointSet | None,
               depth: Callable[[], NDArray[np.floating] | None],
@@ -452,6 +454,15 @@ def _out_from_behind(track: _Track, fronts: set[int] | None, own_front: bool) ->
     would: with `own_front`, for a track held behind a person, from behind that person only
     (not seen this frame, nobody comes out from behind them); otherwise from behind anyone."""
     return bool(fronts) and (not (own_front and track.held) or track.behind in fronts)
+
+
+def span_m(joints: JointSet) -> float:
+    """The largest 3-D distance between two of the skeleton's located joints, metres (0 with
+    fewer than two)."""
+    xyz = joints.xyz[np.logical_and.reduce(np.isfinite(joints.xyz), axis=1)]
+    if len(xyz) < 2:
+        return 0.0
+    return float(np.sqrt(((xyz[:, None] - xyz[None]) ** 2).sum(axis=-1).max()))
 
 
 def _finite(v: NDArray[np.float64]) -> bool:
