@@ -420,11 +420,8 @@ class Detector:
             if d is None or not (np.isfinite(d) & (d > 0)).any():
                 flags = ('no_depth',)
         levels = self.pyramid(color, depth_m, plan, mask=mask, blanked=blanked)
-        maps = None
-        if self.unary is not None and photo is not None and not self.unary.config.masked:
-            maps = self.unary.maps(np.asarray(photo), (plan.x0, plan.y0, plan.x1, plan.y1))
-        elif self.unary is not None:
-            maps = self.net_maps(color, plan, mask=mask, blanked=blanked)
+        maps = None if self.unary is None else self.net_maps(color, plan, mask=mask,
+                                                             blanked=blanked, photo=photo)
         floor = None
         if occluder is not None and mask is not None and self.config.occluded_quantile > 0:
             floor = OcclusionFloor(mask, occluder, self.config.occluded_quantile,
@@ -435,11 +432,16 @@ class Detector:
             floor=floor)
 
     def net_maps(self, color: NDArray, plan: SearchPlan, *,
-                 mask: NDArray[np.bool_] | None = None, blanked: bool = False) -> NetMaps:
+                 mask: NDArray[np.bool_] | None = None, blanked: bool = False,
+                 photo: NDArray | None = None) -> NetMaps:
         """The network's maps of the plan's crop (`NetUnary.maps`), blanked outside `mask` as
-        the pyramid is for a model trained on masked frames."""
+        the pyramid is for a model trained on masked frames; of `photo`'s crop instead (the
+        camera's colour, not blanked) when given and the network is not masked
+        (`UnaryConfig.masked` off)."""
         assert self.unary is not None
         box = (plan.x0, plan.y0, plan.x1, plan.y1)
+        if photo is not None and not self.unary.config.masked:
+            return self.unary.maps(np.asarray(photo), box)
         if self.model.masked_input and mask is not None and not blanked:
             sl = np.s_[plan.y0:plan.y1, plan.x0:plan.x1]
             crop = np.zeros_like(np.asarray(color))
