@@ -121,12 +121,9 @@ def run(args: argparse.Namespace) -> int:
     for root in args.renders:
         if source_kind(root) != 'cad60':
             raise ValueError(f'--renders {root}: not a CAD-60 directory (pose4d synth)')
-        crops, r_uv, r_vis = render_crops(open_source(root, stride=args.render_stride), names)
-        if args.render_background:
-            kept, k_uv, k_vis = render_crops(open_source(root, stride=args.render_stride), names,
-                                             background=True)
-            crops, r_uv, r_vis = crops + kept, np.concatenate([r_uv, k_uv]), \
-                np.concatenate([r_vis, k_vis])
+        crops, r_uv, r_vis = render_crops(
+            open_source(root, stride=args.render_stride), names,
+            backgrounds=(False, True) if args.render_background else (False,))
         if not crops:
             raise ValueError(f'--renders {root}: no frame with one person and a mask')
         images += crops

@@ -143,16 +143,19 @@ def export_weights(net: Any) -> dict[str, tuple[np.ndarray, np.ndarray]]:
 
 
 def render_crops(frames: Iterable[Frame], names: Sequence[str], *, margin: float = 0.12,
-                 background: bool = False
+                 backgrounds: Sequence[bool] = (False,)
                  ) -> tuple[list[np.ndarray], np.ndarray, np.ndarray]:
     """Training photographs from rendered RGB-D frames, the person as the detector's crop shows
     them (`core.dpm.net_unary`): the colour blanked outside the person's ground-truth mask
-    (as the foreground stage blanks it; kept as rendered when `background`), cut to the mask's
-    box plus `margin` of its height on every side; each joint of `names` at its pixel in the
-    crop (the truth's `*_hand` and `*_foot` for `*_wrist` and `*_ankle`), labelled where the
-    truth has it inside the crop. Frames without a mask, an empty one or several people are
-    left out. Returns the crops, (N, J, 2) pixels and (N, J) labelled flags."""
-    images, uvs, labelled = [], [], []
+    (as the foreground stage blanks it), cut to the mask's box plus `margin` of its height on
+    every side; each joint of `names` at its pixel in the crop (the truth's `*_hand` and
+    `*_foot` for `*_wrist` and `*_ankle`), labelled where the truth has it inside the crop.
+    Each frame is cut once per value of `backgrounds` (False: blanked; True: as rendered, the
+    room kept), read once; the crops of the first value come first. Frames without a mask, an
+    empty one or several people are left out. Returns the crops, (N, J, 2) pixels and (N, J)
+    labelled flags."""
+    images: dict[bool, list[np.ndarray]] = {bg: [] for bg in backgrounds}
+    uvs, labelled = [], []
     for f in frames:
         if f.mask is None or f.truth is None or f.people or not f.mask.any():
             continue
@@ -162,8 +165,10 @@ def render_crops(frames: Iterable[Frame], names: Sequence[str], *, margin: float
         h, w = f.mask.shape
         x0, y0 = max(int(cols[0] - pad), 0), max(int(rows[0] - pad), 0)
         x1, y1 = min(int(np.ceil(cols[-1] + 1 + pad)), w), min(int(np.ceil(rows[-1] + 1 + pad)), h)
-        color = f.color if background else \
-            apply_mask(f.color, np.zeros(f.mask.shape, np.float32), f.mask)[0]
+        for bg in backgrounds:
+            color = f.color if bg else \
+                apply_mask(f.color, np.zeros(f.mask.shape, np.float32), f.mask)[0]
+            images[bg].append(np.ascontiguousarray(color[y0:y1, x0:x1]))
         truth = f.truth
         index = {n: i for i, n in enumerate(truth.names)}
         uv = np.full((len(names), 2), np.nan)
@@ -175,11 +180,12 @@ def render_crops(frames: Iterable[Frame], names: Sequence[str], *, margin: float
             u, v = truth.uv[i, 0] - x0, truth.uv[i, 1] - y0
             if 0 <= u < x1 - x0 and 0 <= v < y1 - y0:
                 uv[j], vis[j] = (u, v), True
-        images.append(np.ascontiguousarray(color[y0:y1, x0:x1]))
         uvs.append(uv)
         labelled.append(vis)
-    return images, np.array(uvs).reshape(-1, len(names), 2), \
-        np.array(labelled, bool).reshape(-1, len(names))
+    k = len(images)
+    return [im for bg in images for im in images[bg]], \
+        np.tile(np.array(uvs).reshape(-1, len(names), 2), (k, 1, 1)), \
+        np.tile(np.array(labelled, bool).reshape(-1, len(names)), (k, 1))
 
 
 def _sample(rng: np.random.Generator, image: np.ndarray, uv: np.ndarray, vis: np.ndarray,
