@@ -354,8 +354,26 @@ def test_staging_puts_the_body_where_asked(stature: float, distance: float, turn
     assert_allclose(np.degrees(np.arctan2(across[1], across[0])), turn, atol=1e-6)
 
 
+@pytest.mark.parametrize(('height', 'pitch'), [(2.4, 30.0), (2.0, 20.0)])
+def test_a_mounted_camera_looks_down_from_where_asked(height: float, pitch: float) -> None:
+    staging = synth_video.Staging(camera_height_m=(height, height),
+                                  camera_pitch_deg=(pitch, pitch))
+    scene = synth_scene.random_scene(np.random.default_rng(5), K, occluder_prob=0.0,
+                                     mount=staging.mount)
+    assert scene.cam_height_m == height
+    # the optical axis, in the room (Z up), points down by the pitch (yaw and roll are small)
+    axis = scene.room_to_cam[2]
+    assert_allclose(np.degrees(np.arcsin(-axis[2])), pitch, atol=0.5)
+    # the floor lies the camera's height below it, along the room's up seen from the camera
+    floor_point = scene.to_optical(np.array([[0.0, 3.0, 0.0]]))[0]
+    assert_allclose(-floor_point @ scene.up_optical, height, atol=1e-6)
+
+
 @pytest.mark.parametrize('bad', [{'stature_m': (1.9, 1.5)}, {'distance_m': (0.1, 2.0)},
-                                 {'turn_deg': (0.0, 200.0)}])
+                                 {'turn_deg': (0.0, 200.0)},
+                                 {'camera_height_m': (2.0, 2.5)},
+                                 {'camera_height_m': (2.0, 4.0), 'camera_pitch_deg': (20, 30)},
+                                 {'camera_pitch_deg': (30, 20), 'camera_height_m': (2.0, 2.5)}])
 def test_staging_refuses_bad_ranges(bad: dict) -> None:
     with pytest.raises(ValueError, match=next(iter(bad))):
         synth_video.Staging(**bad)
@@ -372,6 +390,23 @@ def test_pose4d_synth_staging_options(tmp_path: Path) -> None:
     assert info['stature_m'] == [1.8, 1.8] and info['turn_deg'] == [45.0, 45.0]
     video = info['videos'][0]
     assert video['stature_m'] == 1.8 and 3.2 < video['distance_m'] < 3.8
+    assert 'camera_pitch_deg' not in info
+
+
+def test_pose4d_synth_camera_options(tmp_path: Path, capsys) -> None:
+    ut = tmp_path / 'ut'
+    write_utkinect(ut, frames=40)
+    out = tmp_path / 'set'
+    assert pose4d_main(['synth', '--utkinect', str(ut), '--out', str(out), '--takes', 's01_e01',
+                        '--frames', '2', '--camera-height', '2.3', '2.3', '--camera-pitch', '28',
+                        '28', '--quiet']) == 0
+    info = json.loads((out / 'synth.json').read_text())
+    assert info['camera_height_m'] == [2.3, 2.3] and info['camera_pitch_deg'] == [28.0, 28.0]
+    assert info['videos'][0]['camera_height_m'] == 2.3
+    assert pose4d_main(['synth', '--utkinect', str(ut), '--out', str(tmp_path / 'bad'),
+                        '--takes', 's01_e01', '--camera-height', '2.3', '2.3', '--quiet']) == 2
+    assert 'camera_height_m and camera_pitch_deg go together' in capsys.readouterr().err
+    assert not (tmp_path / 'bad').exists()
 
 
 def _flexion_deg(joints: np.ndarray, side: str) -> np.ndarray:

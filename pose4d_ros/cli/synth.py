@@ -76,6 +76,13 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument('--turn', type=float, nargs=2, metavar=('LO', 'HI'), default=None,
                    help='turn of the motion about the vertical, degrees, drawn uniformly: 0 '
                         'faces the camera, 90 shows the right side (default: -25 25)')
+    p.add_argument('--camera-height', type=float, nargs=2, metavar=('LO', 'HI'), default=None,
+                   help='the camera mounted above the heads: its height above the floor, '
+                        'metres, drawn uniformly (with --camera-pitch; default: 0.85-1.35 m, '
+                        'aimed at the person\'s middle)')
+    p.add_argument('--camera-pitch', type=float, nargs=2, metavar=('LO', 'HI'), default=None,
+                   help='the mounted camera\'s pitch down, degrees, drawn uniformly (with '
+                        '--camera-height)')
     p.add_argument('--arm-jitter', type=float, default=0.0, metavar='DEG',
                    help='pose the arms away from the recorded motion by up to DEG degrees (at '
                         'the shoulder and the elbow, varying smoothly through each video): arm '
@@ -199,7 +206,9 @@ def _staging(args: argparse.Namespace):
         stature_m=tuple(args.stature or default.stature_m),
         distance_m=tuple(args.distance or (people.PEOPLE_DISTANCE_M if args.people > 1
                                            else default.distance_m)),
-        turn_deg=tuple(args.turn or default.turn_deg), arm_jitter_deg=args.arm_jitter)
+        turn_deg=tuple(args.turn or default.turn_deg), arm_jitter_deg=args.arm_jitter,
+        camera_height_m=None if args.camera_height is None else tuple(args.camera_height),
+        camera_pitch_deg=None if args.camera_pitch is None else tuple(args.camera_pitch))
 
 
 def _job(args: argparse.Namespace, plan, crosses: bool, motions: list, intrinsics, staging,
@@ -241,6 +250,9 @@ def _info(args: argparse.Namespace, names: list[str], staging, records: list[dic
     if args.msraction3d is not None:
         info.update({'utkinect': None if args.utkinect is None else str(args.utkinect),
                      'msraction3d': str(args.msraction3d), 'msraction3d_skipped': skipped})
+    if staging.mount is not None:  # a set with the default camera's synth.json stays the same
+        info.update({'camera_height_m': list(staging.camera_height_m),
+                     'camera_pitch_deg': list(staging.camera_pitch_deg)})
     if args.people > 1:  # a one-person set's synth.json stays as it always was
         info.update({'people': args.people, 'crossing': crossing})
     return {**info, 'videos': records}

@@ -256,7 +256,7 @@ def prepare_people_video(plan: VideoPlan, motions: Sequence[TakeMotion],
         body = render.random_body(video_rng(plan, 1), stature_m=staging.stature_m)
     rng = video_rng(plan, 2)
     scene = rooms.random_scene(rng, intrinsics, occluder_prob=occluder_prob,
-                               person_zone=people_zone(staging))
+                               person_zone=people_zone(staging), mount=staging.mount)
     windows = [(by_name[plan.take], plan.start, plan.indices)] + companion_windows(
         plan, motions, people, [video_rng(plan, 10 * k) for k in range(2, people + 1)])
     bodies = [body] + [render.random_body(video_rng(plan, 10 * k + 1),

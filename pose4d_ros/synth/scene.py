@@ -197,11 +197,13 @@ def _overlaps(rect: tuple[float, float, float, float],
 
 def random_scene(rng: np.random.Generator, intrinsics: Intrinsics, *,
                  occluder_prob: float = 0.3,
-                 person_zone: tuple[float, float, float, float] = PERSON_ZONE) -> Scene:
+                 person_zone: tuple[float, float, float, float] = PERSON_ZONE,
+                 mount: tuple[tuple[float, float], tuple[float, float]] | None = None) -> Scene:
     """A random furnished room seen by a Kinect-like camera.
 
     The camera stands 0.85-1.35 m high, aimed at a point 1.0-1.1 m high 3 m away (pitch about
-    -6 to +8 degrees), looking at a back wall
+    -6 to +8 degrees), or, with `mount`, as high and pitched down as much as it says (a camera
+    on a wall or a shelf above the heads, looking down), looking at a back wall
     3.7-5.5 m away (partly beyond the sensor's range, as in real rooms; further by as much as
     `person_zone` reaches beyond `PERSON_ZONE`); side walls are 1.7-3 m to either side (at
     least 0.6 m beside `person_zone`).
@@ -217,9 +219,11 @@ def random_scene(rng: np.random.Generator, intrinsics: Intrinsics, *,
     intrinsics : the camera the room is pre-rendered for.
     occluder_prob : probability of an occluding object in front of the person zone.
     person_zone : room-frame (x0, x1, y0, y1) metres kept free for the person.
+    mount : ((lo, hi) height, metres; (lo, hi) pitch down, degrees), each drawn uniformly;
+        None: the camera at a person's chest height described above.
     """
     mb = tex.MaterialBuilder()
-    cam_h, room_to_cam = _random_camera(rng)
+    cam_h, room_to_cam = _random_camera(rng, mount)
     back = float(rng.uniform(3.7, 5.5)) + max(person_zone[3] - PERSON_ZONE[3], 0.0)
     # side walls at least 0.6 m beside a person zone wider than `PERSON_ZONE` (several people)
     xl = -max(float(rng.uniform(1.7, 3.0)), 0.6 - person_zone[0])
@@ -256,13 +260,19 @@ def random_scene(rng: np.random.Generator, intrinsics: Intrinsics, *,
                         floor_index=0)
 
 
-def _random_camera(rng: np.random.Generator) -> tuple[float, NDArray[np.float64]]:
+def _random_camera(rng: np.random.Generator,
+                   mount: tuple[tuple[float, float], tuple[float, float]] | None = None
+                   ) -> tuple[float, NDArray[np.float64]]:
     """The camera's height, metres, and its room-to-optical rotation (see `random_scene`)."""
-    cam_h = float(rng.uniform(0.85, 1.35))
-    # aimed at 1.0-1.1 m high, 3 m away: a whole person fits from about 2.5 m on, and closer
-    # people lose their feet rather than their heads
-    aim = float(rng.uniform(1.0, 1.1))
-    pitch = np.arctan2(cam_h - aim, 3.0) + np.deg2rad(rng.uniform(-1.5, 1.5))
+    if mount is None:
+        cam_h = float(rng.uniform(0.85, 1.35))
+        # aimed at 1.0-1.1 m high, 3 m away: a whole person fits from about 2.5 m on, and
+        # closer people lose their feet rather than their heads
+        aim = float(rng.uniform(1.0, 1.1))
+        pitch = np.arctan2(cam_h - aim, 3.0) + np.deg2rad(rng.uniform(-1.5, 1.5))
+    else:
+        cam_h = float(rng.uniform(*mount[0]))
+        pitch = np.deg2rad(rng.uniform(*mount[1]))
     yaw = np.deg2rad(rng.uniform(-6.0, 6.0))
     roll = np.deg2rad(rng.normal(0.0, 0.8))
     return cam_h, camera_rotation(pitch, yaw, roll)

@@ -66,14 +66,29 @@ class Staging:
         (UTKinect's subjects face the Kinect), 90 = the person's left side towards the camera.
     arm_jitter_deg : arms posed away from the recorded motion by up to this much (`jitter_arms`),
         degrees; 0 = the motion as recorded.
+    camera_height_m, camera_pitch_deg : (lo, hi) the camera's height above the floor, metres,
+        and its pitch down, degrees, both given or neither; None: the camera at chest height,
+        aimed at the person's middle (`scene.random_scene`).
     """
 
     stature_m: tuple[float, float] = render.STATURE_M
     distance_m: tuple[float, float] = (2.4, 3.4)
     turn_deg: tuple[float, float] = (-25.0, 25.0)
     arm_jitter_deg: float = 0.0
+    camera_height_m: tuple[float, float] | None = None
+    camera_pitch_deg: tuple[float, float] | None = None
 
     def __post_init__(self) -> None:
+        if (self.camera_height_m is None) != (self.camera_pitch_deg is None):
+            raise ValueError('camera_height_m and camera_pitch_deg go together, got '
+                             f'{self.camera_height_m} and {self.camera_pitch_deg}')
+        if self.camera_height_m is not None:
+            for name, (lo, hi), bounds in (
+                    ('camera_height_m', self.camera_height_m, (0.5, 3.5)),
+                    ('camera_pitch_deg', self.camera_pitch_deg, (-10.0, 50.0))):
+                if not bounds[0] <= lo <= hi <= bounds[1]:
+                    raise ValueError(f'{name} must be lo <= hi within {bounds[0]:g}-'
+                                     f'{bounds[1]:g}, got {lo:g}-{hi:g}')
         for name, (lo, hi), bounds in (('stature_m', self.stature_m, (1.0, 2.3)),
                                        ('distance_m', self.distance_m, (0.8, 6.0)),
                                        ('turn_deg', self.turn_deg, (-180.0, 180.0))):
@@ -89,6 +104,13 @@ class Staging:
         """The room's free zone for the person's hips (`scene.PERSON_ZONE` by default)."""
         x0, x1, y0, y1 = rooms.PERSON_ZONE
         return (x0, x1, self.distance_m[0] - 0.2, self.distance_m[1] + 0.3)
+
+    @property
+    def mount(self) -> tuple[tuple[float, float], tuple[float, float]] | None:
+        """`scene.random_scene`'s camera mount: None for the default camera."""
+        if self.camera_height_m is None:
+            return None
+        return self.camera_height_m, self.camera_pitch_deg
 
 
 @dataclass(frozen=True)
@@ -375,7 +397,7 @@ def prepare_video(plan: VideoPlan, motion: TakeMotion, intrinsics: Intrinsics, *
         body = render.random_body(video_rng(plan, 1), stature_m=staging.stature_m)
     rng = video_rng(plan, 2)
     scene = rooms.random_scene(rng, intrinsics, occluder_prob=occluder_prob,
-                                person_zone=staging.person_zone)
+                                person_zone=staging.person_zone, mount=staging.mount)
     room = motion.joints[plan.indices].copy()
     if staging.arm_jitter_deg > 0:
         room = jitter_arms(room, video_rng(plan, 4), staging.arm_jitter_deg)
