@@ -421,6 +421,29 @@ def test_a_person_hidden_behind_another_longer_than_max_unseen_s_keeps_their_id(
     assert ended == [far]
 
 
+@pytest.mark.parametrize('needs_front', [True, False])
+def test_a_held_track_with_nobody_in_front_any_more_is_only_unseen(needs_front):
+    """The far person is held behind the near one, who then walks away (seen, far to the
+    side) while the far one stays unseen: with `held_needs_front` the far track is held no
+    more and ends as an unseen track does (it was last seen over `max_unseen_s` before);
+    without, it stays held (published at its last pose) until `max_hidden_s`."""
+    tr = tracker(held_needs_front=needs_front)
+    for k in range(10):
+        out = tr.step([person(0.0, z=2.2), person(-0.2 + 0.03 * k, z=3.4)], k * DT, INTR)
+    far = max(out, key=lambda t: torso(t)[0][2]).track_id
+    for k in range(10, 45):  # 1.2 s behind the near person: held
+        assert far in [t.track_id for t in tr.step([person(0.0, z=2.2)], k * DT, INTR)]
+    ended, published = [], []
+    for k in range(45, 55):  # the near person walks off to the side, the far one unseen
+        out = tr.step([person(0.12 * (k - 44), z=2.2)], k * DT, INTR)
+        ended += tr.ended
+        published.append(far in [t.track_id for t in out])
+    if needs_front:
+        assert far in ended and not any(published[-5:])
+    else:
+        assert ended == [] and all(published)
+
+
 def test_a_pose_held_longer_than_max_held_s_is_kept_but_not_published():
     """Hidden 25 frames: the far person's last pose is published for `max_held_s` (0.31 s
     here: the first 10 held frames), then not, and they come back with their id."""

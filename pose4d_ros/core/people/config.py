@@ -120,6 +120,12 @@ class TrackingConfig:
         87.00 / 0.960 / 0 with; `valid60_people2`, `valid60_people3`, `valid30_people2b`,
         `valid60_people3b` and `valid60_people3c` the same frames with and without. The sweep
         `held_front` of `make results`.
+    held_needs_front : a track is held only while a person seen this frame stands in front of
+        it (`_behind`); when nobody does, its person is not hidden but unseen, and ends as
+        any unseen track (after `max_unseen_s`). False: held until seen or `max_hidden_s`
+        (the tracker before). On the real development recording lab_walk (10 fps), a desk's
+        end at the image's border taken for a person stayed held for 17 frames after the
+        person who had passed in front of it had left.
     emerging_score : while another track is confirmed, a detection coming out from behind a
         nearer person (its torso pixel in the box of a confirmed track's detection nearer by
         over `torso_std_m`, `_emerging`) starts or grows a tentative track from this score
@@ -202,6 +208,7 @@ class TrackingConfig:
     confirmed_first: bool = True
     held_continues: bool = True
     held_own_front: bool = True
+    held_needs_front: bool = True
     emerging_score: float = 3.0
     free_space_m: float = 1.5
     free_share: float = 0.9

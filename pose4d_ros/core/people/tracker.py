@@ -149,6 +149,14 @@ class PeopleTracker:
         # the tracks seen first: a track unseen behind one of them is held (`_behind`)
         for i in sorted(range(len(self.tracks)), key=lambda i: i not in seen):
             track = self.tracks[i]
+            if i not in seen and track.held and cfg.held_needs_front \
+                    and not self._behind(track, stamp_s):
+                # nobody seen in front of them any more, and not seen: not hidden, only
+                # unseen (ended if unseen that long)
+                track.held = False
+                if stamp_s - track.seen_s > cfg.max_unseen_s:
+                    gone.append(track)
+                    continue
             if i not in seen and track.id and (track.held or (
                     behind := self._behind(track, stamp_s))):
                 # its last pose kept until seen again (its SLQE then restarts) or ended
