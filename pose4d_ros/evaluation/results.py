@@ -438,11 +438,22 @@ def summarize_people() -> dict:
     return {'sets': list(PEOPLE_SWEEP_SETS), 'settings': table, 'tie': TIE}
 
 
+def shipped_colour_net() -> str | None:
+    """The label of `COLOUR_NET_GRID` that the colour unary's defaults are (None: none is)."""
+    from pose4d_ros.core.dpm.net_unary import UnaryConfig
+
+    default = UnaryConfig()
+    items = (f'unary.weight={default.weight:g}', f'unary.hog_weight={default.hog_weight:g}')
+    return next((k for k, v in COLOUR_NET_GRID.items() if v == items), None)
+
+
 def summarize_colour_net() -> dict:
     """Each weighting's figures on the validation sets (the renders also pooled, frames
     weighted), and the one chosen: the best PCK@0.2 average of the nodes' model on photographs
     (colour alone) among those losing at most `COLOUR_NET_RGBD_LOSS` of each render set's
-    rgbd_kf_ik average7 against the colour HOG alone."""
+    rgbd_kf_ik average7 against the colour HOG alone and tracking no several-person set worse
+    than the shipped weighting (`tracks_worse`: the weight scales the pose score the tracker's
+    thresholds read)."""
     table = {}
     for label, items in COLOUR_NET_GRID.items():
         files = [colour_net_file(label, d) for d in ('lspet', *COLOUR_NET_RENDERS)]
@@ -462,16 +473,20 @@ def summarize_colour_net() -> dict:
                         'cpu_ms': _pooled([r.get('cpu_ms', {}).get('p50') for r in rows],
                                           frames)},
             'sets': {s: {'average7': r['pck']['average7'],
-                         'within_10cm': r.get('within_10cm', {}).get('average')}
+                         'within_10cm': r.get('within_10cm', {}).get('average'),
+                         **({'tracking': {k: r['tracking'][k] for k in TRACKING_KEYS}}
+                            if r.get('tracking') else {})}
                      for s, r in zip(COLOUR_NET_RENDERS, rows, strict=True)}}
     out: dict = {'network': COLOUR_NET, 'photographs': f'LSPET {COLOUR_NET_VALID}',
                  'renders': ' + '.join(COLOUR_NET_RENDERS),
                  'max_rgbd_loss': COLOUR_NET_RGBD_LOSS, 'values': table}
     if 'none' in table:
         base = table['none']['sets']
+        shipped = table.get(shipped_colour_net())
         ok = {k: v for k, v in table.items()
               if all(v['sets'][s]['average7'] >= base[s]['average7'] - COLOUR_NET_RGBD_LOSS
-                     for s in COLOUR_NET_RENDERS)}
+                     for s in COLOUR_NET_RENDERS)
+              and not (shipped and tracks_worse(v, shipped))}
         out['chosen'] = max(ok, key=lambda k: ok[k]['lspet']['pck@0.2'])
         out['best_on_photographs'] = max(table, key=lambda k: table[k]['lspet']['pck@0.2'])
     return out

@@ -53,7 +53,10 @@ class UnaryConfig:
         `lspet_convnet` (`make results`' colour_net job, `docs/results/colour_net.json`: the
         best on LSPET photographs among the weightings losing at most 0.5 of average7 on
         `valid30`, `valid30_msr` and `valid60_people3`; chosen again for the network
-        fine-tuned on renders in their rooms, weight 16 losing 1.1 on `valid60_people3`).
+        fine-tuned on renders in their rooms, weight 16 losing 1.1 on `valid60_people3`; and
+        for `rgbd_14` retrained with mounted-camera renders, where the rule now also keeps
+        `valid60_people2` and the tracking guard, which refuses weight 16: 6.9 false skeletons
+        per 1000 frames there against 0 at weight 4).
     floor : log-probability below which a cell scores no worse.
     scales : the network's reading scales of the crop (`ConvNet.heat_maps`).
     mirror : the crop's mirror image read too and the maps averaged (twice the network's
