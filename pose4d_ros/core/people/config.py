@@ -178,6 +178,11 @@ class TrackingConfig:
         coasting after its person had left put its predicted joints metres apart across the
         empty floor, a ghost every frame; on validation renders no published skeleton spans
         over 1.86 m (`valid60_people2`, 1396 skeletons), on lab_walk 9 of 151 over 2.5 m.
+    one_body_m : a track whose torso lies in the box of a skeleton published before it (the
+        longer tracked first, `_ordered`) and within this distance of that skeleton's torso in
+        3-D is kept but not published: a piece of that person's body (seen from above, a
+        person's legs lie deeper than their torso and may be a region of their own, with a
+        skeleton of its own 0.4-0.7 m from theirs). 0: off.
 
     `confirm_frames`, `birth_score` and `trust_score`, and the foreground's second look, were
     chosen on validation renders (training subjects s01-s06, seed 201: `valid60_people2`, two
@@ -214,6 +219,7 @@ class TrackingConfig:
     free_share: float = 0.9
     same_person_m: float = 0.3
     max_span_m: float = 2.7
+    one_body_m: float = 0.6
 
     def __post_init__(self) -> None:
         if self.max_people < 1 or self.confirm_frames < 1 or self.quiet_frames < 0:
@@ -224,6 +230,8 @@ class TrackingConfig:
                      'occluded_width_m', 'max_held_s', 'max_hidden_s'):
             if not getattr(self, name) > 0:
                 raise ValueError(f'{name} must be > 0, got {getattr(self, name)}')
+        if not self.one_body_m >= 0:
+            raise ValueError(f'one_body_m must be >= 0, got {self.one_body_m}')
         if not self.max_span_m > 0:
             raise ValueError(f'max_span_m must be > 0, got {self.max_span_m}')
         if not self.detector_keep_s >= 0:

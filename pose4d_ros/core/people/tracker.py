@@ -149,14 +149,9 @@ class PeopleTracker:
         # the tracks seen first: a track unseen behind one of them is held (`_behind`)
         for i in sorted(range(len(self.tracks)), key=lambda i: i not in seen):
             track = self.tracks[i]
-            if i not in seen and track.held and cfg.held_needs_front \
-                    and not self._behind(track, stamp_s):
-                # nobody seen in front of them any more, and not seen: not hidden, only
-                # unseen (ended if unseen that long)
-                track.held = False
-                if stamp_s - track.seen_s > cfg.max_unseen_s:
-                    gone.append(track)
-                    continue
+            if i not in seen and track.held and self._released(track, stamp_s):
+                gone.append(track)
+                continue
             if i not in seen and track.id and (track.held or (
                     behind := self._behind(track, stamp_s))):
                 # its last pose kept until seen again (its SLQE then restarts) or ended
@@ -199,11 +194,45 @@ class PeopleTracker:
         self.tracks = [t for t in self.tracks
                        if (t.id or t.seen_s == stamp_s) and t not in gone]
         self.ended += [t.id for t in gone]
-        # a pose held too long is mostly where nobody is, and no person spans more than
-        # `max_span_m`: kept, not published
-        return [t.last for t in self._ordered(stamp_s)
-                if not (t.held and stamp_s - t.held_s > cfg.max_held_s)
-                and span_m(t.last) <= cfg.max_span_m]
+        return self._published(stamp_s)
+
+    def _released(self, track: _Track, stamp_s: float) -> bool:
+        """`held_needs_front`: a held track unseen with nobody seen in front of it any more
+        is not hidden, only unseen: no longer held; whether it has ended (unseen longer than
+        `max_unseen_s`)."""
+        cfg = self.config
+        if not cfg.held_needs_front or self._behind(track, stamp_s):
+            return False
+        track.held = False
+        return stamp_s - track.seen_s > cfg.max_unseen_s
+
+    def _published(self, stamp_s: float) -> list[JointSet]:
+        """The skeletons published, primary first: a pose held too long is mostly where
+        nobody is, no person spans more than `max_span_m`, and one body gets one skeleton
+        (`one_body_m`): those tracks are kept, not published."""
+        cfg = self.config
+        published: list[_Track] = []
+        for t in self._ordered(stamp_s):
+            if not (t.held and stamp_s - t.held_s > cfg.max_held_s) \
+                    and span_m(t.last) <= cfg.max_span_m and not self._on_body(t, published):
+                published.append(t)
+        return [t.last for t in published]
+
+    def _on_body(self, track: _Track, others: list[_Track]) -> bool:
+        """Whether `track`'s torso lies in the box of one of `others` (`_in_box`) and within
+        `one_body_m` of theirs in 3-D: a piece of that person's body (`one_body_m`)."""
+        if not self.config.one_body_m > 0 or not others:
+            return False
+        point, _ = torso(track.last)
+        pixel, _ = torso_px(track.last)
+        if not (_finite(point) and _finite(pixel)):
+            return False
+        for other in others:
+            theirs, _ = torso(other.last)
+            if _finite(theirs) and float(np.linalg.norm(point - theirs)) <= \
+                    self.config.one_body_m and _in_box(other.last, pixel):
+                return True
+        return False
 
     def _left(self, joints: JointSet | None,
               depth: Callable[[], NDArray[np.floating] | None],
