@@ -276,7 +276,7 @@ class ForegroundConfig(MaskConfig, FloorConfig, PersonConfig, RegionConfig):
         lab recording's is pitched 29-30 degrees, and at 30 its floor was found in some frames
         and not in others). Chosen on validation renders from such a camera (`pose4d synth
         --camera-height 2.0 2.7 --camera-pitch 20 35`; `rgbd_kf_ik` average7 / MOTA at 30
-        and 45: `valid30_high` 85.52 and 88.27, `valid60_people3_high` 79.07 / 0.895 and
+        and 45: `valid30_high` 82.05 and 83.09, `valid60_people3_high` 79.07 / 0.895 and
         81.97 / 0.931, false skeletons per 1000 frames 29.2 and 1.4); the renders from a
         camera at chest height the same to the digit (`valid30`, `valid30_msr`,
         `valid60_people2`, `valid60_people3`).
