@@ -204,7 +204,7 @@ SWEEPS: dict[str, dict[str, tuple[str, ...]]] = {
 # the several-person held-out sets (the `people` job)
 PEOPLE_TESTS = ('test60_people2', 'test60_people2_alone1', 'test60_people2_alone2',
                 'test60_people3', 'test60_people3b')
-# the several-person validation sets (two and three people, 3960 frames)
+# the held-out sets from the mounted camera (the `mounted` job): one person, three
 MOUNTED_TESTS = ('test30_high', 'test60_people3_high')
 
 
@@ -213,6 +213,7 @@ def _people(data: str) -> tuple[str, ...]:
     return ('--max-people', '4') if '_people' in data else ()
 
 
+# the several-person validation sets (two and three people, 3960 frames)
 PEOPLE_SETS = ('valid60_people2', 'valid60_people3', 'valid30_people2b', 'valid60_people3b')
 SWEEP_SETS = {'cut_height': ('valid30_near',),
               'person_scale': ('valid30', 'valid30_msr', 'valid60_people2'),
