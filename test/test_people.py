@@ -15,6 +15,7 @@ from pose4d_ros.core.camera import project
 from pose4d_ros.core.foreground import segment_people
 from pose4d_ros.core.joints import JointSet
 from pose4d_ros.core.people import PeopleTracker, TrackingConfig, assign, torso
+from pose4d_ros.core.people.tracker import off_axis_m
 from pose4d_ros.core.skeleton import PARTS_10
 from pose4d_ros.core.stages import TrackerStage
 
@@ -445,23 +446,46 @@ def test_a_held_track_with_nobody_in_front_any_more_is_only_unseen(needs_front):
         assert ended == [] and all(published)
 
 
-@pytest.mark.parametrize('one_body_m', [0.6, 0.0])
-def test_a_second_skeleton_on_a_persons_body_is_not_published(one_body_m):
-    """A person and a piece of their body found as a person of its own (seen from above, the
-    legs lie deeper than the torso): a second track whose torso lies in the first's box, 0.45 m
-    from its torso in 3-D. With `one_body_m` 0.6 only the person's skeleton is published (the
-    piece's track is kept); off, both. Another person 1 m away is published either way."""
+@pytest.mark.parametrize('offset, one_body_m, piece_published', [
+    ((0.05, 0.2, 0.4), 0.6, False),   # a piece 0.45 m from the torso, 0.40 m off the axis
+    ((0.05, 0.8, 0.4), 0.6, False),   # the legs: 0.9 m from the torso, 0.40 m off the axis
+    ((0.05, 0.8, 0.4), 0.0, True),    # the rule off
+    ((0.05, 0.8, 0.75), 0.6, True),   # 0.75 m off the axis: another person
+    ((0.05, -0.2, 0.4), 0.6, True),   # above the torso in the image: another person
+    ((0.05, 0.2, -0.4), 0.6, True),   # nearer the camera: another person
+])
+def test_a_second_skeleton_on_a_persons_body_is_not_published(offset, one_body_m,
+                                                              piece_published):
+    """A person and a second track whose torso lies in their box at `offset` (x, y down, z
+    deeper; metres) from theirs. Seen from above, a person's legs are found as a person of
+    their own: below the torso in the image, deeper, on the body's (vertical) axis however
+    far below. Such a track is kept, not published (`one_body_m`); one off the axis, above
+    the torso or nearer the camera is another person's. Another person 1 m away is published
+    either way."""
     tr = tracker(one_body_m=one_body_m)
-    piece = person(0.05, z=2.5)
-    piece = JointSet(piece.names, project(piece.xyz + [0.0, 0.2, 0.4], INTR),
-                     piece.xyz + [0.0, 0.2, 0.4], source=piece.source,
+    piece = person(0.0)
+    xyz = piece.xyz + offset
+    piece = JointSet(piece.names, project(xyz, INTR), xyz, source=piece.source,
                      confidence=piece.confidence)
     for k in range(10):
         out = tr.step([_scored(person(0.0), 9.0), _scored(piece, 8.0),
                        _scored(person(1.0, z=2.5), 8.0)], k * DT, INTR)
     assert len(tr.tracks) == 3 and all(t.id for t in tr.tracks)
     xs = sorted(round(float(torso(t)[0][0]), 2) for t in out)
-    assert xs == ([0.0, 1.0] if one_body_m else [0.0, 0.05, 1.0])
+    assert xs == ([0.0, 0.05, 1.0] if piece_published else [0.0, 1.0])
+
+
+def test_off_axis_m_is_the_distance_to_the_line_through_hips_and_shoulders():
+    body = person(0.0)
+    hips = body.xyz[[body.names.index('left_hip'), body.names.index('right_hip')]].mean(axis=0)
+    assert off_axis_m(hips + [0.3, 1.5, 0.4], body) == pytest.approx(0.5, abs=1e-6)
+    # without hips: the distance to the torso point
+    source = body.source.copy()
+    source[[body.names.index('left_hip'), body.names.index('right_hip')]] = cj.MISSING
+    no_hips = JointSet(body.names, body.uv, body.xyz, source=source,
+                       confidence=body.confidence)
+    point = torso(no_hips)[0] + [0.0, 2.0, 0.0]
+    assert off_axis_m(point, no_hips) == pytest.approx(2.0)
 
 
 def test_a_pose_held_longer_than_max_held_s_is_kept_but_not_published():

@@ -219,8 +219,10 @@ class PeopleTracker:
         return [t.last for t in published]
 
     def _on_body(self, track: _Track, others: list[_Track]) -> bool:
-        """Whether `track`'s torso lies in the box of one of `others` (`_in_box`) and within
-        `one_body_m` of theirs in 3-D: a piece of that person's body (`one_body_m`)."""
+        """Whether `track`'s torso lies where a piece of the body of one of `others` would: in
+        their box (`_in_box`), below their torso in the image and no nearer the camera, and
+        within `one_body_m` of their body's axis in 3-D (`off_axis_m`). Seen from above, a
+        person's legs lie there (`one_body_m`)."""
         if not self.config.one_body_m > 0 or not others:
             return False
         point, _ = torso(track.last)
@@ -229,8 +231,10 @@ class PeopleTracker:
             return False
         for other in others:
             theirs, _ = torso(other.last)
-            if _finite(theirs) and float(np.linalg.norm(point - theirs)) <= \
-                    self.config.one_body_m and _in_box(other.last, pixel):
+            theirs_px, _ = torso_px(other.last)
+            if (_finite(theirs) and point[2] >= theirs[2] and pixel[1] > theirs_px[1]
+                    and _in_box(other.last, pixel)
+                    and off_axis_m(point, other.last) <= self.config.one_body_m):
                 return True
         return False
 
@@ -524,6 +528,38 @@ def _clear_of_sides(det: JointSet, intrinsics: Intrinsics | None) -> bool:
     u = det.uv[det.source != cj.MISSING, 0]
     margin = SIDE_SHARE * intrinsics.width
     return bool(u.size) and bool(np.all((u > margin) & (u < intrinsics.width - 1 - margin)))
+
+
+def off_axis_m(point: NDArray[np.float64], joints: JointSet) -> float:
+    """The distance in 3-D from `point` to the axis of the body of `joints`: the line through
+    the mean of its located hips and that of its located shoulders and neck (to its torso
+    point when either is missing; inf when that is missing too). Seen from above, a person's
+    legs lie on that line, far below their torso point."""
+    located = (joints.source != cj.MISSING) & np.logical_and.reduce(np.isfinite(joints.xyz),
+                                                                    axis=1)
+    hips, top = (_mean_of(joints, located, rows) for rows in _axis_rows(joints.names))
+    if not (_finite(hips) and _finite(top)) or not (length := float(np.linalg.norm(
+            top - hips))) > 0:
+        theirs, _ = torso(joints)
+        return float(np.linalg.norm(point - theirs)) if _finite(theirs) else math.inf
+    v = point - hips
+    along = float(v @ (top - hips)) / length
+    return math.sqrt(max(float(v @ v) - along * along, 0.0))
+
+
+@functools.lru_cache(maxsize=16)
+def _axis_rows(names: tuple[str, ...]) -> tuple[tuple[int, ...], tuple[int, ...]]:
+    """The rows of the hips and those of the shoulders and neck in `names`."""
+    return (tuple(names.index(n) for n in ('left_hip', 'right_hip') if n in names),
+            tuple(names.index(n) for n in ('left_shoulder', 'right_shoulder', 'neck')
+                  if n in names))
+
+
+def _mean_of(joints: JointSet, located: NDArray[np.bool_],
+             rows: tuple[int, ...]) -> NDArray[np.float64]:
+    """The mean 3-D position of the located joints among `rows` (NaN if none)."""
+    rows = [r for r in rows if located[r]]
+    return joints.xyz[rows].mean(axis=0) if rows else np.full(3, np.nan)
 
 
 def _in_box(joints: JointSet, pixel: NDArray[np.float64]) -> bool:
