@@ -15,7 +15,7 @@ from pose4d_ros.core.camera import project
 from pose4d_ros.core.foreground import segment_people
 from pose4d_ros.core.joints import JointSet
 from pose4d_ros.core.people import PeopleTracker, TrackingConfig, assign, torso
-from pose4d_ros.core.people.tracker import off_axis_m
+from pose4d_ros.core.people.tracker import LEGS_M, axis_position
 from pose4d_ros.core.skeleton import PARTS_10
 from pose4d_ros.core.stages import TrackerStage
 
@@ -123,6 +123,9 @@ def test_nobody_and_bad_configs():
         TrackingConfig(occluded_width_m=-0.1)
     with pytest.raises(ValueError, match='trust_score'):
         TrackingConfig(trust_score=float('nan'))
+    for spans in ({'min_span_m': -0.1}, {'min_span_m': 3.0}, {'max_span_m': 0.0}):
+        with pytest.raises(ValueError, match='min_span_m < max_span_m'):
+            TrackingConfig(**spans)
 
 
 # --------------------------------------------------------------- rendered frames
@@ -449,43 +452,51 @@ def test_a_held_track_with_nobody_in_front_any_more_is_only_unseen(needs_front):
 @pytest.mark.parametrize('offset, one_body_m, piece_published', [
     ((0.05, 0.2, 0.4), 0.6, False),   # a piece 0.45 m from the torso, 0.40 m off the axis
     ((0.05, 0.8, 0.4), 0.6, False),   # the legs: 0.9 m from the torso, 0.40 m off the axis
+    ((0.05, 1.2, 0.4), 0.6, False),   # the feet, below the skeleton's own box
     ((0.05, 0.8, 0.4), 0.0, True),    # the rule off
     ((0.05, 0.8, 0.75), 0.6, True),   # 0.75 m off the axis: another person
     ((0.05, -0.2, 0.4), 0.6, True),   # above the torso in the image: another person
     ((0.05, 0.2, -0.4), 0.6, True),   # nearer the camera: another person
+    ((0.05, LEGS_M + 0.6, 0.4), 0.6, True),  # lower than any legs reach
 ])
 def test_a_second_skeleton_on_a_persons_body_is_not_published(offset, one_body_m,
                                                               piece_published):
-    """A person and a second track whose torso lies in their box at `offset` (x, y down, z
-    deeper; metres) from theirs. Seen from above, a person's legs are found as a person of
-    their own: below the torso in the image, deeper, on the body's (vertical) axis however
-    far below. Such a track is kept, not published (`one_body_m`); one off the axis, above
-    the torso or nearer the camera is another person's. Another person 1 m away is published
-    either way."""
+    """A person and a second track whose torso lies at `offset` (x, y down, z deeper; metres)
+    from theirs. Seen from above, a person's legs are found as a person of their own: below
+    the torso in the image, deeper, on the body's (vertical) axis however far below, down to
+    the feet. Such a track is kept, not published (`one_body_m`); one off the axis, above the
+    torso, nearer the camera or farther below the hips than legs reach is another person's.
+    Another person 1 m away is published either way."""
     tr = tracker(one_body_m=one_body_m)
-    piece = person(0.0)
+    z = 4.5  # far enough for the piece to be in the image however low
+    piece = person(0.0, z)
     xyz = piece.xyz + offset
     piece = JointSet(piece.names, project(xyz, INTR), xyz, source=piece.source,
                      confidence=piece.confidence)
     for k in range(10):
-        out = tr.step([_scored(person(0.0), 9.0), _scored(piece, 8.0),
-                       _scored(person(1.0, z=2.5), 8.0)], k * DT, INTR)
+        out = tr.step([_scored(person(0.0, z), 9.0), _scored(piece, 8.0),
+                       _scored(person(1.0, z), 8.0)], k * DT, INTR)
     assert len(tr.tracks) == 3 and all(t.id for t in tr.tracks)
     xs = sorted(round(float(torso(t)[0][0]), 2) for t in out)
     assert xs == ([0.0, 0.05, 1.0] if piece_published else [0.0, 1.0])
 
 
-def test_off_axis_m_is_the_distance_to_the_line_through_hips_and_shoulders():
+def test_axis_position_is_off_the_line_through_hips_and_shoulders_and_below_the_hips():
     body = person(0.0)
     hips = body.xyz[[body.names.index('left_hip'), body.names.index('right_hip')]].mean(axis=0)
-    assert off_axis_m(hips + [0.3, 1.5, 0.4], body) == pytest.approx(0.5, abs=1e-6)
+    top = body.xyz[[body.names.index(n) for n in ('left_shoulder', 'right_shoulder', 'neck')]]
+    up = (top.mean(axis=0) - hips) / np.linalg.norm(top.mean(axis=0) - hips)
+    side = np.cross(up, [0.0, 0.0, 1.0])
+    side /= np.linalg.norm(side)
+    assert axis_position(hips - 1.5 * up + 0.5 * side, body) == pytest.approx((0.5, 1.5))
+    assert axis_position(hips + 0.2 * up, body) == pytest.approx((0.0, -0.2), abs=1e-9)
     # without hips: the distance to the torso point
     source = body.source.copy()
     source[[body.names.index('left_hip'), body.names.index('right_hip')]] = cj.MISSING
     no_hips = JointSet(body.names, body.uv, body.xyz, source=source,
                        confidence=body.confidence)
     point = torso(no_hips)[0] + [0.0, 2.0, 0.0]
-    assert off_axis_m(point, no_hips) == pytest.approx(2.0)
+    assert axis_position(point, no_hips) == pytest.approx((2.0, 0.0))
 
 
 def test_a_pose_held_longer_than_max_held_s_is_kept_but_not_published():
@@ -892,3 +903,18 @@ def test_a_track_spanning_more_than_a_body_is_kept_but_not_published():
     out = tr.step([person(0.0)], 5 * DT, INTR)
     assert [t.track_id for t in out] == [track.id]
     assert span_m(out[0]) == pytest.approx(body, rel=0.05)
+
+
+def test_a_track_spanning_less_than_a_body_is_kept_but_not_published():
+    """`min_span_m`: a skeleton whose located joints all lie within a few tenths of a metre
+    (seen from above, a person's feet found as a person of their own) is not published; the
+    person beside it is."""
+    feet = person(0.0, z=3.0)
+    xyz = feet.xyz.mean(axis=0) + 0.1 * (feet.xyz - feet.xyz.mean(axis=0))
+    feet = JointSet(feet.names, project(xyz, INTR), xyz, source=feet.source,
+                    confidence=feet.confidence)
+    for min_span_m, published in ((0.5, [1.0]), (0.0, [0.0, 1.0])):
+        tr = tracker(min_span_m=min_span_m)
+        for k in range(5):
+            out = tr.step([_scored(person(1.0), 9.0), _scored(feet, 9.0)], k * DT, INTR)
+        assert sorted(round(float(torso(t)[0][0]), 2) for t in out) == published

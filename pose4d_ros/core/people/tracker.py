@@ -214,15 +214,16 @@ class PeopleTracker:
         published: list[_Track] = []
         for t in self._ordered(stamp_s):
             if not (t.held and stamp_s - t.held_s > cfg.max_held_s) \
-                    and span_m(t.last) <= cfg.max_span_m and not self._on_body(t, published):
+                    and cfg.min_span_m <= span_m(t.last) <= cfg.max_span_m \
+                    and not self._on_body(t, published):
                 published.append(t)
         return [t.last for t in published]
 
     def _on_body(self, track: _Track, others: list[_Track]) -> bool:
-        """Whether `track`'s torso lies where a piece of the body of one of `others` would: in
-        their box (`_in_box`), below their torso in the image and no nearer the camera, and
-        within `one_body_m` of their body's axis in 3-D (`off_axis_m`). Seen from above, a
-        person's legs lie there (`one_body_m`)."""
+        """Whether `track`'s torso lies where a piece of the body of one of `others` would:
+        below their torso in the image and no nearer the camera, within `one_body_m` of their
+        body's axis in 3-D and at most `LEGS_M` below their hips along it (`axis_position`).
+        Seen from above, a person's legs lie there (`one_body_m`)."""
         if not self.config.one_body_m > 0 or not others:
             return False
         point, _ = torso(track.last)
@@ -232,10 +233,10 @@ class PeopleTracker:
         for other in others:
             theirs, _ = torso(other.last)
             theirs_px, _ = torso_px(other.last)
-            if (_finite(theirs) and point[2] >= theirs[2] and pixel[1] > theirs_px[1]
-                    and _in_box(other.last, pixel)
-                    and off_axis_m(point, other.last) <= self.config.one_body_m):
-                return True
+            if _finite(theirs) and point[2] >= theirs[2] and pixel[1] > theirs_px[1]:
+                off, below = axis_position(point, other.last)
+                if off <= self.config.one_body_m and below <= LEGS_M:
+                    return True
         return False
 
     def _left(self, joints: JointSet | None,
@@ -514,6 +515,9 @@ def _finite(v: NDArray[np.float64]) -> bool:
 # a detection reaching this share of the image's width from its left or right edge starts no
 # track from `emerging_score` (`_clear_of_sides`)
 SIDE_SHARE = 0.04
+# how far below a person's hips a piece of their body may lie (`_on_body`): a tall person's
+# legs, hip to sole, with room for a skeleton's hips placed high
+LEGS_M = 1.3
 
 
 def _clear_of_sides(det: JointSet, intrinsics: Intrinsics | None) -> bool:
@@ -530,21 +534,22 @@ def _clear_of_sides(det: JointSet, intrinsics: Intrinsics | None) -> bool:
     return bool(u.size) and bool(np.all((u > margin) & (u < intrinsics.width - 1 - margin)))
 
 
-def off_axis_m(point: NDArray[np.float64], joints: JointSet) -> float:
-    """The distance in 3-D from `point` to the axis of the body of `joints`: the line through
-    the mean of its located hips and that of its located shoulders and neck (to its torso
-    point when either is missing; inf when that is missing too). Seen from above, a person's
-    legs lie on that line, far below their torso point."""
+def axis_position(point: NDArray[np.float64], joints: JointSet) -> tuple[float, float]:
+    """Where `point` lies from the axis of the body of `joints` (the line through the mean of
+    its located hips and that of its located shoulders and neck), in 3-D: its distance from
+    the axis and how far below the hips along it (negative above them), metres. Without an
+    axis (hips, or shoulders and neck, missing): the distance to the torso point and 0 (inf
+    and 0 without one). Seen from above, a person's legs lie on that line, below the hips."""
     located = (joints.source != cj.MISSING) & np.logical_and.reduce(np.isfinite(joints.xyz),
                                                                     axis=1)
     hips, top = (_mean_of(joints, located, rows) for rows in _axis_rows(joints.names))
     if not (_finite(hips) and _finite(top)) or not (length := float(np.linalg.norm(
             top - hips))) > 0:
         theirs, _ = torso(joints)
-        return float(np.linalg.norm(point - theirs)) if _finite(theirs) else math.inf
+        return (float(np.linalg.norm(point - theirs)) if _finite(theirs) else math.inf), 0.0
     v = point - hips
     along = float(v @ (top - hips)) / length
-    return math.sqrt(max(float(v @ v) - along * along, 0.0))
+    return math.sqrt(max(float(v @ v) - along * along, 0.0)), -along
 
 
 @functools.lru_cache(maxsize=16)
