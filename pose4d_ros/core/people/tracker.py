@@ -213,8 +213,9 @@ class PeopleTracker:
         cfg = self.config
         published: list[_Track] = []
         for t in self._ordered(stamp_s):
+            span = span_m(t.last)  # 0: no 3-D to judge by (no camera_info yet)
             if not (t.held and stamp_s - t.held_s > cfg.max_held_s) \
-                    and cfg.min_span_m <= span_m(t.last) <= cfg.max_span_m \
+                    and span <= cfg.max_span_m and not 0 < span < cfg.min_span_m \
                     and not self._on_body(t, published):
                 published.append(t)
         return [t.last for t in published]
