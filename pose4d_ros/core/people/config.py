@@ -202,8 +202,8 @@ class TrackingConfig:
         and depth tests a person standing just behind another's legs was taken for them, 145).
     min_span_m : a track whose located joints all lie within this distance of each other in
         3-D is kept but not published: smaller than any person (seen from above, a person's
-        feet found as a region, and a skeleton, of their own; one without 3-D, before the
-        camera's calibration has come, is not judged). Chosen on validation (`--config
+        feet found as a region, and a skeleton, of their own; before the camera's
+        calibration has come, without 3-D, none is judged). Chosen on validation (`--config
         tracking.min_span_m=M`): off, 0.3, 0.5 and 0.7 give every validation set the same
         average7; `valid60_people3c_high` 22.2 false skeletons per 1000 frames off, 12.5 at 0.3
         and 0.5 (MOTA 0.946 -> 0.949), at 0.7 a person-frame lost; the validation sets'

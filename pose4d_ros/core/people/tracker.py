@@ -194,7 +194,7 @@ class PeopleTracker:
         self.tracks = [t for t in self.tracks
                        if (t.id or t.seen_s == stamp_s) and t not in gone]
         self.ended += [t.id for t in gone]
-        return self._published(stamp_s)
+        return self._published(stamp_s, has_3d=intrinsics is not None)
 
     def _released(self, track: _Track, stamp_s: float) -> bool:
         """`held_needs_front`: a held track unseen with nobody seen in front of it any more
@@ -206,16 +206,17 @@ class PeopleTracker:
         track.held = False
         return stamp_s - track.seen_s > cfg.max_unseen_s
 
-    def _published(self, stamp_s: float) -> list[JointSet]:
+    def _published(self, stamp_s: float, *, has_3d: bool = True) -> list[JointSet]:
         """The skeletons published, primary first: a pose held too long is mostly where
-        nobody is, no person spans more than `max_span_m`, and one body gets one skeleton
+        nobody is, no person spans more than `max_span_m` or (with 3-D: `has_3d`, the
+        camera's calibration known) less than `min_span_m`, and one body gets one skeleton
         (`one_body_m`): those tracks are kept, not published."""
         cfg = self.config
+        least = cfg.min_span_m if has_3d else 0.0
         published: list[_Track] = []
         for t in self._ordered(stamp_s):
-            span = span_m(t.last)  # 0: no 3-D to judge by (no camera_info yet)
             if not (t.held and stamp_s - t.held_s > cfg.max_held_s) \
-                    and span <= cfg.max_span_m and not 0 < span < cfg.min_span_m \
+                    and least <= span_m(t.last) <= cfg.max_span_m \
                     and not self._on_body(t, published):
                 published.append(t)
         return [t.last for t in published]
