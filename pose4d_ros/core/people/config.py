@@ -203,12 +203,13 @@ class TrackingConfig:
     min_span_m : a track whose located joints all lie within this distance of each other in
         3-D is kept but not published: smaller than any person (seen from above, a person's
         feet found as a region, and a skeleton, of their own; before the camera's
-        calibration has come, without 3-D, none is judged). Chosen on validation (`--config
-        tracking.min_span_m=M`): off, 0.3, 0.5 and 0.7 give every validation set the same
-        average7; `valid60_people3c_high` 22.2 false skeletons per 1000 frames off, 12.5 at 0.3
-        and 0.5 (MOTA 0.946 -> 0.949), at 0.7 a person-frame lost; the validation sets'
-        people span at least 0.58 m (`valid60_people3b_high`), lab_walk's 0.97 m (two of its
-        ghosts under 0.3 m).
+        calibration has come, without 3-D, none is judged; the one-person path,
+        `core.pipeline.ONE_PERSON`, publishes its person whatever the size). Chosen on
+        validation (`--config tracking.min_span_m=M`): off, 0.3, 0.5 and 0.7 give every
+        validation set the same average7; `valid60_people3c_high` 22.2 false skeletons per
+        1000 frames off, 12.5 at 0.3 and 0.5 (MOTA 0.946 -> 0.949), at 0.7 a person-frame
+        lost; the validation sets' people span at least 0.58 m (`valid60_people3b_high`),
+        lab_walk's 0.97 m (two of its ghosts under 0.3 m).
 
     `confirm_frames`, `birth_score` and `trust_score`, and the foreground's second look, were
     chosen on validation renders (training subjects s01-s06, seed 201: `valid60_people2`, two
