@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from helpers import header_at
 
 from pose4d_ros.core.sync import StampSync
 
@@ -212,3 +213,48 @@ def test_frame_queue_survives_an_error_in_a_frame(ros):
         assert monitor.bad == 1
     finally:
         queue.close()
+
+
+def test_polled_topics_wake_nobody_and_give_what_came_since(ros):
+    """A `PolledTopic`'s messages wait in the reader (no callback runs in the executor) until
+    a frame takes them; `LatestIntrinsics` gives the newest valid calibration and counts each
+    refused one; `RecentImages` the image of a stamp if it has come, and counts bytes that
+    hold no Image."""
+    from rclpy.serialization import serialize_message
+    from sensor_msgs.msg import CameraInfo, Image
+
+    from pose4d_ros.core.camera import cad60_intrinsics
+    from pose4d_ros.nodes import qos
+    from pose4d_ros.nodes.common import LatestIntrinsics, RecentImages, close_inputs
+    from pose4d_ros.nodes.convert import array_to_image, intrinsics_to_msg
+    from pose4d_ros.wire import depth_from_msg, stamp_to_ns
+
+    monitor = _Counter()
+    refused: list[str] = []
+    monitor.bad_input = refused.append
+    camera = LatestIntrinsics(ros.node, monitor, topic='polled_test/camera_info')
+    depth = RecentImages(ros.node, monitor, 'polled_test/depth', depth_from_msg)
+    info_pub = ros.node.create_publisher(CameraInfo, 'polled_test/camera_info', qos.OUTPUT_QOS)
+    depth_pub = ros.node.create_publisher(Image, 'polled_test/depth', qos.OUTPUT_QOS)
+    try:
+        # an executor serves rclpy's subscriptions only: these are not among them
+        assert not [s for s in ros.node.subscriptions if 'polled_test' in s.topic_name]
+        ros.spin_until(lambda: info_pub.get_subscription_count() > 0
+                       and depth_pub.get_subscription_count() > 0, 5.0, 'the readers')
+        assert camera.latest() is None and depth.at(0) is None
+        intrinsics = cad60_intrinsics()
+        info_pub.publish(intrinsics_to_msg(intrinsics, header_at(1)))
+        info_pub.publish(serialize_message(intrinsics_to_msg(intrinsics, header_at(2)))[:40])
+        metres = np.full((intrinsics.height, intrinsics.width), 2.0, np.float32)
+        for k in (1, 2):
+            depth_pub.publish(array_to_image(metres * k, '32FC1', header_at(k)))
+        depth_pub.publish(b'\x00\x01\x00\x00' + b'\x07' * 20)
+        ros.spin_for(0.3)
+        assert camera.latest() == intrinsics
+        assert depth.at(stamp_to_ns(header_at(2).stamp))[0, 0] == 4.0
+        assert depth.at(10 ** 15) is None  # no image of that stamp: not waited for
+        assert len(refused) == 2, refused
+        assert 'polled_test/camera_info' in refused[0] and 'polled_test/depth' in refused[1]
+    finally:
+        close_inputs(ros.node)
+    assert not ros.node.__dict__.get('polled_topics')

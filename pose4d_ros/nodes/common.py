@@ -31,6 +31,7 @@ from builtin_interfaces.msg import Time
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from pose4d_msgs.msg import JointArray, SkeletonArray
 from rclpy.clock import Clock, ClockType
+from rclpy.exceptions import InvalidHandle
 from rclpy.executors import Executor, ExternalShutdownException, SingleThreadedExecutor
 from rclpy.experimental import EventsExecutor
 from rclpy.impl.implementation_singleton import rclpy_implementation as _rclpy
@@ -38,6 +39,7 @@ from rclpy.node import Node
 from rclpy.serialization import deserialize_message
 from rclpy.signals import SignalHandlerOptions
 from rclpy.subscription import Subscription
+from rclpy.type_support import check_is_valid_msg_type
 from sensor_msgs.msg import CameraInfo, Image
 from std_msgs.msg import Header
 
@@ -165,8 +167,7 @@ def run(factory: Callable[[], Node], args: list[str] | None = None,
         code = 1
     finally:
         if node is not None:
-            for queue in list(node.__dict__.get('frame_queues', [])):
-                queue.close()
+            close_inputs(node)
             close = getattr(node, 'close', None)
             if close is not None:
                 close()
@@ -341,22 +342,37 @@ def subscribe(node: Node, msg_type: type, topic: str, callback: Callable[[object
     instead of `deserialize_message` (a ValueError for bytes it refuses); `callback` gets what
     it returns, unless None.
     """
-    name = node.resolve_topic_name(topic)
-    kind = f'{msg_type.__module__.split(".")[0]}/{msg_type.__name__}'
-    if decode is None and msg_type is Image:
-        decode = image_of_bytes
+    read = _Reader(node, msg_type, topic, monitor, decode)
 
     def on_bytes(data: bytes) -> None:
-        try:
-            msg = deserialize_message(data, msg_type) if decode is None else decode(data)
-        except Exception as exc:  # rclpy's RMWError: the CDR does not hold a msg_type
-            reason = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
-            monitor.bad_input(f'{name}: {len(data)} bytes that are not a {kind} ({reason})')
-            return
+        msg = read(data)
         if msg is not None:
             callback(msg)
 
     return node.create_subscription(msg_type, topic, on_bytes, profile, raw=True)
+
+
+class _Reader:
+    """Reads one topic's serialised messages (`decode`, else an Image in place and other types
+    by `deserialize_message`); bytes that hold no such message are counted as a bad input on
+    `monitor`, named by topic and type, and read as None."""
+
+    def __init__(self, node: Node, msg_type: type, topic: str, monitor: StageMonitor,
+                 decode: Callable[[bytes], object] | None = None) -> None:
+        self._name = node.resolve_topic_name(topic)
+        self._kind = f'{msg_type.__module__.split(".")[0]}/{msg_type.__name__}'
+        self._monitor = monitor
+        self._decode = decode or (image_of_bytes if msg_type is Image
+                                  else lambda data: deserialize_message(data, msg_type))
+
+    def __call__(self, data: bytes) -> object | None:
+        try:
+            return self._decode(data)
+        except Exception as exc:  # rclpy's RMWError: the CDR does not hold a msg_type
+            reason = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
+            self._monitor.bad_input(
+                f'{self._name}: {len(data)} bytes that are not a {self._kind} ({reason})')
+            return None
 
 
 # Frames a stage may hold waiting (`FrameQueue`, `PairedInputs`): a new track's first frames
@@ -470,8 +486,59 @@ class PairedInputs:
         self._monitor.dropped(self._sync.dropped[0] - before)
 
 
+class PolledTopic:
+    """A subscription that wakes nobody: its messages wait in the DDS reader (the newest
+    `profile.depth`) until the stage that uses them takes them (`take()`, in the thread
+    that processes its frame).
+
+    For inputs a stage reads beside its frame and never waits for (the latest camera_info,
+    the image of the frame's stamp if it has come): taken through the executor, each such
+    message was a wake-up of the node's Python thread, 0.25-0.3 ms of CPU at 30 fps whatever
+    the message (a null subscriber on this host, docs/NOTES.md), while here it costs the
+    DDS reader's copy alone. The subscription is rcl's, made without rclpy's `Subscription`
+    (which an executor would serve); it is in the ROS graph as any other (`ros2 topic info`).
+    `close()` destroys it (`close_inputs`: at deactivation and exit).
+    """
+
+    def __init__(self, node: Node, msg_type: type, topic: str, profile: object) -> None:
+        self._type = msg_type
+        self.name = node.resolve_topic_name(topic)
+        check_is_valid_msg_type(msg_type)  # its type support loaded, as create_subscription does
+        with node.handle:
+            self._handle = _rclpy.Subscription(node.handle, msg_type, topic,
+                                               profile.get_c_qos_profile())
+        self._polled = node.__dict__.setdefault('polled_topics', [])
+        self._polled.append(self)
+
+    def take(self) -> list[bytes]:
+        """The serialised messages come since the last take, oldest first."""
+        out = []
+        try:
+            with self._handle:
+                while (item := self._handle.take_message(self._type, True)) is not None:
+                    out.append(item[0])
+        except InvalidHandle:  # closed meanwhile (`SubscribedWhile`, a deactivation)
+            pass
+        return out
+
+    def close(self) -> None:
+        self._handle.destroy_when_not_in_use()
+        if self in self._polled:
+            self._polled.remove(self)
+
+
+def close_inputs(node: Node) -> None:
+    """Stop a node's inputs: its frame queues (each finishes the frame in hand), then its
+    polled topics, which those frames read."""
+    for queue in list(node.__dict__.get('frame_queues', [])):
+        queue.close()
+    for topic in list(node.__dict__.get('polled_topics', [])):
+        topic.close()
+
+
 class LatestIntrinsics:
-    """The intrinsics of the latest camera_info (for stages whose inputs carry none).
+    """The intrinsics of the latest camera_info (for stages whose inputs carry none), taken
+    when a frame asks for them (`latest()`, a `PolledTopic`).
 
     A camera sends the same calibration with every frame: a message whose bytes after its
     stamp are those of the last one read is not deserialised again."""
@@ -481,19 +548,23 @@ class LatestIntrinsics:
         self.intrinsics: Intrinsics | None = None
         self._monitor = monitor
         self._read: bytes | None = None  # the bytes after the stamp of the last one read
-        subscribe(node, CameraInfo, topic, self._on, qos.SENSOR_QOS, monitor,
-                  decode=self._decode)
+        self._topic = PolledTopic(node, CameraInfo, topic, qos.SENSOR_QOS)
+        self._message = _Reader(node, CameraInfo, topic, monitor)
 
-    def _decode(self, data: bytes) -> tuple[bytes, CameraInfo] | None:
+    def latest(self) -> Intrinsics | None:
+        """The intrinsics of the newest valid camera_info come so far (None before the
+        first); each one taken that is refused is counted as a bad input."""
+        for data in self._topic.take():
+            self._update(data)
+        return self.intrinsics
+
+    def _update(self, data: bytes) -> None:
         body = data[12:]  # bytes 0-3: the encapsulation, 4-11: the stamp
-        if body == self._read:
-            return None
-        return body, deserialize_message(data, CameraInfo)
-
-    def _on(self, item: tuple[bytes, CameraInfo]) -> None:
+        if body == self._read or (msg := self._message(data)) is None:
+            return
         try:
-            self.intrinsics = intrinsics_from_msg(item[1])
-            self._read = item[0]
+            self.intrinsics = intrinsics_from_msg(msg)
+            self._read = body
         except ValueError as exc:
             self._read = None
             self._monitor.bad_input(f'camera_info refused: {exc}')
@@ -502,17 +573,18 @@ class LatestIntrinsics:
 class SubscribedWhile:
     """A subscription that exists only while `wanted()` says it is needed: `wanted` is asked
     at start and every `period_s` on the steady clock (in the executor's thread), and the
-    subscription made (`make()`) or destroyed when the answer changes. For inputs of outputs
-    that are built on demand, and for a fallback input while its better source is missing:
-    a message never taken costs nothing, while one received to be thrown away costs its
-    transport and its bytes."""
+    subscription made (`make()`: an rclpy `Subscription` or a `PolledTopic`) or destroyed when
+    the answer changes. For inputs of outputs that are built on demand, and for a fallback
+    input while its better source is missing: a message never taken costs nothing, while one
+    received to be thrown away costs its transport and its bytes."""
 
     def __init__(self, node: Node, wanted: Callable[[], bool],
-                 make: Callable[[], Subscription], *, period_s: float = 0.5) -> None:
+                 make: Callable[[], Subscription | PolledTopic], *,
+                 period_s: float = 0.5) -> None:
         self._node = node
         self._wanted = wanted
         self._make = make
-        self.subscription: Subscription | None = None
+        self.subscription: Subscription | PolledTopic | None = None
         self.update()
         node.create_timer(period_s, self.update, clock=Clock(clock_type=ClockType.STEADY_TIME))
 
@@ -521,34 +593,38 @@ class SubscribedWhile:
         if want and self.subscription is None:
             self.subscription = self._make()
         elif not want and self.subscription is not None:
-            self._node.destroy_subscription(self.subscription)
+            if isinstance(self.subscription, PolledTopic):
+                self.subscription.close()
+            else:
+                self._node.destroy_subscription(self.subscription)
             self.subscription = None
 
 
 class RecentImages:
     """A camera's images of the last few stamps, for a stage that uses the one of its frame's
-    stamp when it has come but never waits for it (the tracker's free-space check, the
-    foreground's masked colour): `at(stamp_ns)` is that image read by `read` (the nearest
-    stamp within `slop_ns`), or None.
+    stamp when it has come but never waits for it (the tracker's free-space check, the IK's
+    depth, the foreground's masked colour): `at(stamp_ns)` is that image read by `read` (the
+    nearest stamp within `slop_ns`), or None.
 
-    Only the stamps are read as the images arrive (`wire.cdr_header`); an image is
-    deserialised when it is used. With `wanted`, the topic is subscribed only while
-    `wanted()` (`SubscribedWhile`)."""
-
-    KEEP = 8
+    The images wait in their DDS reader (a `PolledTopic`) until a frame asks: then those come
+    since are read in place (`image_of_bytes`: their header and size, bytes that hold no
+    Image counted as bad inputs), and the pixels of the one used are read. With `wanted`, the
+    topic is subscribed only while `wanted()` (`SubscribedWhile`)."""
 
     def __init__(self, node: Node, monitor: StageMonitor, topic: str,
                  read: Callable[[Image], np.ndarray], *, slop_ns: int = 0,
                  wanted: Callable[[], bool] | None = None) -> None:
-        self._recent: deque[tuple[int, bytes]] = deque(maxlen=self.KEEP)
+        self._recent: deque[tuple[int, object]] = deque(maxlen=qos.RECENT_QOS.depth)
         self._read = read
         self._slop_ns = slop_ns
         self._monitor = monitor
         self._name = node.resolve_topic_name(topic)
+        self._image = _Reader(node, Image, topic, monitor)
+        self._topic: PolledTopic | None = None
 
-        def make() -> Subscription:
-            return subscribe(node, Image, topic, self._recent.append, qos.SENSOR_QOS, monitor,
-                             decode=lambda data: (_stamp_ns(data), data))
+        def make() -> PolledTopic:
+            self._topic = PolledTopic(node, Image, topic, qos.RECENT_QOS)
+            return self._topic
 
         if wanted is None:
             make()
@@ -556,22 +632,20 @@ class RecentImages:
             self.follow = SubscribedWhile(node, wanted, make)
 
     def at(self, stamp_ns: int) -> np.ndarray | None:
-        recent = list(self._recent)
-        if not recent:
+        topic = self._topic
+        for data in (topic.take() if topic is not None else ()):
+            if (msg := self._image(data)) is not None:
+                self._recent.append((stamp_to_ns(msg.header.stamp), msg))
+        if not self._recent:
             return None
-        near, data = min(recent, key=lambda item: abs(item[0] - stamp_ns))
+        near, msg = min(self._recent, key=lambda item: abs(item[0] - stamp_ns))
         if abs(near - stamp_ns) > self._slop_ns:
             return None
         try:
-            return self._read(image_of_bytes(data))
+            return self._read(msg)
         except ValueError as exc:
             self._monitor.bad_input(f'{self._name} at {near} ns refused: {exc}')
             return None
-
-
-def _stamp_ns(data: bytes) -> int:
-    sec, nanosec, _, _ = wire.cdr_header(data)
-    return sec * 1_000_000_000 + nanosec
 
 
 class PeopleInputs:

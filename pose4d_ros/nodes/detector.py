@@ -277,7 +277,7 @@ class DetectorNode(ManagedNode):
             # the foreground's labels (`people_labels`); a plain mask (255 = person) is one
             people = people_from_labels(np.where(labels > 127, labels, 0).astype(np.uint8),
                                         depth)
-            parts = self.people.step(color, depth, self.camera.intrinsics, people,
+            parts = self.people.step(color, depth, self.camera.latest(), people,
                                      stamp_s=stamp * 1e-9)
         except ValueError as exc:
             self.monitor.bad_input(f'frame at {stamp} ns refused: {exc}')

@@ -3,8 +3,10 @@
 Elbows and knees come from shoulders/hips and wrists/ankles in 3-D and the bone lengths (fixed
 parameters, or learned per track); the swivel angle on the circle of possible elbows is chosen by
 the depth image of the person, with a joint-limit prior where depth cannot tell; `ik.method`
-picks the law-of-cosines circle or the paper's Denavit-Hartenberg chains. Tracked parts
-and depth are paired by stamp (exact, or nearest within `ik.depth_slop_s`).
+picks the law-of-cosines circle or the paper's Denavit-Hartenberg chains. The depth image is
+the foreground's of the tracked parts' stamp (exact, or nearest within `ik.depth_slop_s`),
+taken when the parts come and never waited for: the foreground publishes it before the
+detector starts on that frame (a frame without it is completed by the limb prior).
 
 Several people: one IK per track id, each with its own learned bone lengths. Frames are
 completed in a worker thread: an IK slower than its input works on the newest frame and drops
@@ -14,8 +16,10 @@ Subscriptions
     pose4d/parts/tracked/people (pose4d_msgs/SkeletonArray, every tracked person), or from a
     tracker that publishes only one person, pose4d/parts/tracked (pose4d_msgs/JointArray;
     subscribed only while nothing publishes pose4d/parts/tracked/people)
-    pose4d/foreground/depth (sensor_msgs/Image, 16UC1 or 32FC1; only when ik.use_depth)
-    camera/color/camera_info (sensor_msgs/CameraInfo; the latest)
+    pose4d/foreground/depth (sensor_msgs/Image, 16UC1 or 32FC1; only when ik.use_depth; read
+    as the parts come, `common.RecentImages`)
+    camera/color/camera_info (sensor_msgs/CameraInfo; the latest, read as the parts come,
+    `common.LatestIntrinsics`)
 Publications
     pose4d/skeletons (pose4d_msgs/SkeletonArray: every person's 14 joints, the primary first;
     empty when nobody is in view)
@@ -43,7 +47,6 @@ from typing import Any
 
 from pose4d_msgs.msg import JointArray, SkeletonArray
 from rclpy.node import Node
-from sensor_msgs.msg import Image
 from std_msgs.msg import Header
 from tf2_msgs.msg import TFMessage
 from visualization_msgs.msg import MarkerArray
@@ -58,6 +61,7 @@ from pose4d_ros.nodes import hri, qos
 from pose4d_ros.nodes.common import (
     LatestIntrinsics,
     PeopleInputs,
+    RecentImages,
     StageMonitor,
     run,
 )
@@ -183,18 +187,18 @@ class IkNode(ManagedNode):
 
     def activate(self, p: dict[str, Any]) -> None:
         self.camera = LatestIntrinsics(self, self.monitor)
-        depth = ([(Image, 'pose4d/foreground/depth', qos.SENSOR_QOS)]
-                 if self.template.use_depth else [])
+        self.depth = (RecentImages(self, self.monitor, 'pose4d/foreground/depth',
+                                   depth_from_msg, slop_ns=int(p['ik.depth_slop_s'] * 1e9))
+                      if self.template.use_depth else None)
         self.inputs = PeopleInputs(self, 'pose4d/parts/tracked/people', 'pose4d/parts/tracked',
-                                   depth, self.process, self.monitor,
-                                   slop_ns=int(p['ik.depth_slop_s'] * 1e9))
+                                   [], self.process, self.monitor)
         self.get_logger().info(
             f'completing {self.resolve_topic_name("pose4d/parts/tracked")}(/people) -> '
             f'{self.resolve_topic_name("pose4d/skeleton")}, '
             f'{self.resolve_topic_name("pose4d/skeletons")} (depth: {self.template.use_depth}, '
             f'learn lengths: {p["ik.learn_lengths"]}, joints on /tf: {p["tf.publish"]})')
 
-    def process(self, tracked: list[JointSet], header: Header, extra: tuple) -> None:
+    def process(self, tracked: list[JointSet], header: Header, _: tuple) -> None:
         if (p := self.params.changes()) is not None:
             self.people.configure(**ik_settings(p))
             self.outputs.configure(p)
@@ -204,15 +208,18 @@ class IkNode(ManagedNode):
             self.people.reset()
         # a single-person tracker's message of nobody (track 0, nothing located) is nobody
         tracked = [t for t in tracked if t.track_id or (t.source != MISSING).any()]
-        intrinsics = self.camera.intrinsics
-        if extra and intrinsics is None:
+        intrinsics = self.camera.latest()
+        if self.depth is not None and intrinsics is None:
             # not a bad input: the camera's calibration has not come yet (its reader may match
             # after the others'); the depth image cannot be read without it
             self.get_logger().info(
                 f'no {self.resolve_topic_name("camera/color/camera_info")} yet: elbows and '
                 'knees from the limb prior, without the depth image', throttle_duration_sec=5.0)
         try:
-            depth = depth_from_msg(extra[0]) if extra and intrinsics is not None else None
+            # the foreground publishes a frame's depth before the detector starts on it: it
+            # has come by the time the frame's tracked parts do
+            depth = (self.depth.at(stamp) if self.depth is not None and intrinsics is not None
+                     else None)
             skeletons = self.people.step(tracked, depth, intrinsics)
         except ValueError as exc:
             self.monitor.bad_input(f'frame at {stamp} ns refused: {exc}')

@@ -21,7 +21,7 @@ from collections.abc import Callable
 from rclpy.lifecycle import LifecycleNode, LifecycleState, TransitionCallbackReturn
 from rclpy.node import Node
 
-from pose4d_ros.nodes.common import InputFailure
+from pose4d_ros.nodes.common import InputFailure, close_inputs
 from pose4d_ros.nodes.params import NodeParams, Param, ParameterError
 
 AUTOSTART = Param(
@@ -50,8 +50,7 @@ class _Made:
             node.destroy_timer(timer)
         for sub in [s for s in node.subscriptions if s not in self.subscriptions]:
             node.destroy_subscription(sub)
-        for queue in list(node.__dict__.get('frame_queues', [])):
-            queue.close()
+        close_inputs(node)
         for pub in [p for p in node.publishers if publishers and p not in self.publishers]:
             node.destroy_publisher(pub)
         for name in [n for n in node.__dict__ if n not in self.attributes]:

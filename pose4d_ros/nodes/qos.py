@@ -10,6 +10,7 @@
   whose reliable input got one 0-byte `JointArray` answered none of the valid ones after it,
   whatever the executor, raw or typed; `test/test_wedge.py`). Between processes of one machine
   (shared memory) a best-effort reader loses nothing its queue holds.
+- Camera images read beside a frame (the tracker's depth): best effort, keep last 8.
 - Our outputs: reliable, keep last 10.
 - /tf: reliable, keep last 100 (tf2_ros's broadcaster profile).
 - Bags: the QoS a topic was recorded with is offered again on replay.
@@ -31,6 +32,10 @@ SENSOR_QOS: QoSProfile = qos_profile_sensor_data
 INPUT_QOS = QoSProfile(depth=10, reliability=ReliabilityPolicy.BEST_EFFORT,
                        durability=DurabilityPolicy.VOLATILE, history=HistoryPolicy.KEEP_LAST)
 OUTPUT_QOS = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE,
+                        durability=DurabilityPolicy.VOLATILE, history=HistoryPolicy.KEEP_LAST)
+# camera images a stage reads beside its frame, if they have come (`common.RecentImages`): the
+# sensor-data profile's best effort, the last 8 kept
+RECENT_QOS = QoSProfile(depth=8, reliability=ReliabilityPolicy.BEST_EFFORT,
                         durability=DurabilityPolicy.VOLATILE, history=HistoryPolicy.KEEP_LAST)
 TF_QOS = QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE,
                     durability=DurabilityPolicy.VOLATILE, history=HistoryPolicy.KEEP_LAST)

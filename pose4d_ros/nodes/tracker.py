@@ -174,7 +174,7 @@ class TrackerNode(ManagedNode):
         stamp = stamp_to_ns(header.stamp)
         if self.monitor.time_jumped(stamp):
             self.people.reset()
-        intrinsics = self.camera.intrinsics
+        intrinsics = self.camera.latest()
         try:
             # read only when a track goes unseen
             depth = ((lambda: self.depth.at(stamp))
