@@ -4,6 +4,7 @@ every node runs with (`core.malloc`)."""
 from __future__ import annotations
 
 import json
+import os
 import resource
 import subprocess
 
@@ -67,6 +68,15 @@ def test_bench_graph_sets_each_graph_beside_the_core_with_calls_per_process(tmp_
             sum(st['cpu_ms_per_frame'][p] for p in processes), abs=0.02)
         assert st['to_core'] == pytest.approx(st['stages_ms_per_frame'] / core['total'],
                                               abs=1e-3)
+        # each process's CPU by thread adds up to it (each figure /proc's ticks, rounded
+        # down: at most a tick apart a kind); the executor and the frame worker both work
+        tick_ms = 1e3 / os.sysconf('SC_CLK_TCK') / st['frames_in']
+        for p in processes:
+            threads = st['threads_ms_per_frame'][p]
+            assert set(threads) == {'executor', 'dds', 'frames'}, threads
+            assert sum(threads.values()) == pytest.approx(st['cpu_ms_per_frame'][p],
+                                                          abs=4 * tick_ms + 0.02), threads
+            assert threads['executor'] > 0 and threads['frames'] > 0, threads
         # every node ran under the profiler and wrote its calls at exit
         assert set(processes) <= set(st['calls_per_frame']), st['calls_per_frame']
         assert all(st['calls_per_frame'][p] > 50 for p in processes)

@@ -11,9 +11,10 @@ What is compared, each over every colour frame of the bag in its order:
   `wire.color_from_msg`): what a node of the peer would pay for its input too (ours read the
   bytes in place, `nodes.common.image_of_bytes`, for less);
 - each graph run (`nodes`: one process per stage; `pipeline`: the one-process node): each
-  process's CPU while the bag plays and drains, per frame; `stages_ms_per_frame`, the sum over
-  the stage processes (the replay, recorder and load are not the graph's); `to_core` and
-  `to_peer`, that sum over the core's and over the peer's.
+  process's CPU while the bag plays and drains, per frame (and `threads_ms_per_frame`, the
+  same by thread: the executor's, Fast DDS's and the frame worker's, `Graph.thread_seconds`);
+  `stages_ms_per_frame`, the sum over the stage processes (the replay, recorder and load are
+  not the graph's); `to_core` and `to_peer`, that sum over the core's and over the peer's.
 
 Means, not medians: a process's CPU over a run is a mean a frame, so the core's is too (its
 first frames of a track search every person scale, and the nodes pay those as well).
@@ -116,6 +117,10 @@ def graph_run(bag_path: Path, graph: str, out: Path, *, profile: Path | None = N
            'latency_p50_ms_by_third': [ms_stats(part.tolist())['p50']
                                        for part in np.array_split(lat, 3)],
            'cpu_ms_per_frame': cpu,
+           # each process's CPU by thread: the node's executor, Fast DDS's, the frame worker's
+           'threads_ms_per_frame': {
+               exe: {kind: round(t * 1e3 / max(r.frames, 1), 2) for kind, t in kinds.items()}
+               for exe, kinds in r.thread_s.items()},
            'stages_ms_per_frame': round(sum(cpu.get(s, 0.0) for s in GRAPHS[graph]), 2),
            # where frames were lost: each stage's count on /diagnostics
            'dropped_by_stage': r.dropped}

@@ -95,14 +95,30 @@ class Graph:
 
     def cpu_seconds(self) -> dict[str, float]:
         """CPU time (user + system) each running process has used so far (Linux /proc)."""
-        tick = os.sysconf('SC_CLK_TCK')
         out = {}
         for exe, proc in self.procs.items():
             try:
-                fields = Path(f'/proc/{proc.pid}/stat').read_text().rsplit(')', 1)[1].split()
-                out[exe] = (int(fields[11]) + int(fields[12])) / tick
+                out[exe] = _cpu_s(Path(f'/proc/{proc.pid}/stat'))
             except (OSError, IndexError, ValueError):
                 continue
+        return out
+
+    def thread_seconds(self) -> dict[str, dict[str, float]]:
+        """CPU time each running process's threads have used so far, by kind (`THREADS`):
+        `executor` (the main thread, which spins the node), `dds` (Fast DDS's, named
+        `dds.*`) and `frames` (the rest: the frame worker, and any threads of the libraries
+        it calls). Threads that ended are not counted."""
+        out: dict[str, dict[str, float]] = {}
+        for exe, proc in self.procs.items():
+            kinds = dict.fromkeys(THREADS, 0.0)
+            try:
+                for task in Path(f'/proc/{proc.pid}/task').iterdir():
+                    kind = ('executor' if int(task.name) == proc.pid else 'dds'
+                            if (task / 'comm').read_text().startswith('dds.') else 'frames')
+                    kinds[kind] += _cpu_s(task / 'stat')
+            except (OSError, IndexError, ValueError):
+                continue
+            out[exe] = kinds
         return out
 
     def raise_unless_clean(self, codes: dict[str, int]) -> None:
@@ -130,6 +146,16 @@ class Graph:
         return codes
 
 
+# the kinds of a node process's threads (`Graph.thread_seconds`)
+THREADS = ('executor', 'dds', 'frames')
+
+
+def _cpu_s(stat: Path) -> float:
+    """User + system CPU seconds in a /proc `stat` file (a process's or a thread's)."""
+    fields = stat.read_text().rsplit(')', 1)[1].split()
+    return (int(fields[11]) + int(fields[12])) / os.sysconf('SC_CLK_TCK')
+
+
 @dataclass(frozen=True)
 class GraphRun:
     """What one replay of a bag through the node graph gave.
@@ -145,6 +171,8 @@ class GraphRun:
         run).
     dropped : {stage: frames it dropped} (`dropped` on its last /diagnostics, which comes
         after the last frame).
+    thread_s : {executable: {thread kind: CPU seconds}} over the same span as `cpu_s`
+        (`Graph.thread_seconds`; not the replay's).
     """
 
     recorded: Path
@@ -154,6 +182,7 @@ class GraphRun:
     logs: dict[str, Path]
     cpu_s: dict[str, float]
     dropped: dict[str, int] = field(default_factory=dict)
+    thread_s: dict[str, dict[str, float]] = field(default_factory=dict)
 
     def latency_ms(self) -> np.ndarray:
         """Colour frame in -> skeleton out, per frame that came out (both seen here, on one
@@ -245,7 +274,7 @@ def run_graph(bag_path: Path, out: Path, *, rate: float = 1.0, model: str = 'rgb
             ex.spin_once(timeout_sec=0.1)
         for kind in load:  # started once the graph is up, as a user's commands would be
             graph.start_load(kind, list(stages))
-        cpu_before = graph.cpu_seconds()
+        cpu_before, threads_before = graph.cpu_seconds(), graph.thread_seconds()
         t_play = time.monotonic()
         # the replay plays once it has matched every subscriber seen here (this one too)
         played = [t.lstrip('/') for t in bag.topics(bag_path) if t.startswith('/camera/')]
@@ -268,6 +297,9 @@ def run_graph(bag_path: Path, out: Path, *, rate: float = 1.0, model: str = 'rgb
                 break
             ex.spin_once(timeout_sec=0.05)
         cpu = {exe: t - cpu_before.get(exe, 0.0) for exe, t in graph.cpu_seconds().items()}
+        threads = {exe: {kind: t - threads_before.get(exe, {}).get(kind, 0.0)
+                         for kind, t in kinds.items()}
+                   for exe, kinds in graph.thread_seconds().items() if exe != 'replay'}
         cpu['replay'] = replay_cpu
         # each stage's /diagnostics of after its last frame (one a second)
         until = time.monotonic() + 1.2
@@ -279,7 +311,7 @@ def run_graph(bag_path: Path, out: Path, *, rate: float = 1.0, model: str = 'rgb
         codes = graph.stop()
     graph.raise_unless_clean(codes)
     dropped = {stage: int(values.get('dropped', 0)) for stage, values in diagnostics.items()}
-    return GraphRun(recorded, frames, entered, left, dict(graph.logs), cpu, dropped)
+    return GraphRun(recorded, frames, entered, left, dict(graph.logs), cpu, dropped, threads)
 
 
 def tf_per_skeleton(recorded: Path, skeletons: dict[int, JointSet], *,
