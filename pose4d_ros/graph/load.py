@@ -38,11 +38,12 @@ def param_get(node_name: str, timeout_s: float = 2.0) -> bool:
     import rclpy
     import rclpy.executors
     from rcl_interfaces.srv import GetParameters
+    from rclpy.signals import SignalHandlerOptions
 
     from pose4d_ros.nodes.common import try_shutdown
 
     context = rclpy.Context()
-    rclpy.init(context=context)
+    rclpy.init(context=context, signal_handler_options=SignalHandlerOptions.NO)
     try:
         # a name of its own each time, as the ros2 command line's nodes have
         node = rclpy.create_node(f'pose4d_param_get_{os.getpid()}_{time.monotonic_ns()}',
@@ -64,8 +65,9 @@ def query(nodes: list[str]) -> None:
     import rclpy
     from pose4d_msgs.msg import JointArray
     from rclpy.qos import qos_profile_sensor_data
+    from rclpy.signals import SignalHandlerOptions
 
-    rclpy.init()
+    rclpy.init(signal_handler_options=SignalHandlerOptions.NO)
     node = rclpy.create_node('pose4d_topic_hz')
     count = 0
 
@@ -93,6 +95,8 @@ def main(argv: list[str] | None = None) -> int:
         print(f'usage: python -m pose4d_ros.graph.load {"|".join(LOADS)} [NODE...]',
               file=sys.stderr)
         return 2
+    # the only handlers (rclpy's are off: SIGTERM shut its contexts down while a `ros2 param
+    # get` made its node, an RCLError and exit status 1 where the load was only stopped)
     signal.signal(signal.SIGTERM, lambda *_: sys.exit(0))
     try:
         busy() if argv[0] == 'busy' else query(argv[1:])
