@@ -80,3 +80,22 @@ def test_bench_graph_sets_each_graph_beside_the_core_with_calls_per_process(tmp_
         # every node ran under the profiler and wrote its calls at exit
         assert set(processes) <= set(st['calls_per_frame']), st['calls_per_frame']
         assert all(st['calls_per_frame'][p] > 50 for p in processes)
+
+
+def test_the_results_page_gives_each_stage_node_by_thread():
+    from pose4d_ros.evaluation.results_doc import graph_table
+
+    core = {'foreground': 2.0, 'detector': 6.0, 'tracker': 0.5, 'ik': 0.2, 'total': 8.7}
+    run = {'stages_ms_per_frame': 13.0, 'to_core': 1.49, 'frames_out': 300, 'frames_in': 300,
+           'latency_ms': {'p95': 20.0},
+           'cpu_ms_per_frame': {'foreground': 3.0, 'detector': 7.5, 'tracker': 1.3, 'ik': 1.2},
+           'threads_ms_per_frame': {s: {'executor': 0.5, 'dds': 0.2, 'frames': 0.6}
+                                    for s in STAGES}}
+    lines = graph_table({'core_ms_per_frame': core, 'nodes': run, 'pipeline': dict(
+        run, threads_ms_per_frame={})})
+    assert '| ik | 0.5 | 0.2 | 0.6 | 1.2 | 0.2 |' in lines
+    assert sum(line.startswith('| detector |') for line in lines) == 1
+    # a bench from before the split: no thread table
+    del run['threads_ms_per_frame']
+    assert not any('executor' in line for line in graph_table(
+        {'core_ms_per_frame': core, 'nodes': run, 'pipeline': run}))

@@ -379,6 +379,25 @@ def graph_table(graph: dict) -> list[str]:
                    + (f"{g['to_peer']:.2f}" if 'to_peer' in g else '-')
                    + f" | {g['frames_out']}/{g['frames_in']} | {fmt(g['latency_ms']['p95'])} | "
                    f'{spread} |')
+    return out + thread_table(graph)
+
+
+def thread_table(graph: dict) -> list[str]:
+    """The stage processes' CPU a frame by thread (`threads_ms_per_frame`, of the run
+    reported), beside each stage's in one process."""
+    threads = graph['nodes'].get('threads_ms_per_frame')
+    if not threads:
+        return []
+    core = graph['core_ms_per_frame']
+    out = ['', "Each stage node's CPU ms a frame by thread (the run above): its executor "
+           "(taking the messages), Fast DDS's threads, its frame worker (the stage, with the "
+           'decoding and publishing of its frames), beside the same stage in one process:', '',
+           '| node | executor | Fast DDS | frame worker | all | the stage in one process |',
+           '|---|---|---|---|---|---|']
+    for stage in (s for s in core if s != 'total' and s in threads):
+        t = threads[stage]
+        out.append(f"| {stage} | {t['executor']} | {t['dds']} | {t['frames']} | "
+                   f"{graph['nodes']['cpu_ms_per_frame'].get(stage, '-')} | {core[stage]} |")
     return out
 
 
