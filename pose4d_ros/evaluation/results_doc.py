@@ -352,6 +352,7 @@ def bench_section(results: Path, jobs: dict) -> list[str]:
                         ('bench_graph300', 'The node graph and the pipeline node, 300 frames '
                                            'at 30 fps (1x), the ros2 command line querying '
                                            'the nodes'),
+                        ('bench_graph300_quiet', 'The same, with nothing else running'),
                         ('bench_graph_people2', 'The node graph and the pipeline node, the '
                                                 'two-person demo bag at 30 fps (1x)')):
         graph = load(results, name)

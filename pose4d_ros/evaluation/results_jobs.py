@@ -487,6 +487,12 @@ JOBS: tuple[Job, ...] = (
                                    str(RESULTS / 'bench_graph300.json'), '--frames', '20',
                                    '--graph', '--load', 'query', '--repeat', '3',
                                    *(['--peer', 'mediapipe'] if c.peer else [])]]),
+    Job('bench_graph300_quiet', 'bench_graph300 with nothing else running (no query load: '
+        "each ros2 command is a new DDS participant whose discovery every node's DDS threads "
+        'pay)', ('bench300',),
+        lambda c: [['pose4d', 'bench', str(DATA / 'bench300_bag'), '--json',
+                    str(RESULTS / 'bench_graph300_quiet.json'), '--frames', '20', '--graph',
+                    '--repeat', '3', *(['--peer', 'mediapipe'] if c.peer else [])]]),
     Job('bench_graph_people2', 'both graphs replaying the two-person demo bag '
         '(bags/sample_people2, 50 frames) at 30 fps (1x): frames in and out, latency', (),
         lambda c: [['pose4d', 'bench', 'bags/sample_people2', '--json',
