@@ -83,6 +83,25 @@ def test_the_headline_cost_is_the_deployed_graphs() -> None:
     assert block.index('as deployed') < block.index('in one process (the core)')
 
 
+def test_the_quiet_deployed_cost_is_its_json() -> None:
+    """Beside the headline, the same graphs with nothing else running, as
+    `docs/results/bench_graph300_quiet.json` holds them."""
+    block = summary_block((ROOT / 'README.md').read_text())
+    path = RESULTS / 'bench_graph300_quiet.json'
+    graph = json.loads(path.read_text()).get('graph', {}) if path.exists() else {}
+    found = re.search(r'With nothing else running.*?the four stage nodes ([0-9.]+) ms = '
+                      r'([0-9.]+)x the core \(([0-9.]+) ms\), ([0-9.]+)x MediaPipe.*?'
+                      r'`pipeline` ([0-9.]+) ms = ([0-9.]+)x the core', block, re.S)
+    if 'peer_ms_per_frame' not in graph:
+        assert found is None
+        pytest.skip('docs/results/bench_graph300_quiet.json has no MediaPipe')
+    assert found, 'the README summary does not give the quiet deployed cost'
+    nodes, one = graph['nodes'], graph['pipeline']
+    assert [float(x) for x in found.groups()] == pytest.approx(
+        [nodes['stages_ms_per_frame'], nodes['to_core'], graph['core_ms_per_frame']['total'],
+         nodes['to_peer'], one['stages_ms_per_frame'], one['to_core']], abs=5e-3)
+
+
 def test_the_summary_is_what_the_generator_writes() -> None:
     block = summary_block((ROOT / 'README.md').read_text())
     assert block.strip() == doc.summary(RESULTS).strip()

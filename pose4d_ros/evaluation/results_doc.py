@@ -56,7 +56,8 @@ def summary(results: Path) -> str:
         lines.append(f'| `{key}` {what} | ' + ' | '.join(
             cell(tables[s]['rows'][key]) if key in tables[s]['rows'] else '-' for s, _ in sets)
             + ' |')
-    lines += deployed_summary(load(results, 'bench_graph300'))
+    lines += deployed_summary(load(results, 'bench_graph300'),
+                              load(results, 'bench_graph300_quiet'))
     bench = load(results, 'bench')
     if bench and 'ratio_to_peer' in bench:
         lines += ['', f"CPU per frame, our four stages in one process (the core) / MediaPipe "
@@ -69,7 +70,7 @@ def summary(results: Path) -> str:
     return '\n'.join(lines)
 
 
-def deployed_summary(bench: dict | None) -> list[str]:
+def deployed_summary(bench: dict | None, quiet: dict | None = None) -> list[str]:
     """The README's headline cost: the node graphs as deployed against MediaPipe and the core
     (`graph.bench`), when `bench_graph300` ran with the peer."""
     graph = (bench or {}).get('graph', {})
@@ -85,7 +86,21 @@ def deployed_summary(bench: dict | None) -> list[str]:
                 f"{nodes['to_core']:.2f}x the same stages in one process "
                 f"({graph['core_ms_per_frame']['total']} ms); the one-process `pipeline` node "
                 f"{one['stages_ms_per_frame']} ms = {one['to_peer']:.2f}x MediaPipe, "
-                f"{one['to_core']:.2f}x the core."]
+                f"{one['to_core']:.2f}x the core." + quiet_summary(quiet)]
+
+
+def quiet_summary(bench: dict | None) -> str:
+    """The deployed cost with nothing else running (`bench_graph300_quiet`), when it ran with
+    the peer."""
+    graph = (bench or {}).get('graph', {})
+    if 'peer_ms_per_frame' not in graph:
+        return ''
+    nodes, one = graph['nodes'], graph['pipeline']
+    return (' With nothing else running (`docs/results/bench_graph300_quiet.json`): the four '
+            f"stage nodes {nodes['stages_ms_per_frame']} ms = {nodes['to_core']:.2f}x the core "
+            f"({graph['core_ms_per_frame']['total']} ms), {nodes['to_peer']:.2f}x MediaPipe "
+            f"({graph['peer_ms_per_frame']} ms); `pipeline` {one['stages_ms_per_frame']} ms = "
+            f"{one['to_core']:.2f}x the core.")
 
 
 REAL_SUMMARY = ("**Real** recordings (development data, MediaPipe the reference, "
