@@ -918,3 +918,21 @@ def test_a_track_spanning_less_than_a_body_is_kept_but_not_published():
         for k in range(5):
             out = tr.step([_scored(person(1.0), 9.0), _scored(feet, 9.0)], k * DT, INTR)
         assert sorted(round(float(torso(t)[0][0]), 2) for t in out) == published
+
+
+def test_people_from_labels_gives_each_label_from_the_lowest_up_the_highest_first():
+    from pose4d_ros.core.people import people_from_labels
+
+    labels = np.zeros((40, 60), np.uint8)
+    labels[5:20, 10:20] = 255  # the best person
+    labels[22:30, 40:52] = 254  # the next
+    labels[0:3, 0:3] = 37  # under the lowest value asked for: background
+    depth = np.full(labels.shape, 2.0, np.float32)
+    depth[22:30, 40:46] = np.nan  # no reading on half of the second person
+    depth[22:30, 46:52] = 3.0
+    people = people_from_labels(labels, depth, lowest=128)
+    assert [p.box for p in people] == [(10, 5, 20, 20), (40, 22, 52, 30)]
+    assert [p.depth_m for p in people] == [2.0, 3.0]
+    assert people[0].mask.sum() == 150 and not people[0].mask[22:30, 40:52].any()
+    assert len(people_from_labels(labels, None)) == 3  # from 1 up by default
+    assert people_from_labels(np.zeros_like(labels), depth) == []

@@ -275,8 +275,7 @@ class DetectorNode(ManagedNode):
                 raise ValueError(f'colour {color.shape[:2]}, depth {depth.shape} and mask '
                                  f'{labels.shape} differ in size')
             # the foreground's labels (`people_labels`); a plain mask (255 = person) is one
-            people = people_from_labels(np.where(labels > 127, labels, 0).astype(np.uint8),
-                                        depth)
+            people = people_from_labels(labels, depth, lowest=128)
             parts = self.people.step(color, depth, self.camera.latest(), people,
                                      stamp_s=stamp * 1e-9)
         except ValueError as exc:

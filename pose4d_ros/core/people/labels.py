@@ -6,6 +6,7 @@ from __future__ import annotations
 import math
 from collections.abc import Sequence
 
+import cv2
 import numpy as np
 from numpy.typing import NDArray
 
@@ -23,14 +24,16 @@ def people_labels(people: Sequence[ForegroundResult], shape: tuple[int, int]
     return labels
 
 
-def people_from_labels(labels: NDArray[np.uint8], depth_m: NDArray[np.floating] | None
-                       ) -> list[ForegroundResult]:
-    """The people of a label image (`people_labels`: each distinct value > 0 one person, the
-    highest first), their boxes and median depths from `depth_m` (metres, NaN = none)."""
-    labels = np.asarray(labels)
+def people_from_labels(labels: NDArray[np.uint8], depth_m: NDArray[np.floating] | None, *,
+                       lowest: int = 1) -> list[ForegroundResult]:
+    """The people of a label image (`people_labels`: each distinct value from `lowest` up one
+    person, the highest first; lower values are background), their boxes and median depths
+    from `depth_m` (metres, NaN = none)."""
+    labels = np.ascontiguousarray(labels, np.uint8)
+    # which values are there: OpenCV's histogram is a tenth of np.bincount's CPU on a frame
+    counts = cv2.calcHist([labels], [0], None, [256], [0, 256]).ravel()
     out = []
-    values = np.flatnonzero(np.bincount(labels.ravel(), minlength=256)[1:]) + 1
-    for value in values[::-1]:
+    for value in np.flatnonzero(counts[max(lowest, 1):])[::-1] + max(lowest, 1):
         mask = labels == value
         rows, cols = np.flatnonzero(mask.any(axis=1)), np.flatnonzero(mask.any(axis=0))
         z = math.nan
