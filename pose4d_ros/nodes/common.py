@@ -493,7 +493,7 @@ class PolledTopic:
 
     For inputs a stage reads beside its frame and never waits for (the latest camera_info,
     the image of the frame's stamp if it has come): taken through the executor, each such
-    message was a wake-up of the node's Python thread, 0.25-0.3 ms of CPU at 30 fps whatever
+    message was a wake-up of the node's Python thread, 0.13-0.3 ms of CPU at 30 fps whatever
     the message (a null subscriber on this host, docs/NOTES.md), while here it costs the
     DDS reader's copy alone. The subscription is rcl's, made without rclpy's `Subscription`
     (which an executor would serve); it is in the ROS graph as any other (`ros2 topic info`).

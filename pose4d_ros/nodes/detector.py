@@ -12,7 +12,8 @@ Subscriptions
     search sees only their own mask's pixels)
     pose4d/foreground/depth (sensor_msgs/Image, 16UC1 mm or 32FC1 m)
     pose4d/foreground/mask (sensor_msgs/Image, mono8 labels, one value > 127 per person)
-    camera/color/camera_info (sensor_msgs/CameraInfo; the latest)
+    camera/color/camera_info (sensor_msgs/CameraInfo; the latest, read as a frame is processed,
+    `common.LatestIntrinsics`)
 One search per person of the mask (its labels, `core.people.people_from_labels`), each
 person with their own detector state (`core.people.PeopleDetector`; kept while a person is
 out of the mask as long as the tracker's defaults keep their track, or `detector.keep_unseen_s`

@@ -44,8 +44,8 @@ class _Made:
     def undo(self, node: Node, *, publishers: bool = True) -> None:
         """Destroy what was made since: timers first (no `SubscribedWhile` subscribes again),
         then subscriptions (no message is taken any more), then close the node's frame queues
-        (each finishes the frame in hand), then (with `publishers`) destroy the publishers;
-        forget the attributes set since."""
+        (each finishes the frame in hand) and its polled topics (`common.close_inputs`), then
+        (with `publishers`) destroy the publishers; forget the attributes set since."""
         for timer in [t for t in node.timers if t not in self.timers]:
             node.destroy_timer(timer)
         for sub in [s for s in node.subscriptions if s not in self.subscriptions]:

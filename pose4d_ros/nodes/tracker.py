@@ -11,7 +11,8 @@ Subscriptions
     detector that publishes only one person, pose4d/parts (pose4d_msgs/JointArray, the
     detector's 10 or 14 parts, DETECTED or MISSING; subscribed only while nothing publishes
     pose4d/parts/people, `common.PeopleInputs`)
-    camera/color/camera_info (sensor_msgs/CameraInfo; the latest, for 3-D positions)
+    camera/color/camera_info (sensor_msgs/CameraInfo; the latest, for 3-D positions, read as a
+    frame is processed, `common.LatestIntrinsics`)
     camera/depth/image_raw (sensor_msgs/Image, 16UC1 or 32FC1, registered to colour; only
     when tracker.free_space_m > 0: the image of a frame's stamp, `tracker.depth_slop_s`, if it
     has come, never waited for: an unseen person whose place the camera sees through has
