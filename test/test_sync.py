@@ -225,8 +225,9 @@ def test_polled_topics_wake_nobody_and_give_what_came_since(ros):
 
     from pose4d_ros.core.camera import cad60_intrinsics
     from pose4d_ros.nodes import qos
-    from pose4d_ros.nodes.common import LatestIntrinsics, RecentImages, close_inputs
+    from pose4d_ros.nodes.common import close_inputs
     from pose4d_ros.nodes.convert import array_to_image, intrinsics_to_msg
+    from pose4d_ros.nodes.polled import LatestIntrinsics, RecentImages
     from pose4d_ros.wire import depth_from_msg, stamp_to_ns
 
     monitor = _Counter()

@@ -24,6 +24,7 @@ import time
 from collections import deque
 from collections.abc import Callable
 from pathlib import Path
+from typing import Protocol
 
 import numpy as np
 import rclpy
@@ -31,7 +32,6 @@ from builtin_interfaces.msg import Time
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from pose4d_msgs.msg import JointArray, SkeletonArray
 from rclpy.clock import Clock, ClockType
-from rclpy.exceptions import InvalidHandle
 from rclpy.executors import Executor, ExternalShutdownException, SingleThreadedExecutor
 from rclpy.experimental import EventsExecutor
 from rclpy.impl.implementation_singleton import rclpy_implementation as _rclpy
@@ -39,18 +39,16 @@ from rclpy.node import Node
 from rclpy.serialization import deserialize_message
 from rclpy.signals import SignalHandlerOptions
 from rclpy.subscription import Subscription
-from rclpy.type_support import check_is_valid_msg_type
-from sensor_msgs.msg import CameraInfo, Image
+from sensor_msgs.msg import Image
 from std_msgs.msg import Header
 
 from pose4d_ros import wire
-from pose4d_ros.core.camera import Intrinsics
 from pose4d_ros.core.malloc import keep_freed_memory
 from pose4d_ros.core.sync import TIME_JUMP_S, StampJumps, StampSync
 from pose4d_ros.core.threads import set_blas_threads
 from pose4d_ros.nodes import qos
 from pose4d_ros.nodes.params import ParameterError
-from pose4d_ros.wire import intrinsics_from_msg, stamp_to_ns
+from pose4d_ros.wire import stamp_to_ns
 
 DIAGNOSTICS_TOPIC = '/diagnostics'
 # A stamp farther than this from the node's clock was taken on another clock, seconds
@@ -342,7 +340,7 @@ def subscribe(node: Node, msg_type: type, topic: str, callback: Callable[[object
     instead of `deserialize_message` (a ValueError for bytes it refuses); `callback` gets what
     it returns, unless None.
     """
-    read = _Reader(node, msg_type, topic, monitor, decode)
+    read = MessageReader(node, msg_type, topic, monitor, decode)
 
     def on_bytes(data: bytes) -> None:
         msg = read(data)
@@ -352,7 +350,7 @@ def subscribe(node: Node, msg_type: type, topic: str, callback: Callable[[object
     return node.create_subscription(msg_type, topic, on_bytes, profile, raw=True)
 
 
-class _Reader:
+class MessageReader:
     """Reads one topic's serialised messages (`decode`, else an Image in place and other types
     by `deserialize_message`); bytes that hold no such message are counted as a bad input on
     `monitor`, named by topic and type, and read as None."""
@@ -486,45 +484,10 @@ class PairedInputs:
         self._monitor.dropped(self._sync.dropped[0] - before)
 
 
-class PolledTopic:
-    """A subscription that wakes nobody: its messages wait in the DDS reader (the newest
-    `profile.depth`) until the stage that uses them takes them (`take()`, in the thread
-    that processes its frame).
+class Closable(Protocol):
+    """An input that stops when closed (`nodes.polled.PolledTopic`)."""
 
-    For inputs a stage reads beside its frame and never waits for (the latest camera_info,
-    the image of the frame's stamp if it has come): taken through the executor, each such
-    message was a wake-up of the node's Python thread, 0.13-0.3 ms of CPU at 30 fps whatever
-    the message (a null subscriber on this host, docs/NOTES.md), while here it costs the
-    DDS reader's copy alone. The subscription is rcl's, made without rclpy's `Subscription`
-    (which an executor would serve); it is in the ROS graph as any other (`ros2 topic info`).
-    `close()` destroys it (`close_inputs`: at deactivation and exit).
-    """
-
-    def __init__(self, node: Node, msg_type: type, topic: str, profile: object) -> None:
-        self._type = msg_type
-        self.name = node.resolve_topic_name(topic)
-        check_is_valid_msg_type(msg_type)  # its type support loaded, as create_subscription does
-        with node.handle:
-            self._handle = _rclpy.Subscription(node.handle, msg_type, topic,
-                                               profile.get_c_qos_profile())
-        self._polled = node.__dict__.setdefault('polled_topics', [])
-        self._polled.append(self)
-
-    def take(self) -> list[bytes]:
-        """The serialised messages come since the last take, oldest first."""
-        out = []
-        try:
-            with self._handle:
-                while (item := self._handle.take_message(self._type, True)) is not None:
-                    out.append(item[0])
-        except InvalidHandle:  # closed meanwhile (`SubscribedWhile`, a deactivation)
-            pass
-        return out
-
-    def close(self) -> None:
-        self._handle.destroy_when_not_in_use()
-        if self in self._polled:
-            self._polled.remove(self)
+    def close(self) -> None: ...
 
 
 def close_inputs(node: Node) -> None:
@@ -536,55 +499,22 @@ def close_inputs(node: Node) -> None:
         topic.close()
 
 
-class LatestIntrinsics:
-    """The intrinsics of the latest camera_info (for stages whose inputs carry none), taken
-    when a frame asks for them (`latest()`, a `PolledTopic`).
-
-    A camera sends the same calibration with every frame: a message whose bytes after its
-    stamp are those of the last one read is not deserialised again."""
-
-    def __init__(self, node: Node, monitor: StageMonitor,
-                 topic: str = 'camera/color/camera_info') -> None:
-        self.intrinsics: Intrinsics | None = None
-        self._monitor = monitor
-        self._read: bytes | None = None  # the bytes after the stamp of the last one read
-        self._topic = PolledTopic(node, CameraInfo, topic, qos.SENSOR_QOS)
-        self._message = _Reader(node, CameraInfo, topic, monitor)
-
-    def latest(self) -> Intrinsics | None:
-        """The intrinsics of the newest valid camera_info come so far (None before the
-        first); each one taken that is refused is counted as a bad input."""
-        for data in self._topic.take():
-            self._update(data)
-        return self.intrinsics
-
-    def _update(self, data: bytes) -> None:
-        body = data[12:]  # bytes 0-3: the encapsulation, 4-11: the stamp
-        if body == self._read or (msg := self._message(data)) is None:
-            return
-        try:
-            self.intrinsics = intrinsics_from_msg(msg)
-            self._read = body
-        except ValueError as exc:
-            self._read = None
-            self._monitor.bad_input(f'camera_info refused: {exc}')
-
-
 class SubscribedWhile:
     """A subscription that exists only while `wanted()` says it is needed: `wanted` is asked
     at start and every `period_s` on the steady clock (in the executor's thread), and the
-    subscription made (`make()`: an rclpy `Subscription` or a `PolledTopic`) or destroyed when
+    subscription made (`make()`: an rclpy `Subscription`, or what has a `close()`: a
+    `nodes.polled.PolledTopic`) or destroyed when
     the answer changes. For inputs of outputs that are built on demand, and for a fallback
     input while its better source is missing: a message never taken costs nothing, while one
     received to be thrown away costs its transport and its bytes."""
 
     def __init__(self, node: Node, wanted: Callable[[], bool],
-                 make: Callable[[], Subscription | PolledTopic], *,
+                 make: Callable[[], Subscription | Closable], *,
                  period_s: float = 0.5) -> None:
         self._node = node
         self._wanted = wanted
         self._make = make
-        self.subscription: Subscription | PolledTopic | None = None
+        self.subscription: Subscription | Closable | None = None
         self.update()
         node.create_timer(period_s, self.update, clock=Clock(clock_type=ClockType.STEADY_TIME))
 
@@ -593,59 +523,11 @@ class SubscribedWhile:
         if want and self.subscription is None:
             self.subscription = self._make()
         elif not want and self.subscription is not None:
-            if isinstance(self.subscription, PolledTopic):
-                self.subscription.close()
-            else:
+            if isinstance(self.subscription, Subscription):
                 self._node.destroy_subscription(self.subscription)
+            else:
+                self.subscription.close()
             self.subscription = None
-
-
-class RecentImages:
-    """A camera's images of the last few stamps, for a stage that uses the one of its frame's
-    stamp when it has come but never waits for it (the tracker's free-space check, the IK's
-    depth, the foreground's masked colour): `at(stamp_ns)` is that image read by `read` (the
-    nearest stamp within `slop_ns`), or None.
-
-    The images wait in their DDS reader (a `PolledTopic`) until a frame asks: then those come
-    since are read in place (`image_of_bytes`: their header and size, bytes that hold no
-    Image counted as bad inputs), and the pixels of the one used are read. With `wanted`, the
-    topic is subscribed only while `wanted()` (`SubscribedWhile`)."""
-
-    def __init__(self, node: Node, monitor: StageMonitor, topic: str,
-                 read: Callable[[Image], np.ndarray], *, slop_ns: int = 0,
-                 wanted: Callable[[], bool] | None = None) -> None:
-        self._recent: deque[tuple[int, object]] = deque(maxlen=qos.RECENT_QOS.depth)
-        self._read = read
-        self._slop_ns = slop_ns
-        self._monitor = monitor
-        self._name = node.resolve_topic_name(topic)
-        self._image = _Reader(node, Image, topic, monitor)
-        self._topic: PolledTopic | None = None
-
-        def make() -> PolledTopic:
-            self._topic = PolledTopic(node, Image, topic, qos.RECENT_QOS)
-            return self._topic
-
-        if wanted is None:
-            make()
-        else:
-            self.follow = SubscribedWhile(node, wanted, make)
-
-    def at(self, stamp_ns: int) -> np.ndarray | None:
-        topic = self._topic
-        for data in (topic.take() if topic is not None else ()):
-            if (msg := self._image(data)) is not None:
-                self._recent.append((stamp_to_ns(msg.header.stamp), msg))
-        if not self._recent:
-            return None
-        near, msg = min(self._recent, key=lambda item: abs(item[0] - stamp_ns))
-        if abs(near - stamp_ns) > self._slop_ns:
-            return None
-        try:
-            return self._read(msg)
-        except ValueError as exc:
-            self._monitor.bad_input(f'{self._name} at {near} ns refused: {exc}')
-            return None
 
 
 class PeopleInputs:

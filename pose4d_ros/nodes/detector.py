@@ -13,7 +13,7 @@ Subscriptions
     pose4d/foreground/depth (sensor_msgs/Image, 16UC1 mm or 32FC1 m)
     pose4d/foreground/mask (sensor_msgs/Image, mono8 labels, one value > 127 per person)
     camera/color/camera_info (sensor_msgs/CameraInfo; the latest, read as a frame is processed,
-    `common.LatestIntrinsics`)
+    `polled.LatestIntrinsics`)
 One search per person of the mask (its labels, `core.people.people_from_labels`), each
 person with their own detector state (`core.people.PeopleDetector`; kept while a person is
 out of the mask as long as the tracker's defaults keep their track, or `detector.keep_unseen_s`
@@ -60,13 +60,13 @@ from pose4d_ros.core.warm_up import warm_up_frame
 from pose4d_ros.models import DEFAULT_COLOUR_NET, DEFAULT_NET_PRECISION, model_path
 from pose4d_ros.nodes import qos
 from pose4d_ros.nodes.common import (
-    LatestIntrinsics,
     PairedInputs,
     StageMonitor,
     run,
 )
 from pose4d_ros.nodes.lifecycle import AUTOSTART, ManagedNode
 from pose4d_ros.nodes.params import Param, ParameterError
+from pose4d_ros.nodes.polled import LatestIntrinsics
 from pose4d_ros.wire import (
     color_from_msg,
     depth_from_msg,

@@ -11,7 +11,7 @@ Subscriptions
     camera/depth/image_raw (sensor_msgs/Image, 16UC1 mm or 32FC1 m, registered to colour)
     camera/color/image_raw (sensor_msgs/Image, rgb8/bgr8/mono8; only while the masked colour
     or the point cloud has a subscriber: the image of a frame's stamp if it has come, never
-    waited for, `common.RecentImages`)
+    waited for, `polled.RecentImages`)
 Every person region is a candidate (`core.foreground.segment_people`, at most `MAX_PEOPLE`,
 best first); the mask tells them apart.
 
@@ -51,13 +51,13 @@ from pose4d_ros.core.stages import ForegroundStage
 from pose4d_ros.nodes import qos
 from pose4d_ros.nodes.common import (
     PairedInputs,
-    RecentImages,
     StageMonitor,
     run,
 )
 from pose4d_ros.nodes.convert import cloud_to_msg
 from pose4d_ros.nodes.lifecycle import AUTOSTART, ManagedNode
 from pose4d_ros.nodes.params import Param
+from pose4d_ros.nodes.polled import RecentImages
 from pose4d_ros.wire import (
     color_from_msg,
     depth_from_msg,

@@ -17,9 +17,9 @@ Subscriptions
     tracker that publishes only one person, pose4d/parts/tracked (pose4d_msgs/JointArray;
     subscribed only while nothing publishes pose4d/parts/tracked/people)
     pose4d/foreground/depth (sensor_msgs/Image, 16UC1 or 32FC1; only when ik.use_depth; read
-    as the parts come, `common.RecentImages`)
+    as the parts come, `polled.RecentImages`)
     camera/color/camera_info (sensor_msgs/CameraInfo; the latest, read as the parts come,
-    `common.LatestIntrinsics`)
+    `polled.LatestIntrinsics`)
 Publications
     pose4d/skeletons (pose4d_msgs/SkeletonArray: every person's 14 joints, the primary first;
     empty when nobody is in view)
@@ -59,15 +59,14 @@ from pose4d_ros.core.skeleton import SKELETON_14, limb_bones
 from pose4d_ros.core.stages import IkStage
 from pose4d_ros.nodes import hri, qos
 from pose4d_ros.nodes.common import (
-    LatestIntrinsics,
     PeopleInputs,
-    RecentImages,
     StageMonitor,
     run,
 )
 from pose4d_ros.nodes.convert import people_markers, skeleton_markers
 from pose4d_ros.nodes.lifecycle import AUTOSTART, ManagedNode
 from pose4d_ros.nodes.params import Param
+from pose4d_ros.nodes.polled import LatestIntrinsics, RecentImages
 from pose4d_ros.wire import depth_from_msg, joints_to_cdr, skeletons_to_cdr, stamp_to_ns, tf_to_cdr
 
 

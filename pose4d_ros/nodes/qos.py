@@ -33,7 +33,7 @@ INPUT_QOS = QoSProfile(depth=10, reliability=ReliabilityPolicy.BEST_EFFORT,
                        durability=DurabilityPolicy.VOLATILE, history=HistoryPolicy.KEEP_LAST)
 OUTPUT_QOS = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE,
                         durability=DurabilityPolicy.VOLATILE, history=HistoryPolicy.KEEP_LAST)
-# camera images a stage reads beside its frame, if they have come (`common.RecentImages`): the
+# camera images a stage reads beside its frame, if they have come (`polled.RecentImages`): the
 # sensor-data profile's best effort, the last 8 kept
 RECENT_QOS = QoSProfile(depth=8, reliability=ReliabilityPolicy.BEST_EFFORT,
                         durability=DurabilityPolicy.VOLATILE, history=HistoryPolicy.KEEP_LAST)

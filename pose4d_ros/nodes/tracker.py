@@ -12,7 +12,7 @@ Subscriptions
     detector's 10 or 14 parts, DETECTED or MISSING; subscribed only while nothing publishes
     pose4d/parts/people, `common.PeopleInputs`)
     camera/color/camera_info (sensor_msgs/CameraInfo; the latest, for 3-D positions, read as a
-    frame is processed, `common.LatestIntrinsics`)
+    frame is processed, `polled.LatestIntrinsics`)
     camera/depth/image_raw (sensor_msgs/Image, 16UC1 or 32FC1, registered to colour; only
     when tracker.free_space_m > 0: the image of a frame's stamp, `tracker.depth_slop_s`, if it
     has come, never waited for: an unseen person whose place the camera sees through has
@@ -47,14 +47,13 @@ from pose4d_ros.core.slqe import CvConfig, SlqeConfig
 from pose4d_ros.core.stages import TrackerStage
 from pose4d_ros.nodes import qos
 from pose4d_ros.nodes.common import (
-    LatestIntrinsics,
     PeopleInputs,
-    RecentImages,
     StageMonitor,
     run,
 )
 from pose4d_ros.nodes.lifecycle import AUTOSTART, ManagedNode
 from pose4d_ros.nodes.params import Param
+from pose4d_ros.nodes.polled import LatestIntrinsics, RecentImages
 from pose4d_ros.wire import depth_from_msg, joints_to_cdr, skeletons_to_cdr, stamp_to_ns
 
 _D = SlqeConfig()
