@@ -61,22 +61,33 @@ def test_every_figure_of_the_readme_summary_is_the_jsons() -> None:
             assert ratio is None, name
 
 
+def _deployed_figures(stem: str, pattern: str, skip_why: str, missing: str
+                      ) -> tuple[str, list[float], dict]:
+    """The README summary, the figures `pattern` reads in it and the `graph` of
+    `docs/results/<stem>.json`: a summary without MediaPipe in that JSON gives none (the test
+    is skipped, `skip_why`), one with it must give them (else it fails, `missing`)."""
+    block = summary_block((ROOT / 'README.md').read_text())
+    path = RESULTS / f'{stem}.json'
+    graph = json.loads(path.read_text()).get('graph', {}) if path.exists() else {}
+    found = re.search(pattern, block, re.S)
+    if 'peer_ms_per_frame' not in graph:
+        assert found is None
+        pytest.skip(skip_why)
+    assert found, missing
+    return block, [float(x) for x in found.groups()], graph
+
+
 def test_the_headline_cost_is_the_deployed_graphs() -> None:
     """The README's first CPU figure is the node graph's as deployed, against MediaPipe in the
     same run, as `docs/results/bench_graph300.json` holds it."""
-    block = summary_block((ROOT / 'README.md').read_text())
-    path = RESULTS / 'bench_graph300.json'
-    graph = json.loads(path.read_text()).get('graph', {}) if path.exists() else {}
-    found = re.search(r'CPU per frame as deployed.*?the four stage nodes together ([0-9.]+) ms = '
-                      r"([0-9.]+)x MediaPipe's ([0-9.]+) ms.*?the one-process `pipeline` node "
-                      r'([0-9.]+) ms = ([0-9.]+)x MediaPipe', block, re.S)
-    if 'peer_ms_per_frame' not in graph:
-        assert found is None
-        pytest.skip('docs/results/bench_graph300.json has no MediaPipe (make peer, then '
-                    'make results RESULTS_ONLY=bench_graph300)')
-    assert found, 'the README summary does not give the deployed cost'
+    block, figures, graph = _deployed_figures(
+        'bench_graph300', r'CPU per frame as deployed.*?the four stage nodes together ([0-9.]+) '
+        r"ms = ([0-9.]+)x MediaPipe's ([0-9.]+) ms.*?the one-process `pipeline` node "
+        r'([0-9.]+) ms = ([0-9.]+)x MediaPipe',
+        'docs/results/bench_graph300.json has no MediaPipe (make peer, then make results '
+        'RESULTS_ONLY=bench_graph300)', 'the README summary does not give the deployed cost')
     nodes, one = graph['nodes'], graph['pipeline']
-    assert [float(x) for x in found.groups()] == pytest.approx(
+    assert figures == pytest.approx(
         [nodes['stages_ms_per_frame'], nodes['to_peer'], graph['peer_ms_per_frame'],
          one['stages_ms_per_frame'], one['to_peer']], abs=5e-3)
     # it comes before the core's own ratio
@@ -86,18 +97,14 @@ def test_the_headline_cost_is_the_deployed_graphs() -> None:
 def test_the_quiet_deployed_cost_is_its_json() -> None:
     """Beside the headline, the same graphs with nothing else running, as
     `docs/results/bench_graph300_quiet.json` holds them."""
-    block = summary_block((ROOT / 'README.md').read_text())
-    path = RESULTS / 'bench_graph300_quiet.json'
-    graph = json.loads(path.read_text()).get('graph', {}) if path.exists() else {}
-    found = re.search(r'With nothing else running.*?the four stage nodes ([0-9.]+) ms = '
-                      r'([0-9.]+)x the core \(([0-9.]+) ms\), ([0-9.]+)x MediaPipe.*?'
-                      r'`pipeline` ([0-9.]+) ms = ([0-9.]+)x the core', block, re.S)
-    if 'peer_ms_per_frame' not in graph:
-        assert found is None
-        pytest.skip('docs/results/bench_graph300_quiet.json has no MediaPipe')
-    assert found, 'the README summary does not give the quiet deployed cost'
+    _, figures, graph = _deployed_figures(
+        'bench_graph300_quiet', r'With nothing else running.*?the four stage nodes ([0-9.]+) ms '
+        r'= ([0-9.]+)x the core \(([0-9.]+) ms\), ([0-9.]+)x MediaPipe.*?`pipeline` ([0-9.]+) '
+        r'ms = ([0-9.]+)x the core',
+        'docs/results/bench_graph300_quiet.json has no MediaPipe',
+        'the README summary does not give the quiet deployed cost')
     nodes, one = graph['nodes'], graph['pipeline']
-    assert [float(x) for x in found.groups()] == pytest.approx(
+    assert figures == pytest.approx(
         [nodes['stages_ms_per_frame'], nodes['to_core'], graph['core_ms_per_frame']['total'],
          nodes['to_peer'], one['stages_ms_per_frame'], one['to_core']], abs=5e-3)
 

@@ -70,11 +70,17 @@ def summary(results: Path) -> str:
     return '\n'.join(lines)
 
 
+def _with_peer(bench: dict | None) -> dict | None:
+    """A graph bench's `graph`, if it ran with the peer (else None)."""
+    graph = (bench or {}).get('graph', {})
+    return graph if 'peer_ms_per_frame' in graph else None
+
+
 def deployed_summary(bench: dict | None, quiet: dict | None = None) -> list[str]:
     """The README's headline cost: the node graphs as deployed against MediaPipe and the core
     (`graph.bench`), when `bench_graph300` ran with the peer."""
-    graph = (bench or {}).get('graph', {})
-    if 'peer_ms_per_frame' not in graph:
+    graph = _with_peer(bench)
+    if graph is None:
         return []
     nodes, one = graph['nodes'], graph['pipeline']
     return ['', f"**CPU per frame as deployed** (`pose4d bench --graph`, {graph['frames']} "
@@ -92,8 +98,8 @@ def deployed_summary(bench: dict | None, quiet: dict | None = None) -> list[str]
 def quiet_summary(bench: dict | None) -> str:
     """The deployed cost with nothing else running (`bench_graph300_quiet`), when it ran with
     the peer."""
-    graph = (bench or {}).get('graph', {})
-    if 'peer_ms_per_frame' not in graph:
+    graph = _with_peer(bench)
+    if graph is None:
         return ''
     nodes, one = graph['nodes'], graph['pipeline']
     return (' With nothing else running (`docs/results/bench_graph300_quiet.json`): the four '

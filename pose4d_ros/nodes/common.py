@@ -357,7 +357,7 @@ class MessageReader:
 
     def __init__(self, node: Node, msg_type: type, topic: str, monitor: StageMonitor,
                  decode: Callable[[bytes], object] | None = None) -> None:
-        self._name = node.resolve_topic_name(topic)
+        self.name = node.resolve_topic_name(topic)
         self._kind = f'{msg_type.__module__.split(".")[0]}/{msg_type.__name__}'
         self._monitor = monitor
         self._decode = decode or (image_of_bytes if msg_type is Image
@@ -369,7 +369,7 @@ class MessageReader:
         except Exception as exc:  # rclpy's RMWError: the CDR does not hold a msg_type
             reason = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
             self._monitor.bad_input(
-                f'{self._name}: {len(data)} bytes that are not a {self._kind} ({reason})')
+                f'{self.name}: {len(data)} bytes that are not a {self._kind} ({reason})')
             return None
 
 
@@ -503,10 +503,10 @@ class SubscribedWhile:
     """A subscription that exists only while `wanted()` says it is needed: `wanted` is asked
     at start and every `period_s` on the steady clock (in the executor's thread), and the
     subscription made (`make()`: an rclpy `Subscription`, or what has a `close()`: a
-    `nodes.polled.PolledTopic`) or destroyed when
-    the answer changes. For inputs of outputs that are built on demand, and for a fallback
-    input while its better source is missing: a message never taken costs nothing, while one
-    received to be thrown away costs its transport and its bytes."""
+    `nodes.polled.PolledTopic`) or destroyed when the answer changes. For inputs of outputs
+    that are built on demand, and for a fallback input while its better source is missing: a
+    message never taken costs nothing, while one received to be thrown away costs its
+    transport and its bytes."""
 
     def __init__(self, node: Node, wanted: Callable[[], bool],
                  make: Callable[[], Subscription | Closable], *,

@@ -36,7 +36,6 @@ class PolledTopic:
 
     def __init__(self, node: Node, msg_type: type, topic: str, profile: object) -> None:
         self._type = msg_type
-        self.name = node.resolve_topic_name(topic)
         check_is_valid_msg_type(msg_type)  # its type support loaded, as create_subscription does
         with node.handle:
             self._handle = _rclpy.Subscription(node.handle, msg_type, topic,
@@ -113,7 +112,6 @@ class RecentImages:
         self._read = read
         self._slop_ns = slop_ns
         self._monitor = monitor
-        self._name = node.resolve_topic_name(topic)
         self._image = MessageReader(node, Image, topic, monitor)
         self._topic: PolledTopic | None = None
 
@@ -139,5 +137,5 @@ class RecentImages:
         try:
             return self._read(msg)
         except ValueError as exc:
-            self._monitor.bad_input(f'{self._name} at {near} ns refused: {exc}')
+            self._monitor.bad_input(f'{self._image.name} at {near} ns refused: {exc}')
             return None

@@ -32,8 +32,9 @@ def people_from_labels(labels: NDArray[np.uint8], depth_m: NDArray[np.floating] 
     labels = np.ascontiguousarray(labels, np.uint8)
     # which values are there: OpenCV's histogram is a tenth of np.bincount's CPU on a frame
     counts = cv2.calcHist([labels], [0], None, [256], [0, 256]).ravel()
+    first = max(lowest, 1)
     out = []
-    for value in np.flatnonzero(counts[max(lowest, 1):])[::-1] + max(lowest, 1):
+    for value in np.flatnonzero(counts[first:])[::-1] + first:
         mask = labels == value
         rows, cols = np.flatnonzero(mask.any(axis=1)), np.flatnonzero(mask.any(axis=0))
         z = math.nan
