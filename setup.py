@@ -20,6 +20,7 @@ EXECUTABLES = {
     'tracker': 'pose4d_ros.nodes.tracker:main',
     'ik': 'pose4d_ros.nodes.ik:main',
     'pipeline': 'pose4d_ros.nodes.pipeline:main',
+    'composed': 'pose4d_ros.nodes.composed:main',
 }
 
 setup(

@@ -1,9 +1,9 @@
-"""Two people through both graphs: the `pipeline` node and the per-stage graph (foreground,
-detector, tracker, ik), fed rendered frames of two people walking sideways past each other at
-different depths. Checked: one SkeletonArray per frame on /pose4d/skeletons with both people
-once their tracks are confirmed, ids 1 and 2 that stay with their person (each id's head on
-that person's head), /pose4d/skeleton = the primary person (id 1), and an empty SkeletonArray
-when nobody is in view.
+"""Two people through every graph: the `pipeline` node, the per-stage graph (foreground,
+detector, tracker, ik) and those four nodes composed in one process, fed rendered frames of
+two people walking sideways past each other at different depths. Checked: one SkeletonArray
+per frame on /pose4d/skeletons with both people once their tracks are confirmed, ids 1 and 2
+that stay with their person (each id's head on that person's head), /pose4d/skeleton = the
+primary person (id 1), and an empty SkeletonArray when nobody is in view.
 """
 
 from __future__ import annotations
@@ -50,7 +50,7 @@ def frames():
     return _frames()
 
 
-@pytest.mark.parametrize('graph', ['pipeline', 'stages'])
+@pytest.mark.parametrize('graph', ['pipeline', 'stages', 'composed'])
 def test_two_people_get_two_stable_ids(ros, tmp_path, frames, graph):
     from pose4d_msgs.msg import JointArray, SkeletonArray
     from sensor_msgs.msg import CameraInfo, Image
@@ -60,7 +60,8 @@ def test_two_people_get_two_stable_ids(ros, tmp_path, frames, graph):
     from pose4d_ros.nodes.convert import array_to_image, intrinsics_to_msg, ns_to_stamp
     from pose4d_ros.wire import skeletons_from_msg
 
-    exes = ['pipeline'] if graph == 'pipeline' else ['foreground', 'detector', 'tracker', 'ik']
+    exes = {'pipeline': ['pipeline'], 'composed': ['composed']}.get(
+        graph, ['foreground', 'detector', 'tracker', 'ik'])
     nodes = [start(exe, log_dir=tmp_path) for exe in exes]
     try:
         pubs = (ros.node.create_publisher(Image, 'camera/color/image_raw', qos.OUTPUT_QOS),
@@ -72,7 +73,7 @@ def test_two_people_get_two_stable_ids(ros, tmp_path, frames, graph):
         for pub in pubs:
             ros.wait_for_subscribers(pub, timeout=60.0)
         ros.wait_for_publishers('pose4d/skeletons', timeout=60.0)
-        if graph == 'stages':  # every stage connected to the next
+        if graph != 'pipeline':  # every stage connected to the next
             for topic, n in (('/pose4d/foreground/mask', 1), ('/pose4d/parts/people', 1),
                              ('/pose4d/parts/tracked/people', 1)):
                 ros.spin_until(lambda t=topic, n=n: ros.node.count_subscribers(t) >= n, 60.0,

@@ -90,6 +90,8 @@ def test_the_headline_cost_is_the_deployed_graphs() -> None:
     assert figures == pytest.approx(
         [nodes['stages_ms_per_frame'], nodes['to_peer'], graph['peer_ms_per_frame'],
          one['stages_ms_per_frame'], one['to_peer']], abs=5e-3)
+    _composed_figures(block, 'composed in one process.*?composed`\\) ([0-9.]+) ms = '
+                      '([0-9.]+)x MediaPipe, ([0-9.]+)x the core', graph, 'to_peer')
     # it comes before the core's own ratio
     assert block.index('as deployed') < block.index('in one process (the core)')
 
@@ -97,7 +99,7 @@ def test_the_headline_cost_is_the_deployed_graphs() -> None:
 def test_the_quiet_deployed_cost_is_its_json() -> None:
     """Beside the headline, the same graphs with nothing else running, as
     `docs/results/bench_graph300_quiet.json` holds them."""
-    _, figures, graph = _deployed_figures(
+    block, figures, graph = _deployed_figures(
         'bench_graph300_quiet', r'With nothing else running.*?the four stage nodes ([0-9.]+) ms '
         r'= ([0-9.]+)x the core \(([0-9.]+) ms\), ([0-9.]+)x MediaPipe.*?`pipeline` ([0-9.]+) '
         r'ms = ([0-9.]+)x the core',
@@ -107,6 +109,23 @@ def test_the_quiet_deployed_cost_is_its_json() -> None:
     assert figures == pytest.approx(
         [nodes['stages_ms_per_frame'], nodes['to_core'], graph['core_ms_per_frame']['total'],
          nodes['to_peer'], one['stages_ms_per_frame'], one['to_core']], abs=5e-3)
+    quiet = block[block.index('With nothing else running'):]
+    _composed_figures(quiet, 'composed ([0-9.]+) ms = ([0-9.]+)x the core, ([0-9.]+)x '
+                      'MediaPipe', graph, 'to_core')
+
+
+def _composed_figures(text: str, pattern: str, graph: dict, second: str) -> None:
+    """The composed graph's figures in `text` (CPU, then `second` and the other ratio) are
+    its JSON's; a bench from before it (no `composed`) gives none."""
+    found = re.search(pattern, text, re.S)
+    if 'composed' not in graph:
+        assert found is None
+        return
+    both = graph['composed']
+    third = 'to_core' if second == 'to_peer' else 'to_peer'
+    assert found, 'the README summary does not give the composed graph'
+    assert [float(x) for x in found.groups()] == pytest.approx(
+        [both['stages_ms_per_frame'], both[second], both[third]], abs=5e-3)
 
 
 def test_the_summary_is_what_the_generator_writes() -> None:

@@ -82,7 +82,7 @@ def deployed_summary(bench: dict | None, quiet: dict | None = None) -> list[str]
     graph = _with_peer(bench)
     if graph is None:
         return []
-    nodes, one = graph['nodes'], graph['pipeline']
+    nodes, both, one = graph['nodes'], graph.get('composed'), graph['pipeline']
     return ['', f"**CPU per frame as deployed** (`pose4d bench --graph`, {graph['frames']} "
                 'rendered 320x240 frames replayed at 30 fps while the ros2 command line queries '
                 'the nodes; every process\'s CPU over the run, a mean a frame; '
@@ -90,9 +90,13 @@ def deployed_summary(bench: dict | None, quiet: dict | None = None) -> list[str]
                 f"{nodes['stages_ms_per_frame']} ms = {nodes['to_peer']:.2f}x MediaPipe's "
                 f"{graph['peer_ms_per_frame']} ms (with its colour decode) and "
                 f"{nodes['to_core']:.2f}x the same stages in one process "
-                f"({graph['core_ms_per_frame']['total']} ms); the one-process `pipeline` node "
-                f"{one['stages_ms_per_frame']} ms = {one['to_peer']:.2f}x MediaPipe, "
-                f"{one['to_core']:.2f}x the core." + quiet_summary(quiet)]
+                f"({graph['core_ms_per_frame']['total']} ms); "
+                + (f"the same four nodes composed in one process (`ros2 run pose4d_ros "
+                   f"composed`) {both['stages_ms_per_frame']} ms = {both['to_peer']:.2f}x "
+                   f"MediaPipe, {both['to_core']:.2f}x the core; " if both else '')
+                + f"the one-process `pipeline` node {one['stages_ms_per_frame']} ms = "
+                f"{one['to_peer']:.2f}x MediaPipe, {one['to_core']:.2f}x the core."
+                + quiet_summary(quiet)]
 
 
 def quiet_summary(bench: dict | None) -> str:
@@ -101,12 +105,14 @@ def quiet_summary(bench: dict | None) -> str:
     graph = _with_peer(bench)
     if graph is None:
         return ''
-    nodes, one = graph['nodes'], graph['pipeline']
+    nodes, both, one = graph['nodes'], graph.get('composed'), graph['pipeline']
     return (' With nothing else running (`docs/results/bench_graph300_quiet.json`): the four '
             f"stage nodes {nodes['stages_ms_per_frame']} ms = {nodes['to_core']:.2f}x the core "
             f"({graph['core_ms_per_frame']['total']} ms), {nodes['to_peer']:.2f}x MediaPipe "
-            f"({graph['peer_ms_per_frame']} ms); `pipeline` {one['stages_ms_per_frame']} ms = "
-            f"{one['to_core']:.2f}x the core.")
+            f"({graph['peer_ms_per_frame']} ms); "
+            + (f"composed {both['stages_ms_per_frame']} ms = {both['to_core']:.2f}x the core, "
+               f"{both['to_peer']:.2f}x MediaPipe; " if both else '')
+            + f"`pipeline` {one['stages_ms_per_frame']} ms = {one['to_core']:.2f}x the core.")
 
 
 REAL_SUMMARY = ("**Real** recordings (development data, MediaPipe the reference, "
@@ -394,7 +400,7 @@ def graph_table(graph: dict) -> list[str]:
                                                if peer else '.'), '',
            '| graph | stage processes CPU ms a frame | x the core | x MediaPipe | frames out | '
            'latency p95 ms | over the runs (min, median, max) |', '|---|---|---|---|---|---|---|']
-    for name in ('nodes', 'pipeline'):
+    for name in (n for n in ('nodes', 'composed', 'pipeline') if n in graph):
         g = graph[name]
         spread = '; '.join(f'{k} {v}' for k, v in g.get('spread', {}).items())
         out.append(f"| {name} | {g['stages_ms_per_frame']} | {g['to_core']:.2f} | "

@@ -38,12 +38,10 @@ import numpy as np
 from pose4d_ros.core.pipeline import STAGES, FramePipeline
 from pose4d_ros.datasets import bag, cad60_bag
 from pose4d_ros.datasets.frame import Frame
-from pose4d_ros.graph.run import run_graph
+from pose4d_ros.graph.run import GRAPHS, run_graph
 from pose4d_ros.peer import Peer
 from pose4d_ros.util.progress import progress
 from pose4d_ros.util.stats import ms_stats
-
-GRAPHS = {'nodes': STAGES, 'pipeline': ('pipeline',)}
 
 
 def core_cost(pipeline: FramePipeline, frames: Sequence[Frame]) -> dict[str, float]:
@@ -83,25 +81,28 @@ def peer_cost(peer: Peer, frames: Sequence[Frame]) -> float:
     return round(total * 1e3 / len(frames), 3)
 
 
-def _calls_per_frame(folder: Path, frames: int) -> dict[str, float]:
-    """Python-level calls a frame of each process, from its threads' cProfile files."""
+def _calls_per_frame(folder: Path, frames: int, graph: str) -> dict[str, float]:
+    """Python-level calls a frame of each process, from its threads' cProfile files (named
+    by node: in the `composed` graph the stage nodes', and its main thread's, are its)."""
     calls: dict[str, int] = {}
     for path in sorted(folder.glob('*.prof')):
         process = path.name.split('.', 1)[0]
+        if graph == 'composed' and (process in STAGES or '+' in process):
+            process = 'composed'
         calls[process] = calls.get(process, 0) + pstats.Stats(str(path)).total_calls
     return {k: round(v / max(frames, 1), 1) for k, v in calls.items()}
 
 
 def graph_run(bag_path: Path, graph: str, out: Path, *, profile: Path | None = None,
               **options: Any) -> dict:
-    """One replay of the bag through `graph` ('nodes' or 'pipeline'): frames, latency, CPU."""
+    """One replay of the bag through `graph` (of `GRAPHS`): frames, latency, CPU."""
     if profile is not None:
         folder = profile / graph
         for old in folder.glob('*.prof'):
             old.unlink()
         os.environ['POSE4D_PROFILE'] = str(folder)
     try:
-        r = run_graph(bag_path, out, pipeline=graph == 'pipeline', **options)
+        r = run_graph(bag_path, out, graph=graph, **options)
     finally:
         os.environ.pop('POSE4D_PROFILE', None)
     lat = r.latency_ms()
@@ -125,7 +126,7 @@ def graph_run(bag_path: Path, graph: str, out: Path, *, profile: Path | None = N
            # where frames were lost: each stage's count on /diagnostics
            'dropped_by_stage': r.dropped}
     if profile is not None:
-        run['calls_per_frame'] = _calls_per_frame(profile / graph, r.frames)
+        run['calls_per_frame'] = _calls_per_frame(profile / graph, r.frames, graph)
     return run
 
 
@@ -172,7 +173,7 @@ def describe(result: dict) -> list[str]:
     if 'peer_ms_per_frame' in result:
         lines.append(f"peer: {result['peer_ms_per_frame']} ms CPU a frame with its colour "
                      f"decode ({result['peer_decode_ms']} ms; {result['peer']})")
-    for graph in GRAPHS:
+    for graph in (g for g in GRAPHS if g in result):  # (a bench from before `composed`)
         st = result[graph]
         line = (f"graph {graph:<9} {st['frames_replayed']}/{st['frames_in']} frames replayed, "
                 f"{st['frames_out']} out, in {st['input_rate_hz']} Hz, out "

@@ -24,6 +24,8 @@ from pose4d_ros.datasets import bag, cad60_bag
 from pose4d_ros.wire import joints_from_msg, stamp_to_ns
 
 STAGES = ('foreground', 'detector', 'tracker', 'ik')
+# the processes of each graph: a node per stage, those four nodes in one process, the one node
+GRAPHS = {'nodes': STAGES, 'composed': ('composed',), 'pipeline': ('pipeline',)}
 # what a user of the skeletons subscribes to: the intermediate topics are published on demand
 RECORDED = ('pose4d/skeleton', 'pose4d/skeletons', '/tf')
 # topic -> subscribers that must be connected before the bag plays
@@ -232,10 +234,11 @@ def probe(node: Any) -> tuple[dict[int, float], dict[int, float], dict[str, dict
 
 
 def run_graph(bag_path: Path, out: Path, *, rate: float = 1.0, model: str = 'rgbd_14',
-              timeout: float = 60.0, pipeline: bool = False, best_effort: bool = False,
+              timeout: float = 60.0, graph: str = 'nodes', best_effort: bool = False,
               load: Sequence[str] = ()) -> GraphRun:
-    """Replay `bag_path` through the graph, each node its own process as `ros2 run` starts
-    it (or the single `pipeline` process), with a recorder; stop everything cleanly.
+    """Replay `bag_path` through a graph of `GRAPHS`, each process as `ros2 run` starts it
+    (`nodes`: a process per stage; `composed`: the four nodes in one; `pipeline`: the one
+    node), with a recorder; stop everything cleanly.
     `best_effort`: the replay publishes best effort, as camera drivers do. `load`: processes
     run beside the graph while the bag plays (`graph.load`: 'busy', 'query')."""
     import rclpy
@@ -246,25 +249,26 @@ def run_graph(bag_path: Path, out: Path, *, rate: float = 1.0, model: str = 'rgb
     # this process and the nodes: Fast DDS with room for large frames (config/fastdds.xml)
     os.environ.setdefault('FASTRTPS_DEFAULT_PROFILES_FILE', str(share_path('config/fastdds.xml')))
     out.mkdir(parents=True, exist_ok=True)
-    recorded = out / ('pipeline_run' if pipeline else 'graph_run')
+    pipeline = graph == 'pipeline'
+    stages = GRAPHS[graph]
+    recorded = out / ('graph_run' if graph == 'nodes' else f'{graph}_run')
     if recorded.exists():
         shutil.rmtree(recorded)
-    graph = Graph(out)
+    running = Graph(out)
     rclpy.init()
     node = rclpy.create_node('pose4d_demo')
     entered, left, diagnostics = probe(node)
     ex = executor(node)
-    stages = ('pipeline',) if pipeline else STAGES
     connections = PIPELINE_CONNECTIONS if pipeline else CONNECTIONS
     try:
-        graph.start('recorder', {'recorder.output': str(recorded),
+        running.start('recorder', {'recorder.output': str(recorded),
                                  'recorder.topics': list(RECORDED)})
         for exe in stages:
-            graph.start(exe, {'detector.model': model} if exe in ('detector', 'pipeline')
-                        else {})
+            running.start(exe, {'detector.model': model}
+                        if exe in ('detector', 'composed', 'pipeline') else {})
         deadline = time.monotonic() + timeout
         while True:
-            graph.check_alive()
+            running.check_alive()
             lacking = {t: n for t, n in connections.items() if node.count_subscribers(t) < n}
             if not lacking:
                 break
@@ -273,33 +277,33 @@ def run_graph(bag_path: Path, out: Path, *, rate: float = 1.0, model: str = 'rgb
                               f'subscribers on {", ".join(lacking)}')
             ex.spin_once(timeout_sec=0.1)
         for kind in load:  # started once the graph is up, as a user's commands would be
-            graph.start_load(kind, list(stages))
-        cpu_before, threads_before = graph.cpu_seconds(), graph.thread_seconds()
+            running.start_load(kind, list(STAGES if graph == 'composed' else stages))
+        cpu_before, threads_before = running.cpu_seconds(), running.thread_seconds()
         t_play = time.monotonic()
         # the replay plays once it has matched every subscriber seen here (this one too)
         played = [t.lstrip('/') for t in bag.topics(bag_path) if t.startswith('/camera/')]
-        graph.start('replay', {'replay.bag': str(bag_path), 'replay.rate': rate,
+        running.start('replay', {'replay.bag': str(bag_path), 'replay.rate': rate,
                                'replay.best_effort': best_effort,
                                'replay.topics': played, 'replay.delay_s': 0.5,
                                'replay.wait_for_subscribers': [
                                    f'{t}={node.count_subscribers(t)}' for t in played]})
-        replay = graph.procs['replay']
+        replay = running.procs['replay']
         replay_cpu = 0.0
         while replay.poll() is None:
-            graph.check_alive()
-            replay_cpu = graph.cpu_seconds().get('replay', replay_cpu)
+            running.check_alive()
+            replay_cpu = running.cpu_seconds().get('replay', replay_cpu)
             ex.spin_once(timeout_sec=0.05)
         if replay.returncode != 0:
-            raise OSError(f'replay failed ({replay.returncode}):\n{graph.tail("replay")}')
+            raise OSError(f'replay failed ({replay.returncode}):\n{running.tail("replay")}')
         # drain: until every frame is out, or nothing has come for 3 s
         while len(left) < frames:
             if time.monotonic() - max(max(left.values(), default=t_play), t_play) > 3.0:
                 break
             ex.spin_once(timeout_sec=0.05)
-        cpu = {exe: t - cpu_before.get(exe, 0.0) for exe, t in graph.cpu_seconds().items()}
+        cpu = {exe: t - cpu_before.get(exe, 0.0) for exe, t in running.cpu_seconds().items()}
         threads = {exe: {kind: t - threads_before.get(exe, {}).get(kind, 0.0)
                          for kind, t in kinds.items()}
-                   for exe, kinds in graph.thread_seconds().items() if exe != 'replay'}
+                   for exe, kinds in running.thread_seconds().items() if exe != 'replay'}
         cpu['replay'] = replay_cpu
         # each stage's /diagnostics of after its last frame (one a second)
         until = time.monotonic() + 1.2
@@ -308,10 +312,10 @@ def run_graph(bag_path: Path, out: Path, *, rate: float = 1.0, model: str = 'rgb
     finally:
         node.destroy_node()
         rclpy.try_shutdown()
-        codes = graph.stop()
-    graph.raise_unless_clean(codes)
+        codes = running.stop()
+    running.raise_unless_clean(codes)
     dropped = {stage: int(values.get('dropped', 0)) for stage, values in diagnostics.items()}
-    return GraphRun(recorded, frames, entered, left, dict(graph.logs), cpu, dropped, threads)
+    return GraphRun(recorded, frames, entered, left, dict(running.logs), cpu, dropped, threads)
 
 
 def tf_per_skeleton(recorded: Path, skeletons: dict[int, JointSet], *,

@@ -22,7 +22,7 @@ import os
 import threading
 import time
 from collections import deque
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Protocol
 
@@ -91,39 +91,47 @@ class _Profiled:
         tmp.replace(self._path)
 
 
-def executor(node: Node) -> Executor:
-    """The executor a node spins on: rclpy's events executor (its C++ event queue: per message
+def executor(*nodes: Node) -> Executor:
+    """The executor nodes spin on: rclpy's events executor (its C++ event queue: per message
     a fraction of the CPU that `SingleThreadedExecutor`'s Python wait set costs, measured in the
     README), or with POSE4D_EXECUTOR=single the `SingleThreadedExecutor`."""
     choice = os.environ.get(EXECUTOR_ENV, 'events')
     if choice not in ('events', 'single'):
         raise ParameterError(f'{EXECUTOR_ENV}={choice!r}: use events or single')
-    ex = (EventsExecutor(context=node.context) if choice == 'events'
-          else SingleThreadedExecutor(context=node.context))
-    ex.add_node(node)
+    context = nodes[0].context
+    ex = (EventsExecutor(context=context) if choice == 'events'
+          else SingleThreadedExecutor(context=context))
+    for node in nodes:
+        ex.add_node(node)
     return ex
 
 
-def spin(node: Node) -> None:
-    """Serve the node's callbacks until the context shuts down (Ctrl-C, SIGTERM)."""
-    ex = executor(node)
+def spin(*nodes: Node) -> None:
+    """Serve the nodes' callbacks, on one executor, until the context shuts down (Ctrl-C,
+    SIGTERM) or every one of them is a managed node whose lifecycle was shut down."""
+    ex = executor(*nodes)
     try:
         # the events executor's spin() does not return on shutdown (rclpy 7.1.6): poll; a
         # managed node whose lifecycle was shut down (finalized) has nothing left to serve
-        while rclpy.ok(context=node.context) and not getattr(node, 'finalized', False):
+        while (rclpy.ok(context=nodes[0].context)
+               and not all(getattr(node, 'finalized', False) for node in nodes)):
             ex.spin_once(timeout_sec=0.2)
     finally:
-        # the node out first: the events executor aborts the process when it is destroyed
-        # while the node's entities still hold its callbacks ("Destroying callback manager
+        # the nodes out first: the events executor aborts the process when it is destroyed
+        # while the nodes' entities still hold its callbacks ("Destroying callback manager
         # with callbacks remaining", rclpy 7.1.6; seen once at a node's stop in CI)
-        ex.remove_node(node)
+        for node in nodes:
+            ex.remove_node(node)
         ex.shutdown()
 
 
-def run(factory: Callable[[], Node], args: list[str] | None = None,
-        body: Callable[[Node], None] = spin, *, signal_handlers: bool = True) -> int:
+def run(factory: Callable[[], Node] | Sequence[Callable[[], Node]],
+        args: list[str] | None = None, body: Callable[..., None] = spin, *,
+        signal_handlers: bool = True) -> int:
     """Jazzy's main(): init, spin (or `body`), clean shutdown on Ctrl-C/SIGTERM.
 
+    `factory`: the node's class, or several (nodes composed in one process, served by one
+    executor: `body(*nodes)`).
     `signal_handlers=False`: rclpy does not shut the context down on SIGINT/SIGTERM; `body`
     handles them (the recorder, which must still take what is on its way).
     Returns the exit status: 0, 2 when a parameter was refused, 1 when the node's input
@@ -136,19 +144,21 @@ def run(factory: Callable[[], Node], args: list[str] | None = None,
     wire.warm_up()  # the depth decoders' kernels, for message buffers (else the first frame's)
     rclpy.init(args=args, signal_handler_options=None if signal_handlers
                else SignalHandlerOptions.NO)
-    node = None
+    nodes: list[Node] = []
     code = 0
     try:
-        node = factory()
-        if getattr(node, 'autostart', False):
-            node.start()  # a managed node as a plain one: configured and active
+        for make in ([factory] if callable(factory) else factory):
+            nodes.append(make())
+        for node in nodes:
+            if getattr(node, 'autostart', False):
+                node.start()  # a managed node as a plain one: configured and active
         # what start-up made (modules, kernels, the model: some 150,000 objects) is kept out of
         # the collector's passes: a full collection walking it took 64 ms, two frames at 30
         # fps, whenever enough objects had survived since the last one
         gc.collect()
         gc.freeze()
-        with _Profiled(node.get_name(), 'main'):
-            body(node)
+        with _Profiled('+'.join(node.get_name() for node in nodes), 'main'):
+            body(*nodes)
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
     except _rclpy.RCLError:
@@ -164,8 +174,9 @@ def run(factory: Callable[[], Node], args: list[str] | None = None,
         rclpy.logging.get_logger('pose4d').fatal(str(exc))
         code = 1
     finally:
-        if node is not None:
+        for node in nodes:  # every node's frames stop before any node is destroyed
             close_inputs(node)
+        for node in nodes:
             close = getattr(node, 'close', None)
             if close is not None:
                 close()
