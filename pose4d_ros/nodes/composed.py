@@ -4,9 +4,10 @@ parameters, topics, lifecycle services and /diagnostics), served by one executor
 
 Between processes each frame crosses Fast DDS's shared memory three times, and each process
 pays its own executor and DDS threads and runs its stage on caches the others have evicted:
-composed, the four cost 12 ms of CPU a frame where they cost 14-15 ms as four processes
-(docs/NOTES.md). Run the stages apart to spread them over hosts or restart one alone; the
-one-process `pipeline` node is cheaper still, but it is one node, not four.
+composed, the four cost a fifth less CPU a frame than as four processes (11.7 against 14.7
+ms on bench300, `docs/results/bench_graph300_quiet.json`). Run the stages apart to spread
+them over hosts or restart one alone; the one-process `pipeline` node is cheaper still, but
+it is one node, not four.
 
 Parameters are given as to the stage nodes (`--ros-args -p detector.model:=rgbd_14`): each
 name is its stage's, so each node takes its own; so are their parameter files, one
