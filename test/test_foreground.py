@@ -223,6 +223,34 @@ def test_a_whole_person_comes_before_a_region_cut_by_the_bottom_edge() -> None:
     assert iou(r.mask, union(masks[3:])) > 0.9
 
 
+def test_seen_edges_are_where_the_readings_end() -> None:
+    from pose4d_ros.core.foreground.person import seen_edges
+
+    valid = np.random.default_rng(0).random((240, 320)) > 0.05  # dropouts everywhere
+    assert seen_edges(valid) == (0, 320, 240)
+    # a depth image registered to the colour camera: bands without readings at its borders,
+    # the readings thinning out before the bottom one
+    valid[-7:] = False
+    valid[:, :5] = False
+    valid[:, -13:] = False
+    valid[-10:-7, ::2] = False
+    assert seen_edges(valid) == (5, 307, 230)
+
+
+def test_a_person_too_near_to_be_seen_whole_beside_a_whole_one() -> None:
+    # a 1.4 m person 1 m from the camera, cut by the image's bottom edge, and a whole person
+    # 2.8 m away; the depth image has no readings in its last rows (registered to the colour
+    # camera): the near one stops short of the array's edge, and is still cut by the image
+    depth, masks, _ = render_boxes(box_person(x=-0.3, z=1.0, stature=1.4)
+                                   + box_person(x=0.6, z=2.8), noise=False)
+    depth[-8:] = np.nan
+    people, found = segment_people(depth, K)
+    near, far = union(masks[:6]), union(masks[6:])
+    assert found == 2
+    assert sorted(max(iou(p.mask, truth) for p in people) > 0.8 for truth in (near, far)) \
+        == [True, True]
+
+
 def test_previous_result_keeps_the_same_person() -> None:
     # two people of similar size: without history the larger wins, with the previous box on
     # the other one, that one is kept (the temporal bonus outweighs a small size difference)

@@ -39,16 +39,19 @@ Steps of `segment` (one depth frame, float32 metres, NaN = no reading):
    ``n_px z^2 / (fx fy)``, fill of its box, depth extent, and, with a floor, the height above
    the floor of its top rows (head or hands) and bottom rows (feet or the occluder's top).
    The best-scoring part wins; with `previous`, a part overlapping the previous box gets
-   `previous_bonus`. A person nearer than the camera sees whole (1.2 m away, head to thighs)
-   is cut by the image's bottom edge and shorter than a whole person may be: when no part
-   passes the rules, parts cut by that edge get smaller lower bounds on height and surface
-   and no rule on their bottom rows (`person_min_cut_height_m`); the best few such regions
-   are examined besides the best few others, never in their place. A person of the previous
-   frame who bends or crouches (a pick-up, a bow) shrinks under a whole person's bounds, to a
-   table's size: a part that overlaps their previous box (`FOLLOW_OVERLAP`) with its top near
-   that box's top (`FOLLOW_TOP`: one bends over several frames) passes with a cut person's
-   lower bounds and its top at least `person_min_bent_top_m` above the floor, when no part
-   passing the usual rules overlaps that box (`bent_rules`).
+   `previous_bonus`. A person nearer than the camera sees whole (1.2 m away, head to thighs) is
+   cut by the image's bottom edge and shorter than a whole person may be: parts cut by that edge
+   get smaller lower bounds on height and surface and no rule on their bottom rows
+   (`person_min_cut_height_m`): in `segment`, when no part passes the rules; in
+   `segment_people`, beside those that do. The best few such regions are examined besides the
+   best few others, never in their place. The image's edges are where the depth readings end
+   (`person.seen_edges`): a depth image registered to the colour camera has a band without
+   readings along its borders, and a person cut by the image stops there. A person of the
+   previous frame who bends or crouches (a pick-up, a bow) shrinks under a whole person's
+   bounds, to a table's size: a part that overlaps their previous box (`FOLLOW_OVERLAP`) with
+   its top near that box's top (`FOLLOW_TOP`: one bends over several frames) passes with a cut
+   person's lower bounds and its top at least `person_min_bent_top_m` above the floor, when no
+   part passing the usual rules overlaps that box (`bent_rules`).
 5. Completion. No-reading pixels that a small closing of the mask adds (Kinect loses the
    readings in a ragged band along depth edges) join the mask; optionally, holes of no-reading
    pixels are filled.

@@ -36,7 +36,8 @@ class Part:
     n : pixels; z : median depth, m; height_m, width_m : box size at depth z; area_m2 :
     surface seen from the camera; fill : n over box area; variation : the region's MSER
     variation; side : touches the left or right image border; cut : touches the bottom one
-    (a person too near to be seen whole); top_m, bottom_m : height
+    (a person too near to be seen whole; the borders are where the readings end,
+    `seen_edges`); top_m, bottom_m : height
     above the floor of its top and bottom rows (NaN without a floor); extent_m : depth
     between its 5th and 95th percentiles.
     """
@@ -60,8 +61,31 @@ class Part:
     extent_m: float
 
 
+# A depth image's edge is where its readings end: a depth image registered to the colour
+# camera has a band without readings along its borders (lab_walk's Xtion: 12-15 px at the
+# top, left and bottom, 26 at the right, of 640x480), then a few rows or columns where the
+# readings thin out; a row or column with at least this share of the median row's or column's
+# readings is inside the edge
+SEEN_SHARE = 0.9
+
+
+def seen_edges(valid: NDArray[np.bool_]) -> tuple[int, int, int]:
+    """Where a depth image's readings end (`valid`: pixels with a reading): the first seen
+    column, one past the last seen column, one past the last seen row (`SEEN_SHARE`). A part
+    reaching them is cut by the image's side or bottom edge; an image with readings up to its
+    borders has (0, width, height)."""
+    h, w = valid.shape
+    rows, cols = valid.sum(axis=1, dtype=np.int32), valid.sum(axis=0, dtype=np.int32)
+    seen_rows = np.flatnonzero(rows >= SEEN_SHARE * np.partition(rows, h // 2)[h // 2])
+    seen_cols = np.flatnonzero(cols >= SEEN_SHARE * np.partition(cols, w // 2)[w // 2])
+    if seen_rows.size == 0 or seen_cols.size == 0:
+        return 0, w, h
+    return int(seen_cols[0]), int(seen_cols[-1]) + 1, int(seen_rows[-1]) + 1
+
+
 def person_sized(regions: StableRegions, intrinsics: Intrinsics, config: ForegroundConfig,
-                 boxes: Sequence[tuple[int, int, int, int]] = ()) -> NDArray[np.int64]:
+                 boxes: Sequence[tuple[int, int, int, int]] = (),
+                 edges: tuple[int, int, int] | None = None) -> NDArray[np.int64]:
     """Stage 1 of the person rules, on the tree's statistics (box, mean depth): the stable
     regions worth tracing, best first (none: no region of person size).
 
@@ -69,9 +93,10 @@ def person_sized(regions: StableRegions, intrinsics: Intrinsics, config: Foregro
     the person's lower size bounds apply, and the upper ones with `merge_slack`. At most
     `max_candidates` regions that may hold a whole person (or a person of the previous frame,
     `boxes`, bending: a cut person's lower bounds, `bent_rules`), then as many cut by the
-    bottom edge.
+    bottom edge (`edges`: where the depth image's readings end, `seen_edges`).
     """
     r, st = regions, regions.step
+    left, right, bottom = edges or (0, r.shape[1] * st, r.shape[0] * st)
     cand = r.stable
     z = config.depth_near_m + (255.0 - r.gsum[cand] / r.size[cand]) * config.metres_per_level
     height_m = (r.y1[cand] - r.y0[cand]) * st * z / intrinsics.fy
@@ -83,7 +108,7 @@ def person_sized(regions: StableRegions, intrinsics: Intrinsics, config: Foregro
     whole_size = ((height_m >= config.person_min_height_m)
                   & (area_m2 >= config.person_min_area_m2))
     cut_size = (height_m >= config.person_min_cut_height_m) & (area_m2 >= config.min_cut_area_m2)
-    near = (r.y1[cand] == r.shape[0]) & cut_size
+    near = (r.y1[cand] * st >= bottom) & cut_size
     if boxes and math.isfinite(config.person_min_bent_top_m):
         whole_size |= cut_size & _follows(boxes, r.x0[cand] * st, r.y0[cand] * st,
                                           r.x1[cand] * st, r.y1[cand] * st)
@@ -99,7 +124,7 @@ def person_sized(regions: StableRegions, intrinsics: Intrinsics, config: Foregro
     cand = cand[ok]
     if cand.size == 0:
         return cand
-    side = (r.x0[cand] == 0) | (r.x1[cand] == r.shape[1])
+    side = (r.x0[cand] * st <= left) | (r.x1[cand] * st >= right)
     score = (np.log(r.area_px[cand]) - config.stability_weight * r.variation[cand]
              - config.border_penalty * side + 1000.0 * strict)
     rank = np.argsort(-score, kind='stable')
@@ -138,7 +163,8 @@ def _follows_one(box: tuple[int, int, int, int],
 def depth_parts(g: NDArray[np.uint8], regions: StableRegions, order: NDArray[np.int64],
                 above: NDArray[np.float32] | None, intrinsics: Intrinsics,
                 config: ForegroundConfig, *, occluded: bool = False,
-                boxes: Sequence[tuple[int, int, int, int]] = ()) -> list[Part]:
+                boxes: Sequence[tuple[int, int, int, int]] = (),
+                edges: tuple[int, int, int] | None = None) -> list[Part]:
     """Stage 2, on the full-resolution pixels of the regions `order` picked: each split at
     empty depth gaps (an occluder in front, furniture behind), and a part deeper than
     `person_max_extent_m` at Otsu's threshold too; every part is a candidate. `occluded`: the
@@ -149,6 +175,7 @@ def depth_parts(g: NDArray[np.uint8], regions: StableRegions, order: NDArray[np.
     Each region is traced and its parts measured by one kernel call (`_region_parts`): per
     region, a handful of Python-level calls instead of some seventy small numpy ones."""
     h, w = g.shape
+    edges = edges or (0, w, h)
     parts = []
     mpl = config.metres_per_level
     gap_levels = config.occluder_gap_m / mpl
@@ -167,7 +194,7 @@ def depth_parts(g: NDArray[np.uint8], regions: StableRegions, order: NDArray[np.
         for a, b, n, med, r0, r1, c0, c1, extent, top, bottom, whole in rows.tolist():
             pt = _describe(crop, g, box, int(a), int(b), int(n), int(med),
                            (int(r0), int(r1), int(c0), int(c1)), extent, top, bottom,
-                           bool(whole), float(regions.variation[i]), intrinsics, (w, h),
+                           bool(whole), float(regions.variation[i]), intrinsics, edges,
                            config, mpl, small)
             if pt is not None:
                 parts.append(pt)
@@ -215,11 +242,12 @@ def _distinct_kernel(order: NDArray[np.int64], x0: NDArray, y0: NDArray, x1: NDA
 def _describe(crop: NDArray[np.bool_], g: NDArray[np.uint8], origin: tuple[int, ...],
               lo: int, hi: int, n: int, med: int, extent_box: tuple[int, int, int, int],
               extent_levels: float, top: float, bottom: float, whole: bool, var: float,
-              intrinsics: Intrinsics, size: tuple[int, int], config: ForegroundConfig,
+              intrinsics: Intrinsics, edges: tuple[int, int, int], config: ForegroundConfig,
               metres_per_level: float, occluded: bool = False) -> Part | None:
     """One depth part as `_region_parts` measured it (levels `lo`-`hi` of the region `crop`
     over box `origin`; `n` pixels, median level `med`, rows `r0:r1` and columns `c0:c1` of
-    the crop, depth extent in levels, heights of its top and bottom rows); None when it is
+    the crop, depth extent in levels, heights of its top and bottom rows; `edges`: where the
+    readings end, left, right and bottom, `seen_edges`); None when it is
     too small to be anything (`occluded`: its tops and bottoms judged by a cut person's
     sizes; `metres_per_level` is the config's, computed once by the caller)."""
     if n < config.mser_min_area_px:
@@ -229,7 +257,7 @@ def _describe(crop: NDArray[np.bool_], g: NDArray[np.uint8], origin: tuple[int, 
     z = config.depth_near_m + (255.0 - med) * metres_per_level
     bh, bw = r1 - r0, c1 - c0
     box = (origin[0] + c0, origin[1] + r0, origin[0] + c1, origin[1] + r1)
-    cut = box[3] == size[1]
+    cut = box[3] >= edges[2]
     height_m, width_m = bh * z / intrinsics.fy, bw * z / intrinsics.fx
     area, fill = n * z * z / (intrinsics.fx * intrinsics.fy), n / (bh * bw)
     extent = extent_levels * metres_per_level
@@ -241,7 +269,7 @@ def _describe(crop: NDArray[np.bool_], g: NDArray[np.uint8], origin: tuple[int, 
         crop = crop & (gl >= lo) & (gl <= hi)
     return Part(crop=crop, origin=(origin[0], origin[1]), box=box, lo=lo, hi=hi, n=n, z=z,
                 height_m=height_m, width_m=width_m, area_m2=area, fill=fill, variation=var,
-                side=box[0] == 0 or box[2] == size[0], cut=cut, top_m=top, bottom_m=bottom,
+                side=box[0] <= edges[0] or box[2] >= edges[1], cut=cut, top_m=top, bottom_m=bottom,
                 extent_m=extent)
 
 

@@ -34,6 +34,7 @@ from pose4d_ros.core.foreground.person import (
     part_score,
     person_rules,
     person_sized,
+    seen_edges,
 )
 from pose4d_ros.core.foreground.regions import depth_to_levels, stable_regions
 from pose4d_ros.core.stats import median
@@ -175,9 +176,9 @@ def segment_people(depth_m: NDArray[np.floating], intrinsics: Intrinsics, *,
     if left:  # people of the previous frame not found by the usual rules, bending?
         picked += _distinct_people([pt for pt in parts if bent_rules(pt, config, left)],
                                    depth.shape, config, boxes, picked)
-    if not picked:
-        picked = _distinct_people([pt for pt in parts if person_rules(pt, config, near=True)],
-                                  depth.shape, config, boxes, [])
+    # people too near to be seen whole (cut by the image's bottom edge), beside the others
+    picked += _distinct_people([pt for pt in parts if person_rules(pt, config, near=True)],
+                               depth.shape, config, boxes, picked)
     first = len(picked)
     if config.second_look and picked and first < max_people and (
             not previous or any(p.behind for p in previous)
@@ -370,8 +371,9 @@ def _parts(depth: NDArray[np.float32], intrinsics: Intrinsics, config: Foregroun
     regions = stable_regions(g, config)
     if regions.stable.size == 0:
         return [], REASON_NO_REGION
-    order = person_sized(regions, intrinsics, config, boxes)
+    edges = seen_edges(np.isfinite(depth))
+    order = person_sized(regions, intrinsics, config, boxes, edges)
     if order.size == 0:
         return [], REASON_NO_PERSON
     return depth_parts(g, regions, order, above, intrinsics, config, occluded=occluded,
-                       boxes=boxes), REASON_NO_PERSON
+                       boxes=boxes, edges=edges), REASON_NO_PERSON
