@@ -755,6 +755,28 @@ def test_a_person_coming_out_from_behind_is_born_from_emerging_score(emerging_sc
         assert tr.born == [] and ids_by_x(out)[2] == pytest.approx(0.2, abs=0.03)
 
 
+@pytest.mark.parametrize('near, band, born', [(True, 8, True), (True, None, False),
+                                               (False, 8, False)])
+def test_a_person_cut_by_the_image_bottom_is_born_from_emerging_score(near, band, born):
+    """A person too near to be seen whole (joints at or below the last row of the depth
+    image's readings: a depth image registered to the colour camera has none in a band along
+    its bottom), scoring 4 (under `birth_score`, over `emerging_score` 3), beside a confirmed
+    person: born after `confirm_frames` frames. Not without a depth image to tell where the
+    image ends, nor a whole person at the same score."""
+    tr = tracker(emerging_score=3.0)
+    depth = None
+    if band is not None:
+        depth = np.full((INTR.height, INTR.width), 3.0, np.float32)
+        depth[-band:] = np.nan
+    for k in range(5):
+        tr.step([_scored(person(-0.7, z=3.0), 8.0)], k * DT, INTR, depth)
+    other = _scored(person(0.15, z=1.6 if near else 3.0), 4.0)
+    assert (other.uv[:, 1].max() >= INTR.height - 9) == near
+    for k in range(5, 10):
+        out = tr.step([_scored(person(-0.7, z=3.0), 8.0), other], k * DT, INTR, depth)
+    assert len(out) == (2 if born else 1)
+
+
 @pytest.mark.parametrize('far_x, born', [(1.0, True), (1.3, False)])
 def test_a_region_cut_by_the_image_side_behind_a_person_is_not_born_from_emerging_score(
         far_x, born):

@@ -15,6 +15,7 @@ from numpy.typing import NDArray
 
 from pose4d_ros.core import joints as cj
 from pose4d_ros.core.camera import Intrinsics, project
+from pose4d_ros.core.foreground.person import seen_edges
 from pose4d_ros.core.joints import JointSet
 from pose4d_ros.core.people.assignment import _mahalanobis2_all, assign, torso, torso_px
 from pose4d_ros.core.people.config import TrackingConfig
@@ -126,7 +127,8 @@ class PeopleTracker:
         self.tracks = [t for t in self.tracks if t not in ended]
         points = [torso(d) for d in detections]
         cost = self._cost(detections, points, stamp_s)
-        matched, trusted, emerging, refused = self._match(detections, points, cost, intrinsics)
+        matched, trusted, emerging, refused = self._match(detections, points, cost, intrinsics,
+                                                          depth)
         while refused:
             # a pair the track refuses takes no part: the detection goes to the next track
             # that fits, a tentative one among them (a person held behind another, offered the
@@ -135,10 +137,10 @@ class PeopleTracker:
             # removes a pair, so this ends
             cost[tuple(np.array(refused).T)] = np.nan
             matched, trusted, emerging, refused = self._match(detections, points, cost,
-                                                              intrinsics)
+                                                              intrinsics, depth)
         # no pair left is refused (`_match`): each detection is its track's, or may start one
         for j, det in enumerate(detections):
-            born = self._born(det, j in emerging and _clear_of_sides(det, intrinsics))
+            born = self._born(det, self._partly_seen(det, j in emerging, depth, intrinsics))
             if j not in matched and (_finite(points[j][0]) or _finite(torso_px(det)[0])) \
                     and (j in trusted or born):
                 stage = self.template.spawn()
@@ -266,7 +268,8 @@ class PeopleTracker:
                    and _in_box(other.last, pixel) for other in self.tracks)
 
     def _match(self, detections: Sequence[JointSet], points: list[tuple[NDArray, NDArray]],
-               cost: NDArray[np.float64], intrinsics: Intrinsics | None
+               cost: NDArray[np.float64], intrinsics: Intrinsics | None,
+               depth: Callable[[], NDArray[np.floating] | None]
                ) -> tuple[dict[int, int], set[int], dict[int, set[int]], list[tuple[int, int]]]:
         """The assignment on `cost` ({detection: track}), the detections trusted at once,
         those emerging from behind a nearer person, and the pairs (track, detection) whose
@@ -275,8 +278,8 @@ class PeopleTracker:
         trusted = self._trusted(detections, matched)
         emerging = self._emerging(detections, points, matched)
         refused = [(i, j) for j, i in matched.items() if self._refuses(
-            self.tracks[i], self._born(detections[j], j in emerging and _clear_of_sides(
-                detections[j], intrinsics)), emerging.get(j))]
+            self.tracks[i], self._born(detections[j], self._partly_seen(
+                detections[j], j in emerging, depth, intrinsics)), emerging.get(j))]
         return matched, trusted, emerging, refused
 
     def _refuses(self, track: _Track, born: bool, fronts: set[int] | None) -> bool:
@@ -349,6 +352,19 @@ class PeopleTracker:
         cfg = self.config
         least = min(cfg.birth_score, cfg.emerging_score) if emerging else cfg.birth_score
         return not det.score < least  # NaN: no score to judge by
+
+    def _partly_seen(self, det: JointSet, emerging: bool,
+                     depth: Callable[[], NDArray[np.floating] | None],
+                     intrinsics: Intrinsics | None) -> bool:
+        """Whether `det` is of a person partly seen, who starts or grows a tentative track from
+        `emerging_score` (`_born`): coming out from behind a nearer person (`emerging`), or
+        too near to be seen whole, cut by the image's bottom edge (a located joint at or below
+        where the depth image's readings end, `seen_edges`; the depth is read only for a
+        detection under `birth_score`), and clear of the image's sides (`_clear_of_sides`)."""
+        if not (emerging or (det.score < self.config.birth_score
+                             and _below_seen(det, depth()))):
+            return False
+        return _clear_of_sides(det, intrinsics)
 
     def _continues(self, track: _Track, emerging: bool = False) -> bool:
         """Whether a confirmed track takes any detection: no other confirmed track exists (one
@@ -520,6 +536,17 @@ SIDE_SHARE = 0.04
 # how far below a person's hips a piece of their body may lie (`_on_body`): a tall person's
 # legs, hip to sole, with room for a skeleton's hips placed high
 LEGS_M = 1.3
+
+
+def _below_seen(det: JointSet, depth_m: NDArray[np.floating] | None) -> bool:
+    """Whether a located joint of `det` lies at or below the last row of `depth_m` with
+    readings (`seen_edges`: a depth image registered to the colour camera has none in a band
+    along its bottom): the person is cut by the image's bottom edge. False without depth."""
+    if depth_m is None:
+        return False
+    bottom = seen_edges(np.isfinite(np.asarray(depth_m)))[2]
+    v = det.uv[det.source != cj.MISSING, 1]
+    return bool(np.any(v >= bottom - 1))
 
 
 def _clear_of_sides(det: JointSet, intrinsics: Intrinsics | None) -> bool:
