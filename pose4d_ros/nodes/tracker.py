@@ -176,7 +176,8 @@ class TrackerNode(ManagedNode):
             self.people.reset()
         intrinsics = self.camera.latest()
         try:
-            # read only when a track goes unseen
+            # read only when a track goes unseen, or a detection under the birth score may
+            # be of a person cut by the image's bottom edge
             depth = ((lambda: self.depth.at(stamp))
                      if self.depth is not None and intrinsics is not None else None)
             tracked = self.people.step(detections, stamp * 1e-9, intrinsics, depth)
