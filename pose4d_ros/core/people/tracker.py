@@ -104,11 +104,10 @@ class PeopleTracker:
              | None = None) -> list[JointSet]:
         """Track one frame: the tracked parts of every confirmed track (its `track_id` set),
         primary first, then by id. `depth_m` (the camera's depth, metres, NaN = no reading):
-        an unseen track whose person the depth image shows is not there ends (`free_space`),
-        and a detection reaching its last row of readings is of a person partly seen
-        (`_partly_seen`); or a function giving it (None: none), called once, and only if a
-        track went unseen or a detection under `birth_score` may be such a person (a node
-        reads the image only then)."""
+        an unseen track whose person it shows is not there ends (`free_space`), a detection
+        reaching its last row of readings is partly seen (`_partly_seen`); or a function
+        giving it (None: none), called once, only when a track went unseen or a detection
+        scored under `birth_score` (a node reads the image only then)."""
         cfg = self.config
         depth = functools.cache(depth_m if callable(depth_m) else lambda: depth_m)
         # every detection checked before anything changes: a frame with one the SLQE would
