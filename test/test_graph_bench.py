@@ -32,6 +32,19 @@ def test_kept_memory_serves_each_frame_without_fresh_pages():
     assert _minor_faults_of_frames() < 10
 
 
+def test_a_graph_discovers_this_host_only_unless_told_otherwise(monkeypatch):
+    from pose4d_ros.graph.run import graph_environment
+
+    monkeypatch.delenv('ROS_AUTOMATIC_DISCOVERY_RANGE', raising=False)
+    monkeypatch.delenv('FASTRTPS_DEFAULT_PROFILES_FILE', raising=False)
+    graph_environment()
+    assert os.environ['ROS_AUTOMATIC_DISCOVERY_RANGE'] == 'LOCALHOST'
+    assert os.environ['FASTRTPS_DEFAULT_PROFILES_FILE'].endswith('fastdds.xml')
+    monkeypatch.setenv('ROS_AUTOMATIC_DISCOVERY_RANGE', 'SUBNET')  # the user's choice stays
+    graph_environment()
+    assert os.environ['ROS_AUTOMATIC_DISCOVERY_RANGE'] == 'SUBNET'
+
+
 def test_the_spread_and_the_printout_name_every_figure():
     runs = [{'stages_ms_per_frame': v, 'frames_out': 300, 'latency_ms': {'p95': p}}
             for v, p in ((20.0, 30.0), (22.0, 25.0), (21.0, 40.0))]

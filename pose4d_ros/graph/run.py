@@ -233,6 +233,15 @@ def probe(node: Any) -> tuple[dict[int, float], dict[int, float], dict[str, dict
     return entered, left, stages
 
 
+def graph_environment() -> None:
+    """The DDS settings of this process and of the graph it starts, where the environment
+    gives none: Fast DDS with room for large frames (config/fastdds.xml), and discovery on
+    this host only (`ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST`: a demo or a bench is not to
+    join, or be joined by, another machine's nodes; the Makefile sets the same)."""
+    os.environ.setdefault('FASTRTPS_DEFAULT_PROFILES_FILE', str(share_path('config/fastdds.xml')))
+    os.environ.setdefault('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')
+
+
 def run_graph(bag_path: Path, out: Path, *, rate: float = 1.0, model: str = 'rgbd_14',
               timeout: float = 60.0, graph: str = 'nodes', best_effort: bool = False,
               load: Sequence[str] = ()) -> GraphRun:
@@ -246,8 +255,7 @@ def run_graph(bag_path: Path, out: Path, *, rate: float = 1.0, model: str = 'rgb
     from pose4d_ros.nodes.common import executor
 
     frames = bag.topics(bag_path)[cad60_bag.COLOR_TOPIC].count
-    # this process and the nodes: Fast DDS with room for large frames (config/fastdds.xml)
-    os.environ.setdefault('FASTRTPS_DEFAULT_PROFILES_FILE', str(share_path('config/fastdds.xml')))
+    graph_environment()
     out.mkdir(parents=True, exist_ok=True)
     pipeline = graph == 'pipeline'
     stages = GRAPHS[graph]
