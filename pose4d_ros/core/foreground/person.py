@@ -84,8 +84,8 @@ def seen_edges(valid: NDArray[np.bool_]) -> tuple[int, int, int]:
 
 
 def person_sized(regions: StableRegions, intrinsics: Intrinsics, config: ForegroundConfig,
-                 boxes: Sequence[tuple[int, int, int, int]] = (),
-                 edges: tuple[int, int, int] | None = None) -> NDArray[np.int64]:
+                 boxes: Sequence[tuple[int, int, int, int]],
+                 edges: tuple[int, int, int]) -> NDArray[np.int64]:
     """Stage 1 of the person rules, on the tree's statistics (box, mean depth): the stable
     regions worth tracing, best first (none: no region of person size).
 
@@ -96,7 +96,7 @@ def person_sized(regions: StableRegions, intrinsics: Intrinsics, config: Foregro
     bottom edge (`edges`: where the depth image's readings end, `seen_edges`).
     """
     r, st = regions, regions.step
-    left, right, bottom = edges or (0, r.shape[1] * st, r.shape[0] * st)
+    left, right, bottom = edges
     cand = r.stable
     z = config.depth_near_m + (255.0 - r.gsum[cand] / r.size[cand]) * config.metres_per_level
     height_m = (r.y1[cand] - r.y0[cand]) * st * z / intrinsics.fy
@@ -163,8 +163,8 @@ def _follows_one(box: tuple[int, int, int, int],
 def depth_parts(g: NDArray[np.uint8], regions: StableRegions, order: NDArray[np.int64],
                 above: NDArray[np.float32] | None, intrinsics: Intrinsics,
                 config: ForegroundConfig, *, occluded: bool = False,
-                boxes: Sequence[tuple[int, int, int, int]] = (),
-                edges: tuple[int, int, int] | None = None) -> list[Part]:
+                boxes: Sequence[tuple[int, int, int, int]],
+                edges: tuple[int, int, int]) -> list[Part]:
     """Stage 2, on the full-resolution pixels of the regions `order` picked: each split at
     empty depth gaps (an occluder in front, furniture behind), and a part deeper than
     `person_max_extent_m` at Otsu's threshold too; every part is a candidate. `occluded`: the
@@ -174,8 +174,6 @@ def depth_parts(g: NDArray[np.uint8], regions: StableRegions, order: NDArray[np.
 
     Each region is traced and its parts measured by one kernel call (`_region_parts`): per
     region, a handful of Python-level calls instead of some seventy small numpy ones."""
-    h, w = g.shape
-    edges = edges or (0, w, h)
     parts = []
     mpl = config.metres_per_level
     gap_levels = config.occluder_gap_m / mpl

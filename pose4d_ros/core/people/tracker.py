@@ -41,6 +41,29 @@ class _Track:
     behind: int = 0  # while held: the id of the track of the person hiding them
 
 
+class _FrameDepth:
+    """A frame's depth image for `PeopleTracker.step` (an array, None, or a function giving
+    it), read at most once, when first asked (`__call__`), and the row one past its last row
+    of readings (`bottom`, `seen_edges`: a depth image registered to the colour camera has
+    none in a band along its bottom), measured at most once a frame."""
+
+    def __init__(self, depth_m: NDArray[np.floating] | Callable[[], NDArray[np.floating] | None]
+                 | None) -> None:
+        self._source = depth_m
+
+    @functools.cached_property
+    def image(self) -> NDArray[np.floating] | None:
+        return self._source() if callable(self._source) else self._source
+
+    def __call__(self) -> NDArray[np.floating] | None:
+        return self.image
+
+    @functools.cached_property
+    def bottom(self) -> int | None:
+        image = self.image
+        return None if image is None else seen_edges(np.isfinite(np.asarray(image)))[2]
+
+
 class PeopleTracker:
     """One SLQE per person (`core.pipeline.TrackerStage`), detections assigned to tracks each
     frame (module docstring).
@@ -109,7 +132,7 @@ class PeopleTracker:
         giving it (None: none), called once, only when a track went unseen or a detection
         scored under `birth_score` (a node reads the image only then)."""
         cfg = self.config
-        depth = functools.cache(depth_m if callable(depth_m) else lambda: depth_m)
+        depth = _FrameDepth(depth_m)
         # every detection checked before anything changes: a frame with one the SLQE would
         # refuse is refused whole (ValueError), and the tracks are untouched
         checker = self.tracks[0].stage if self.tracks else self._checker()
@@ -269,8 +292,7 @@ class PeopleTracker:
                    and _in_box(other.last, pixel) for other in self.tracks)
 
     def _match(self, detections: Sequence[JointSet], points: list[tuple[NDArray, NDArray]],
-               cost: NDArray[np.float64], intrinsics: Intrinsics | None,
-               depth: Callable[[], NDArray[np.floating] | None]
+               cost: NDArray[np.float64], intrinsics: Intrinsics | None, depth: _FrameDepth
                ) -> tuple[dict[int, int], set[int], dict[int, set[int]], list[tuple[int, int]]]:
         """The assignment on `cost` ({detection: track}), the detections trusted at once,
         those emerging from behind a nearer person, and the pairs (track, detection) whose
@@ -354,8 +376,7 @@ class PeopleTracker:
         least = min(cfg.birth_score, cfg.emerging_score) if emerging else cfg.birth_score
         return not det.score < least  # NaN: no score to judge by
 
-    def _partly_seen(self, det: JointSet, emerging: bool,
-                     depth: Callable[[], NDArray[np.floating] | None],
+    def _partly_seen(self, det: JointSet, emerging: bool, depth: _FrameDepth,
                      intrinsics: Intrinsics | None) -> bool:
         """Whether `det` is of a person partly seen, who starts or grows a tentative track from
         `emerging_score` (`_born`): coming out from behind a nearer person (`emerging`), or
@@ -363,7 +384,7 @@ class PeopleTracker:
         where the depth image's readings end, `seen_edges`; the depth is read only for a
         detection under `birth_score`), and clear of the image's sides (`_clear_of_sides`)."""
         if not (emerging or (det.score < self.config.birth_score
-                             and _below_seen(det, depth()))):
+                             and _below_seen(det, depth.bottom))):
             return False
         return _clear_of_sides(det, intrinsics)
 
@@ -539,13 +560,12 @@ SIDE_SHARE = 0.04
 LEGS_M = 1.3
 
 
-def _below_seen(det: JointSet, depth_m: NDArray[np.floating] | None) -> bool:
-    """Whether a located joint of `det` lies at or below the last row of `depth_m` with
-    readings (`seen_edges`: a depth image registered to the colour camera has none in a band
-    along its bottom): the person is cut by the image's bottom edge. False without depth."""
-    if depth_m is None:
+def _below_seen(det: JointSet, bottom: int | None) -> bool:
+    """Whether a located joint of `det` lies at or below `bottom`, the depth image's last row
+    of readings (`_FrameDepth.bottom`): the person is cut by the image's bottom edge. False
+    without depth (None)."""
+    if bottom is None:
         return False
-    bottom = seen_edges(np.isfinite(np.asarray(depth_m)))[2]
     v = det.uv[det.source != cj.MISSING, 1]
     return bool(np.any(v >= bottom - 1))
 
