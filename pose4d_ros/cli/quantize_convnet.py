@@ -17,9 +17,14 @@ import time
 from dataclasses import replace
 from pathlib import Path
 
-import numpy as np
-
-from pose4d_ros.core.convnet import calibration_batches, load_convnet, quantize, save_convnet
+from pose4d_ros.core.convnet import (
+    CALIBRATION_PHOTOGRAPHS,
+    calibration_batches,
+    calibration_photographs,
+    load_convnet,
+    quantize,
+    save_convnet,
+)
 from pose4d_ros.datasets import lspet
 from pose4d_ros.datasets.sources import open_source, parse_ranges, source_kind
 from pose4d_ros.models import model_path
@@ -37,8 +42,9 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument('source', metavar='LSPET', help='LSPET root (calibration photographs)')
     p.add_argument('--range', dest='frame_range', default='1-2500', metavar='A-B[,C-D...]',
                    help='LSPET image numbers to calibrate on (training photographs)')
-    p.add_argument('--photographs', type=int, default=256,
-                   help='photographs taken, evenly spread over --range')
+    p.add_argument('--photographs', type=int, default=CALIBRATION_PHOTOGRAPHS,
+                   help='about as many photographs taken, evenly spread over --range (every '
+                   'k-th, as train-convnet takes them)')
     p.add_argument('--renders', action='append', default=[], type=Path, metavar='DIR',
                    help='also calibrate on a rendered CAD-60 set (pose4d synth); repeatable')
     p.add_argument('--render-stride', type=int, default=30, metavar='N',
@@ -56,8 +62,7 @@ def run(args: argparse.Namespace) -> int:
     net = load_convnet(model_path(args.model))
     numbers = [i for first, last in parse_ranges(args.frame_range)
                for i in range(first, last + 1)]
-    numbers = [numbers[int(k)] for k in np.linspace(0, len(numbers) - 1,
-                                                    min(args.photographs, len(numbers)))]
+    numbers = calibration_photographs(numbers, args.photographs)
     images = [lspet.read_image(args.source, i) for i in numbers]
     rendered = {}
     for root in args.renders:
@@ -74,7 +79,7 @@ def run(args: argparse.Namespace) -> int:
     metadata = dict(out.metadata, quantized={
         'command': command_line('quantize-convnet'), 'photographs': len(numbers),
         'data': f'LSPET {args.frame_range}', **({'renders': rendered} if rendered else {}),
-        'format': 'ONNX QDQ: weights int8 per channel, activations uint8 (min-max)'})
+        'format': 'ONNX QDQ: weights int8 per channel at 7 bits, activations uint8 (min-max)'})
     save_convnet(replace(out, metadata=metadata), args.out)
     log(f'wrote {args.out}: calibrated on {len(images)} crops in '
         f'{time.time() - started:.0f} s')

@@ -26,6 +26,7 @@ import numpy as np
 from pose4d_ros.core.convnet import (
     ConvNet,
     calibration_batches,
+    calibration_photographs,
     load_convnet,
     quantize,
     save_convnet,
@@ -44,8 +45,6 @@ from pose4d_ros.training.convnet_torch import (
 from pose4d_ros.training.dpm.samples import mirror_index
 from pose4d_ros.util.machine import command_line, machine
 from pose4d_ros.util.progress import log
-
-QUANTIZE_PHOTOGRAPHS = 256  # calibrating the 8-bit twin (`pose4d quantize-convnet`)
 
 
 def add_parser(subparsers: argparse._SubParsersAction) -> None:
@@ -156,8 +155,8 @@ def run(args: argparse.Namespace) -> int:
     }
     model = ConvNet(names, tuple(mirror), args.input_px, export_weights(done.net), metadata)
     # its 8-bit twin, the detector's default, calibrated on the training photographs
-    step = max(len(numbers) // QUANTIZE_PHOTOGRAPHS, 1)
-    model = quantize(model, calibration_batches(images[:len(numbers):step], args.input_px))
+    model = quantize(model, calibration_batches(
+        [images[k] for k in calibration_photographs(range(len(numbers)))], args.input_px))
     save_convnet(model, args.out)
     log(f'wrote {args.out}: {done.steps} steps, {done.epochs} epochs, {minutes:.1f} wall min, '
         f'{cpu_minutes:.1f} CPU min')

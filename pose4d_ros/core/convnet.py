@@ -20,7 +20,11 @@ graph optimised), so the nodes and `pose4d eval` need no PyTorch.
 `quantize` adds an 8-bit twin of the graph (ONNX Runtime's static QDQ quantisation: weights
 per output channel, activations at ranges calibrated on inputs as the network reads them),
 kept in the same file and run when `precision` is 'int8': the same network at a third of the
-CPU on CPUs with 8-bit dot products (VNNI).
+CPU on CPUs with 8-bit dot products (VNNI), at half of it on those without (AVX2). Its weights
+span 7 bits, not 8 (`reduce_range`): ONNX Runtime multiplies uint8 activations by int8 weights
+with AVX2's VPMADDUBSW, which saturates a pair of products at 16 bits; with the full 8 bits
+the twin's heat maps differ by CPU (on an AVX2-only AMD EPYC their peaks left the float
+graph's in 43 % of LSPET 8501-8580's maps, against 22 % at 7 bits; docs/NOTES.md).
 """
 
 from __future__ import annotations
@@ -44,6 +48,7 @@ STRIDE = 4  # input pixels per heat-map cell
 PAD_VALUE = 114  # grey outside the photograph
 # The photograph's scales read by `ConvNet.detect` by default (`heat_maps`)
 PHOTO_SCALES: tuple[float, ...] = (1.0, 1.3)
+CALIBRATION_PHOTOGRAPHS = 256  # about as many calibrate the 8-bit twin (`quantize`)
 
 
 def layer_names() -> list[str]:
@@ -350,7 +355,8 @@ QUANTIZED = 'int8.onnx'  # the file's array holding the 8-bit twin's bytes
 
 def quantize(net: ConvNet, inputs: Iterable[NDArray[np.floating]]) -> ConvNet:
     """`net` with its 8-bit twin (`ConvNet.quantized`): ONNX Runtime's static quantisation of
-    `onnx_model` in QDQ form, weights int8 per output channel, activations uint8 over the
+    `onnx_model` in QDQ form, weights int8 per output channel at 7 bits (module docstring:
+    the same heat maps on every x86 CPU), activations uint8 over the
     ranges (min to max) the float graph reaches on `inputs`, each an (N, S, S, 3) batch of
     normalised inputs (`normalise`) as the network will read them."""
     import tempfile
@@ -374,9 +380,17 @@ def quantize(net: ConvNet, inputs: Iterable[NDArray[np.floating]]) -> ConvNet:
     with tempfile.TemporaryDirectory(prefix='pose4d-quantize-') as tmp:
         out = Path(tmp) / 'int8.onnx'
         quantize_static(onnx_model(net.weights), out, Reader(), quant_format=QuantFormat.QDQ,
-                        per_channel=True, activation_type=QuantType.QUInt8,
+                        per_channel=True, reduce_range=True, activation_type=QuantType.QUInt8,
                         weight_type=QuantType.QInt8)
         return replace(net, quantized=out.read_bytes())
+
+
+def calibration_photographs(numbers: Sequence[int], n: int = CALIBRATION_PHOTOGRAPHS
+                             ) -> list[int]:
+    """About `n` of the training photographs `numbers`, evenly spread (every k-th): those
+    `quantize` calibrates on, after training (`pose4d train-convnet`) and alone (`pose4d
+    quantize-convnet`)."""
+    return list(numbers[::max(len(numbers) // n, 1)])
 
 
 def calibration_batches(images: Sequence[NDArray[np.uint8]], input_px: int, batch: int = 16
