@@ -117,7 +117,9 @@ def quiet_summary(bench: dict | None) -> str:
 
 REAL_SUMMARY = ("**Real** recordings (development data, MediaPipe the reference, "
                 '`docs/results/real_*.json`): share of its joints where ours lie within 0.1 x '
-                "the person's height; hand-labelled people found; ghosts. As shipped (the "
+                "the person's height; hand-labelled people found; ghosts. Recordings this short "
+                'move with the smallest change: lab_walk by 12 points with the photograph '
+                "network's arithmetic alone (float or 8-bit, docs/NOTES.md). As shipped (the "
                 'photograph network in the detector) / without it (`detector.colour_net:=\'\'`):')
 
 
