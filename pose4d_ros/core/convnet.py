@@ -20,7 +20,7 @@ graph optimised), so the nodes and `pose4d eval` need no PyTorch.
 `quantize` adds an 8-bit twin of the graph (ONNX Runtime's static QDQ quantisation: weights
 per output channel, activations at ranges calibrated on inputs as the network reads them),
 kept in the same file and run when `precision` is 'int8': the same network at a third of the
-CPU on CPUs with 8-bit dot products (VNNI), at half of it on those without (AVX2). Its weights
+CPU on CPUs with 8-bit dot products (VNNI), at 0.6 of it on one without (AVX2). Its weights
 span 7 bits, not 8 (`reduce_range`): ONNX Runtime multiplies uint8 activations by int8 weights
 with AVX2's VPMADDUBSW, which saturates a pair of products at 16 bits; with the full 8 bits
 the twin's heat maps differ by CPU (on an AVX2-only AMD EPYC their peaks left the float
@@ -356,7 +356,7 @@ QUANTIZED = 'int8.onnx'  # the file's array holding the 8-bit twin's bytes
 def quantize(net: ConvNet, inputs: Iterable[NDArray[np.floating]]) -> ConvNet:
     """`net` with its 8-bit twin (`ConvNet.quantized`): ONNX Runtime's static quantisation of
     `onnx_model` in QDQ form, weights int8 per output channel at 7 bits (module docstring:
-    the same heat maps on every x86 CPU), activations uint8 over the
+    no x86 CPU's kernel saturates them), activations uint8 over the
     ranges (min to max) the float graph reaches on `inputs`, each an (N, S, S, 3) batch of
     normalised inputs (`normalise`) as the network will read them."""
     import tempfile
