@@ -53,6 +53,7 @@ frames as one grid (`evaluation.draw`).
 from __future__ import annotations
 
 import argparse
+from dataclasses import asdict, replace
 from pathlib import Path
 
 import cv2
@@ -67,6 +68,7 @@ from pose4d_ros.core.files import write_atomic, write_json
 from pose4d_ros.core.foreground import ForegroundConfig
 from pose4d_ros.core.joints import JointSet
 from pose4d_ros.core.people import TrackingConfig
+from pose4d_ros.core.registration import edge_shift, shift_image
 from pose4d_ros.core.slqe import SlqeConfig
 from pose4d_ros.core.threads import set_blas_threads
 from pose4d_ros.datasets.sources import load_frames, source_kind
@@ -162,6 +164,10 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument('--fps', type=float, default=None,
                    help="a folder of frames: its frame rate (default: its frames.yaml's, else "
                         '30)')
+    p.add_argument('--depth-shift', type=depth_shift, default=None, metavar='DX,DY',
+                   help="move every frame's depth image by DX, DY pixels (x right, y down) onto "
+                        'its colour image, for a camera whose depth is registered off (a real '
+                        "recording's table gives the shift its edges suggest: registration)")
     p.add_argument('--plot', type=Path, metavar='FILE.png',
                    help='also draw PCK against the threshold (0 to 0.5) per joint group, one '
                         'curve per row, and the 3-D error distribution')
@@ -170,6 +176,24 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
                         "(DIR/<row>/), and each row's worst and best frames as a grid "
                         '(DIR/<row>_worst_best.jpg)')
     p.set_defaults(func=run)
+
+
+def depth_shift(text: str) -> tuple[int, int]:
+    """`--depth-shift DX,DY`: two whole numbers of pixels."""
+    try:
+        dx, dy = (int(v) for v in text.split(','))
+    except ValueError:
+        raise argparse.ArgumentTypeError(
+            f'{text!r}: give two whole numbers of pixels, DX,DY (e.g. 10,2)') from None
+    return dx, dy
+
+
+def shifted(frames: list, shift: tuple[int, int] | None) -> list:
+    """`frames` with their depth moved by `shift` (`--depth-shift`; None: as they are)."""
+    if shift is None:
+        return frames
+    return [f if f.depth_m is None else replace(f, depth_m=shift_image(f.depth_m, *shift))
+            for f in frames]
 
 
 def run(args: argparse.Namespace) -> int:
@@ -225,8 +249,9 @@ def table_rows(args: argparse.Namespace, kind: str, models: dict[str, PartModel 
     rows' accuracy curves (`evaluation.pipeline.curve_rows` at `evaluation.plot.ALPHAS`).
     `offsets`: the peer's fitted depth offsets (the `<peer>_fit` row); with
     `args.fit_peer_depth` the offsets are fitted on these frames and written there."""
-    frames = load_frames([args.source], frame_range=args.frame_range, stride=args.stride,
-                         max_frames=args.max_frames)
+    frames = shifted(load_frames([args.source], frame_range=args.frame_range,
+                                 stride=args.stride, max_frames=args.max_frames),
+                     args.depth_shift)
     sequence = kind in ('cad60', 'bag') and args.max_frames is None
     max_people = args.max_people
     if max_people is None and any(getattr(f, 'people', ()) for f in frames):
@@ -309,6 +334,11 @@ def real_rows(args: argparse.Namespace, models: dict[str, PartModel | ConvNet],
                              'info_topic': args.info_topic}, hold=args.hold)
     if any(f.depth_m is None for f in frames):
         raise ValueError(f'{args.source}: a real recording needs depth in every frame')
+    frames = shifted(frames, args.depth_shift)
+    try:  # how far the depth edges lie from the colour edges (every 4th frame)
+        registration = asdict(edge_shift((f.color, f.depth_m) for f in frames[::4]))
+    except ValueError as exc:
+        registration = {'error': str(exc)}
     labels = real.read_labels(args.labels) if args.labels is not None else None
     settings = overrides.parse(args.config)
     people = overrides.apply(TrackingConfig(
@@ -341,7 +371,8 @@ def real_rows(args: argparse.Namespace, models: dict[str, PartModel | ConvNet],
         if labels is not None:
             out[peer.name]['labels'] = real.agreement(frames, [() for _ in frames], reference,
                                                       labels)['labels']
-    return {'frames': len(frames), 'source': str(args.source), 'real': out}
+    return {'frames': len(frames), 'source': str(args.source), 'real': out,
+            'depth_shift': args.depth_shift, 'registration': registration}
 
 
 def format_real(result: dict) -> str:
@@ -371,6 +402,13 @@ def format_real(result: dict) -> str:
             lines.append(f"{'  ' + stage:28s} {s['agree@0.1']!s:>9s} {s['agree@0.2']!s:>6s} "
                          f"{'':>6s} {s['people_per_frame'].get('ours', 0):>9.2f} {found:>9s} "
                          f"{s.get('ghosts', '-')!s:>6s}")
+    reg = result.get('registration') or {}
+    if 'dx' in reg:
+        lines.append(f"registration: the depth edges lie nearest the colour edges moved by "
+                     f"{reg['dx']}, {reg['dy']} px ({reg['chamfer_px']} px away there on average, "
+                     f"{reg['unshifted_px']} px as given; {reg['frames']} frames)"
+                     + (f"; depth moved by {result['depth_shift']}" if result.get('depth_shift')
+                        else ''))
     return '\n'.join(lines)
 
 
