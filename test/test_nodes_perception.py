@@ -2,9 +2,12 @@
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 import pytest
 from harness import check_tf, start
+from numpy.testing import assert_array_equal
 
 from pose4d_ros.core.camera import cad60_intrinsics
 
@@ -46,15 +49,23 @@ def _publish_frame(ros, pubs, r, header):
     info.publish(intrinsics_to_msg(INTR, header))
 
 
-def test_foreground_node_masks_the_person(ros, frames, tmp_path):
+@pytest.mark.parametrize('shift', [(0, 0), (6, -2)], ids=['registered', 'depth_beside'])
+def test_foreground_node_masks_the_person(ros, frames, tmp_path, shift):
+    """The person's mask, colour and depth out of the foreground node; with the camera's depth
+    registered off (moved by -shift), `foreground.depth_shift_px` moves it back first."""
     from sensor_msgs.msg import CameraInfo, Image
     from std_msgs.msg import Header
 
+    from pose4d_ros.core.registration import shift_image
     from pose4d_ros.nodes import qos
     from pose4d_ros.nodes.convert import ns_to_stamp
     from pose4d_ros.wire import depth_from_msg, image_to_array
 
-    node = start('foreground', {}, log_dir=tmp_path)
+    params = {'foreground.depth_shift_px': list(shift)} if any(shift) else {}
+    sent = [r if not any(shift) else replace(r, depth_mm=shift_image(r.depth_mm, -shift[0],
+                                                                     -shift[1]))
+            for r in frames]
+    node = start('foreground', params, log_dir=tmp_path)
     try:
         pubs = (ros.node.create_publisher(Image, 'camera/color/image_raw', qos.OUTPUT_QOS),
                 ros.node.create_publisher(Image, 'camera/depth/image_raw', qos.OUTPUT_QOS),
@@ -69,7 +80,7 @@ def test_foreground_node_masks_the_person(ros, frames, tmp_path):
             ros.wait_for_publishers(f'pose4d/foreground/{topic}')
         headers = [Header(stamp=ns_to_stamp(10**18 + k * 33_333_334), frame_id='cam')
                    for k in range(len(frames))]
-        for r, header in zip(frames, headers, strict=True):
+        for r, header in zip(sent, headers, strict=True):
             ros.send_until_answered(lambda r=r, h=header: _publish_frame(ros, pubs, r, h),
                                     lambda h=header: h in [m.header for m in depths],
                                     f'the frame at {header.stamp.nanosec} ns')
@@ -91,6 +102,10 @@ def test_foreground_node_masks_the_person(ros, frames, tmp_path):
         assert (color[~mask] == 0).all()
         depth = depth_from_msg(depth_msg)
         assert depth_msg.encoding == '16UC1' and np.isnan(depth[~mask]).all()
+        # the person's depth where the colour image has them: moved back onto it
+        inside = mask & r.mask & np.isfinite(depth)
+        assert inside.sum() > 0.7 * r.mask.sum()
+        assert_array_equal(np.round(depth[inside] * 1000), r.depth_mm[inside])
 
 
 def _part_errors_px(joints, frame) -> dict[str, float]:

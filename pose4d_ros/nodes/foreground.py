@@ -30,7 +30,7 @@ Parameters (config/foreground.yaml)
     foreground.max_region_area_px, foreground.mser_delta, foreground.mser_max_variation,
     foreground.depth_near_m, foreground.depth_far_m, foreground.floor_remove,
     foreground.temporal, foreground.slop_s, foreground.publish_cloud, foreground.cloud_step,
-    lifecycle.autostart (`nodes.lifecycle`: a managed node)
+    foreground.depth_shift_px, lifecycle.autostart (`nodes.lifecycle`: a managed node)
 """
 
 from __future__ import annotations
@@ -47,6 +47,7 @@ from std_msgs.msg import Header
 from pose4d_ros.core.camera import backproject, cad60_intrinsics, depth_to_millimetres
 from pose4d_ros.core.foreground import ForegroundConfig
 from pose4d_ros.core.people import people_labels
+from pose4d_ros.core.registration import shift_image
 from pose4d_ros.core.stages import ForegroundStage
 from pose4d_ros.nodes import qos
 from pose4d_ros.nodes.common import (
@@ -69,6 +70,12 @@ from pose4d_ros.wire import (
 _F = ForegroundConfig()
 # Person regions published at most per frame (the detector's max_people bounds its work)
 MAX_PEOPLE = 16
+def _pixel_pair(value: list) -> str | None:
+    if len(value) == 2 and all(isinstance(v, int) for v in value):
+        return None
+    return f'{list(value)}: give two whole numbers of pixels, [dx, dy]'
+
+
 PARAMS = (
     Param('foreground.max_region_area_px', _F.max_region_area_px, 'The background area '
           'threshold: stable regions larger than this are background, pixels.',
@@ -94,6 +101,11 @@ PARAMS = (
           restart='it decides at start-up whether the cloud has a publisher'),
     Param('foreground.cloud_step', 2, 'Pixel stride of the point cloud.', range=(1, 16),
           live=True),
+    Param('foreground.depth_shift_px', [0, 0], "[dx, dy]: move the camera's depth image by "
+          'this many pixels (x right, y down) onto its colour image, for a camera whose depth '
+          "is registered off (`pose4d eval` of a recording gives the shift its edges suggest: "
+          "registration); what the foreground publishes, and the detector reads, is moved.",
+          check=_pixel_pair, live=True),
     AUTOSTART,
 )
 
@@ -104,6 +116,13 @@ CAMERA_TOPICS = [(Image, 'camera/color/image_raw', qos.SENSOR_QOS),
                  (CameraInfo, 'camera/color/camera_info', qos.SENSOR_QOS)]
 # the foreground node's: the colour camera's calibration (the pivot) and the depth image
 DEPTH_TOPICS = [CAMERA_TOPICS[2], CAMERA_TOPICS[1]]
+
+
+def camera_depth(msg: Image, shift: list[int]) -> np.ndarray:
+    """The camera's depth image (metres), moved by `foreground.depth_shift_px` onto its
+    colour image (`core.registration.shift_image`; as it is at [0, 0])."""
+    depth = depth_from_msg(msg)
+    return shift_image(depth, *shift) if any(shift) else depth
 
 
 def foreground_settings(p: dict[str, Any]) -> dict[str, Any]:
@@ -154,6 +173,7 @@ class ForegroundNode(ManagedNode):
         self.stage = foreground_stage(p)
         self.publish_cloud = p['foreground.publish_cloud']
         self.cloud_step = p['foreground.cloud_step']
+        self.depth_shift = p['foreground.depth_shift_px']
         self.stage.warm_up(cad60_intrinsics())  # compile before the first camera frame
         self.monitor = StageMonitor(self, 'foreground')
         self.pubs = {name: self.create_publisher(Image, f'pose4d/foreground/{name}',
@@ -184,6 +204,7 @@ class ForegroundNode(ManagedNode):
         if (p := self.params.changes()) is not None:
             self.stage.configure(**foreground_settings(p))
             self.cloud_step = p['foreground.cloud_step']
+            self.depth_shift = p['foreground.depth_shift_px']
         info_msg, depth_msg = items
         t0 = time.perf_counter()
         stamp = stamp_to_ns(info_msg.header.stamp)
@@ -193,7 +214,7 @@ class ForegroundNode(ManagedNode):
             color = self.color.at(stamp) if self._colour_wanted() else None
             intrinsics = intrinsics_from_msg(info_msg)
             people, found, color_m, depth_m = self.stage.step_people(
-                color, depth_from_msg(depth_msg), intrinsics, MAX_PEOPLE)
+                color, camera_depth(depth_msg, self.depth_shift), intrinsics, MAX_PEOPLE)
         except ValueError as exc:
             self.monitor.bad_input(f'frame at {stamp} ns refused: {exc}')
             return

@@ -41,7 +41,6 @@ from pose4d_ros.nodes.lifecycle import AUTOSTART, ManagedNode
 from pose4d_ros.nodes.params import Param
 from pose4d_ros.wire import (
     color_from_msg,
-    depth_from_msg,
     intrinsics_from_msg,
     joints_to_cdr,
     stamp_to_ns,
@@ -76,6 +75,7 @@ class PipelineNode(ManagedNode):
             people=tracker.people_config(p))
         self.pipeline.warm_up(cad60_intrinsics())  # compile before the first camera frame
         self.publish_foreground = p['pipeline.publish_foreground']
+        self.depth_shift = p['foreground.depth_shift_px']
         self.monitor = StageMonitor(self, 'pipeline')
         self.monitor.values.update(people=0, people_over_limit=0, tracks_born=0,
                                    tracks_ended=0)
@@ -108,12 +108,14 @@ class PipelineNode(ManagedNode):
     def process(self, items: Any) -> None:
         if (p := self.params.changes()) is not None:
             self.reconfigure(p)
+            self.depth_shift = p['foreground.depth_shift_px']
         color_msg, depth_msg, info_msg = items
         t0 = time.perf_counter()
         stamp = stamp_to_ns(color_msg.header.stamp)
         try:
             intrinsics = intrinsics_from_msg(info_msg)
-            out = self.pipeline.step(color_from_msg(color_msg), depth_from_msg(depth_msg),
+            out = self.pipeline.step(color_from_msg(color_msg),
+                                     foreground.camera_depth(depth_msg, self.depth_shift),
                                      intrinsics, stamp * 1e-9)
         except ValueError as exc:
             self.monitor.bad_input(f'frame at {stamp} ns refused: {exc}')
