@@ -32,7 +32,10 @@ REAL = '../shared/data/real'
 # Real development recordings (no joint labels: MediaPipe the reference, our hand labels for
 # people and ghosts): never test data, they are looked at after every change. Folder: options.
 # Separate frames are held 20 frames each (a still camera's stream, as a tracker sees it).
-REAL_SETS = {'lab_walk': ('--fps', '10'), 'outdoor4': ('--hold', '20'),
+# lab_walk's Xtion has its depth 8 px left of and 3 px below its colour image: the shift its
+# own edges give (`core.registration.edge_shift`, printed by `pose4d eval` as registration),
+# as a user gives it to the nodes (foreground.depth_shift_px); the others measure 0, 0
+REAL_SETS = {'lab_walk': ('--fps', '10', '--depth-shift', '8,3'), 'outdoor4': ('--hold', '20'),
              'kinect2_masked': ('--hold', '20')}
 # each as the nodes run by default (the photograph network in the colour unary), and without
 # the network (the part model's HOG filters alone)
