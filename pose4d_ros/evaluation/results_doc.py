@@ -117,10 +117,12 @@ def quiet_summary(bench: dict | None) -> str:
 
 REAL_SUMMARY = ("**Real** recordings (development data, MediaPipe the reference, "
                 '`docs/results/real_*.json`): share of its joints where ours lie within 0.1 x '
-                "the person's height; hand-labelled people found; ghosts. Recordings this short "
-                'move with the smallest change: lab_walk by 12 points with the photograph '
-                "network's arithmetic alone (float or 8-bit, docs/NOTES.md). As shipped (the "
-                'photograph network in the detector) / without it (`detector.colour_net:=\'\'`):')
+                "the person's height; hand-labelled people found; ghosts. lab_walk is run with "
+                'its depth moved onto its colour image by the shift its edges give (8, 3 px: '
+                '`foreground.depth_shift_px`, Camera drivers); as given, its figures moved by 12 '
+                "points with the photograph network's arithmetic alone (moved, by 2: "
+                'docs/NOTES.md). As shipped (the photograph network in the detector) / without it '
+                "(`detector.colour_net:=''`):")
 
 
 def real_summary(results: Path) -> list[str]:
