@@ -70,7 +70,10 @@ from pose4d_ros.wire import (
 _F = ForegroundConfig()
 # Person regions published at most per frame (the detector's max_people bounds its work)
 MAX_PEOPLE = 16
+
+
 def _pixel_pair(value: list) -> str | None:
+    """`foreground.depth_shift_px`'s rule: two whole numbers of pixels."""
     if len(value) == 2 and all(isinstance(v, int) for v in value):
         return None
     return f'{list(value)}: give two whole numbers of pixels, [dx, dy]'
