@@ -25,6 +25,7 @@ from pose4d_ros.core.foreground import (
     segment,
     segment_people,
 )
+from pose4d_ros.core.foreground.mask import grow_down
 
 K = cad60_intrinsics()
 CAM_HEIGHT = 1.1  # metres above the floor; optical y points down, so the floor is y = +1.1
@@ -157,6 +158,37 @@ def test_without_floor_removal_the_mask_leaks_into_the_floor() -> None:
     r = segment(depth, K, config=ForegroundConfig(floor_remove=False))
     with_floor = segment(depth, K)
     assert iou(with_floor.mask, union(masks)) > iou(r.mask, union(masks))
+
+
+def test_a_mask_grows_down_a_leg_whose_depth_runs_into_the_floor() -> None:
+    # a leg seen from above: its depth runs on 1 cm a row, its height above the floor falls
+    # 2 cm a row; the region was cut at row 10, and a wall 2 m behind stands beside the leg
+    h, w = 30, 14
+    rows = np.arange(h, dtype=np.float32)[:, None]
+    depth = np.full((h, w), 4.0, np.float32)
+    above = np.full((h, w), 1.0, np.float32)
+    depth[:, 5:9] = 2.0 + 0.01 * rows
+    above[:, 5:9] = 0.5 - 0.02 * rows  # 7 cm above the floor at row 21.5
+    depth[18:, 5] = np.nan  # no reading: never joins
+    # an arm held out 1.2 m above the floor over someone behind, whose depth runs on from it
+    depth[:, 10:13] = 2.05 + 0.01 * rows
+    above[:, 10:13] = 1.3 - 0.03 * rows
+    mask = np.zeros((h, w), bool)
+    mask[:10, 5:9] = True
+    mask[3, 10:13] = True
+    config = ForegroundConfig(grow_min_above_m=0.07)
+    grown = mask.copy()
+    assert grow_down(grown, depth, above, (5, 0, 13, 10), config) == (5, 0, 13, 22)
+    want = mask.copy()
+    want[:22, 5:9] = True
+    want[18:, 5] = False
+    # not the wall, the floor's band, a hole, nor the body under the arm
+    assert np.array_equal(grown, want)
+    # no floor, or the rule off: nothing grows
+    for above_, config_ in ((None, config), (above, ForegroundConfig(grow_min_above_m=0))):
+        kept = mask.copy()
+        assert grow_down(kept, depth, above_, (5, 0, 13, 10), config_) == (5, 0, 13, 10)
+        assert np.array_equal(kept, mask)
 
 
 @pytest.mark.parametrize('pitch_deg', [-4.0, 8.0])
@@ -412,6 +444,9 @@ def test_apply_mask_checks_shapes() -> None:
     ('floor_max_below', -0.5),
     ('occluder_gap_m', -0.1),
     ('close_px', 40),
+    ('grow_min_above_m', -0.1),
+    ('grow_step_m', 0.0),
+    ('grow_px', -1),
     ('stability_weight', -1.0),
     ('person_min_bent_top_m', -0.5),
     ('max_candidates', 0),

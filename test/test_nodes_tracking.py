@@ -60,19 +60,24 @@ def test_tracker_node(ros, info_pub, tmp_path):
     assert (last.source[np.arange(10) != i] == cj.DETECTED).all()
 
 
+@pytest.mark.parametrize('shift', [0, 80], ids=['registered', 'depth_beside'])
 def test_tracker_node_ends_the_track_of_a_person_the_depth_sees_through(ros, info_pub,
-                                                                         tmp_path):
+                                                                         tmp_path, shift):
     """Ten frames of a person, then one without their parts: with the camera's depth showing
     a wall 2.5 m behind where they were, the tracker publishes nobody (the track ended,
-    `core.people.free_space`); the depth image of the frame before still showed them."""
+    `core.people.free_space`); the depth image of the frame before still showed them. With
+    the camera's depth lying `shift` px left of its colour (the person's depth clear of where
+    their parts are), `tracker.depth_shift_px` moves it back before it is read."""
     from pose4d_msgs.msg import JointArray
     from sensor_msgs.msg import Image
 
+    from pose4d_ros.core.registration import shift_image
     from pose4d_ros.nodes import qos
     from pose4d_ros.nodes.convert import array_to_image, intrinsics_to_msg
     from pose4d_ros.wire import joints_from_msg
 
-    node = start('tracker', {}, log_dir=tmp_path)
+    node = start('tracker', {'tracker.depth_shift_px': [shift, 0]} if shift else {},
+                 log_dir=tmp_path)
     try:
         pub = ros.node.create_publisher(JointArray, 'pose4d/parts', qos.OUTPUT_QOS)
         depth_pub = ros.node.create_publisher(Image, 'camera/depth/image_raw', qos.OUTPUT_QOS)
@@ -83,6 +88,7 @@ def test_tracker_node_ends_the_track_of_a_person_the_depth_sees_through(ros, inf
         sent = [header_at(k) for k in range(12)]
         person = np.full((INTR.height, INTR.width), 5000, np.uint16)
         person[40:230, 120:200] = 2500  # the person 2.5 m away, a wall at 5 m
+        person = shift_image(person, -shift, 0)
         wall = np.full((INTR.height, INTR.width), 5000, np.uint16)
 
         def send(k: int, depth: np.ndarray, missing=()) -> None:

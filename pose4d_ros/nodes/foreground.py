@@ -72,8 +72,9 @@ _F = ForegroundConfig()
 MAX_PEOPLE = 16
 
 
-def _pixel_pair(value: list) -> str | None:
-    """`foreground.depth_shift_px`'s rule: two whole numbers of pixels."""
+def pixel_pair(value: list) -> str | None:
+    """`foreground.depth_shift_px`'s (and `tracker.depth_shift_px`'s) rule: two whole numbers
+    of pixels."""
     if len(value) == 2 and all(isinstance(v, int) for v in value):
         return None
     return f'{list(value)}: give two whole numbers of pixels, [dx, dy]'
@@ -108,7 +109,7 @@ PARAMS = (
           'this many pixels (x right, y down) onto its colour image, for a camera whose depth '
           "is registered off (`pose4d eval` of a recording gives the shift its edges suggest: "
           "registration); what the foreground publishes, and the detector reads, is moved.",
-          check=_pixel_pair, live=True),
+          check=pixel_pair, live=True),
     AUTOSTART,
 )
 

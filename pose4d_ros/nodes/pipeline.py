@@ -46,9 +46,12 @@ from pose4d_ros.wire import (
     stamp_to_ns,
 )
 
+# a stage node's own reading of a camera topic the pipeline reads once for all its stages
+_NOT_HERE = ('tracker.depth_shift_px',)  # the pipeline's: foreground.depth_shift_px
+
 PARAMS = (
     *(p for stage in (foreground, detector, tracker, ik) for p in stage.PARAMS
-      if p is not AUTOSTART),
+      if p is not AUTOSTART and p.name not in _NOT_HERE),
     Param('pipeline.publish_foreground', True, 'Also publish the foreground mask and the '
           'masked colour and depth images.',
           restart='it decides at start-up whether the foreground images have publishers'),

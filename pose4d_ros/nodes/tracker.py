@@ -13,10 +13,10 @@ Subscriptions
     pose4d/parts/people, `common.PeopleInputs`)
     camera/color/camera_info (sensor_msgs/CameraInfo; the latest, for 3-D positions, read as a
     frame is processed, `polled.LatestIntrinsics`)
-    camera/depth/image_raw (sensor_msgs/Image, 16UC1 or 32FC1, registered to colour; only
-    when tracker.free_space_m > 0: the image of a frame's stamp, `tracker.depth_slop_s`, if it
-    has come, never waited for: an unseen person whose place the camera sees through has
-    left, `core.people.free_space`)
+    camera/depth/image_raw (sensor_msgs/Image, 16UC1 or 32FC1, registered to colour, moved by
+    tracker.depth_shift_px; only when tracker.free_space_m > 0: the image of a frame's
+    stamp, `tracker.depth_slop_s`, if it has come, never waited for: an unseen person whose
+    place the camera sees through has left, `core.people.free_space`)
 Publications (with the input header)
     pose4d/parts/tracked/people (pose4d_msgs/SkeletonArray: every confirmed track's parts,
     DETECTED / TRACKED / MISSING, track_id set; the primary person first; empty: nobody)
@@ -28,8 +28,8 @@ Parameters (config/tracker.yaml)
     tracker.kind, tracker.coupling, tracker.process_noise, tracker.measurement_noise_px,
     tracker.gate_chi2, tracker.max_missed_frames, tracker.max_dt_s, tracker.depth_std_m,
     tracker.confirm_frames, tracker.max_unseen_s, tracker.max_hidden_s, tracker.max_held_s,
-    tracker.free_space_m, tracker.depth_slop_s, lifecycle.autostart (`nodes.lifecycle`: a
-    managed node)
+    tracker.free_space_m, tracker.depth_slop_s, tracker.depth_shift_px, lifecycle.autostart
+    (`nodes.lifecycle`: a managed node)
 """
 
 from __future__ import annotations
@@ -51,10 +51,11 @@ from pose4d_ros.nodes.common import (
     StageMonitor,
     run,
 )
+from pose4d_ros.nodes.foreground import camera_depth, pixel_pair
 from pose4d_ros.nodes.lifecycle import AUTOSTART, ManagedNode
 from pose4d_ros.nodes.params import Param
 from pose4d_ros.nodes.polled import LatestIntrinsics, RecentImages
-from pose4d_ros.wire import depth_from_msg, joints_to_cdr, skeletons_to_cdr, stamp_to_ns
+from pose4d_ros.wire import joints_to_cdr, skeletons_to_cdr, stamp_to_ns
 
 _D = SlqeConfig()
 PARAMS = (
@@ -96,6 +97,10 @@ PARAMS = (
     Param('tracker.depth_slop_s', 0.0, 'Largest stamp difference between detected parts and '
           'the camera depth, seconds (0 = exact).', range=(0.0, 1.0),
           restart='the pairing of parts and depth is set up at start-up'),
+    Param('tracker.depth_shift_px', [0, 0], "[dx, dy]: the camera's depth image moved by "
+          "this many pixels onto its colour image before it is read: the foreground node's "
+          '`foreground.depth_shift_px`, given to both (the pipeline node moves it once for '
+          'all its stages).', check=pixel_pair, live=True),
     Param('tracker.depth_std_m', TrackerStage.DEPTH_STD_M,
           "Standard deviation of a tracked part's depth in its "
           'covariance, metres.', range=(0.0, 10.0), live=True),
@@ -155,8 +160,10 @@ class TrackerNode(ManagedNode):
 
     def activate(self, p: dict[str, Any]) -> None:
         self.camera = LatestIntrinsics(self, self.monitor)
+        self.depth_shift = p['tracker.depth_shift_px']
         self.depth = (RecentImages(self, self.monitor, 'camera/depth/image_raw',
-                                   depth_from_msg, slop_ns=int(p['tracker.depth_slop_s'] * 1e9))
+                                   lambda msg: camera_depth(msg, self.depth_shift),
+                                   slop_ns=int(p['tracker.depth_slop_s'] * 1e9))
                       if p['tracker.free_space_m'] > 0 else None)
         self.inputs = PeopleInputs(self, 'pose4d/parts/people', 'pose4d/parts', [],
                                    self.process, self.monitor)
@@ -170,6 +177,7 @@ class TrackerNode(ManagedNode):
         if (p := self.params.changes()) is not None:
             self.people.configure(**tracker_settings(p))
             self.people.config = people_config(p)
+            self.depth_shift = p['tracker.depth_shift_px']
         t0 = time.perf_counter()
         stamp = stamp_to_ns(header.stamp)
         if self.monitor.time_jumped(stamp):

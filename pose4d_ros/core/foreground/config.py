@@ -191,6 +191,10 @@ class MaskConfig:
     close_px: int = 5
     fill_holes: bool = False
     working_height_px: int = 240
+    grow_min_above_m: float = 0.06
+    grow_max_above_m: float = 0.85
+    grow_step_m: float = 0.05
+    grow_px: int = 4
 
     def __post_init__(self) -> None:
         _integers(self)
@@ -200,6 +204,9 @@ class MaskConfig:
         _at_least_one(self, 'working_height_px')
         if not 0 <= self.close_px <= 31:
             raise ValueError(f'close_px must be in [0, 31], got {self.close_px}')
+        _not_negative(self, 'grow_min_above_m', 'grow_max_above_m', 'grow_px')
+        if not self.grow_step_m > 0:
+            raise ValueError(f'grow_step_m must be positive, got {self.grow_step_m}')
 
 
 @dataclass(frozen=True)
@@ -308,6 +315,12 @@ class ForegroundConfig(MaskConfig, FloorConfig, PersonConfig, RegionConfig):
     close_px : size of the closing (ellipse, pixels) whose no-reading pixels join the mask;
         0 or 1 = none.
     fill_holes : fill holes of the mask that have no depth reading.
+    grow_min_above_m, grow_max_above_m, grow_step_m, grow_px : the mask grows down from its
+        pixels less than `grow_max_above_m` above the floor into the pixels below them whose
+        depth runs on from theirs (within `grow_step_m` metres from one row to the next, on
+        the working grid) and that stand at least `grow_min_above_m` above the floor, within
+        `grow_px` columns beside its box (`mask.grow_down`: a leg seen from above runs into
+        the floor's depth, and its region ended at the knees); `grow_min_above_m` 0 = none.
     stability_weight : a region's score is ``log(area) - stability_weight * variation -
         border_penalty * touches_side``.
     previous_bonus : with `previous`, score added to a region whose box overlaps the previous

@@ -39,6 +39,64 @@ def complete(mask: NDArray[np.bool_], no_reading: NDArray[np.bool_],
         _fill_holes(mask, no_reading, box)
 
 
+def grow_down(mask: NDArray[np.bool_], depth: NDArray[np.float32],
+              above: NDArray[np.float32] | None, box: tuple[int, int, int, int],
+              config: MaskConfig) -> tuple[int, int, int, int]:
+    """Grow the mask (in place) down from its pixels less than `grow_max_above_m` above the
+    floor into those below them whose depth runs on from theirs (within `grow_step_m`) and
+    that stand at least `grow_min_above_m` above the floor, within the box's columns widened by
+    `grow_px` each side; the grown mask's box. (From higher pixels, an arm held out over a
+    person behind would grow down their body.)
+
+    A leg seen from above runs into the floor's depth towards the foot, so the stable region
+    of the depth's levels ends above it: on a real lab camera (`lab_walk`, pitched 30
+    degrees) at the knees or mid-shin. Nothing grows without a floor (`above` None) or where
+    the mask already reaches it (a person seen from the front, every render's)."""
+    if above is None or config.grow_min_above_m <= 0:
+        return box
+    h, w = mask.shape
+    x0, x1 = max(box[0] - config.grow_px, 0), min(box[2] + config.grow_px, w)
+    bottom = _grow_down_kernel(mask, depth, above, box[1], box[3], x0, x1,
+                               np.float32(config.grow_min_above_m),
+                               np.float32(config.grow_max_above_m),
+                               np.float32(config.grow_step_m))
+    if bottom <= box[3] and x0 == box[0] and x1 == box[2]:
+        return box
+    cols = np.flatnonzero(np.logical_or.reduce(mask[box[1]:bottom], axis=0))
+    return int(cols[0]), box[1], int(cols[-1]) + 1, max(bottom, box[3])
+
+
+@njit(cache=True)
+def _grow_down_kernel(mask: NDArray[np.bool_], depth: NDArray[np.float32],
+                      above: NDArray[np.float32], y0: int, y1: int, x0: int, x1: int,
+                      min_above: np.float32, max_above: np.float32, step: np.float32) -> int:
+    """`grow_down`'s rows from the box's top (`y0`) down: a pixel joins when one of the three
+    above it is in the mask, under `max_above`, with a depth within `step` of its own; below
+    the box (`y1`), until a row where none does. Returns the row after the mask's last."""
+    h, w = mask.shape
+    bottom = y0
+    for y in range(y0, h):
+        joined = False
+        for x in range(x0, x1):
+            if mask[y, x]:
+                joined = True
+                continue
+            z = depth[y, x]
+            if y == y0 or not above[y, x] >= min_above:  # NaN: no reading, never joins
+                continue
+            for xx in range(max(x - 1, 0), min(x + 2, w)):
+                if mask[y - 1, xx] and above[y - 1, xx] < max_above and \
+                        abs(depth[y - 1, xx] - z) <= step:
+                    mask[y, x] = True
+                    joined = True
+                    break
+        if joined:
+            bottom = y + 1
+        elif y >= y1:
+            break
+    return bottom
+
+
 def _fill_holes(mask: NDArray[np.bool_], fillable: NDArray[np.bool_],
                 box: tuple[int, int, int, int]) -> None:
     """Fill, in place, the holes of `mask` (inside `box`) made only of `fillable` pixels."""

@@ -23,7 +23,7 @@ from pose4d_ros.core.foreground.config import (
     not_found,
 )
 from pose4d_ros.core.foreground.floor import fit_floor, floor_height
-from pose4d_ros.core.foreground.mask import complete, upsample_mask
+from pose4d_ros.core.foreground.mask import complete, grow_down, upsample_mask
 from pose4d_ros.core.foreground.person import (
     FOLLOW_OVERLAP,
     Part,
@@ -92,7 +92,7 @@ def segment(depth_m: NDArray[np.floating], intrinsics: Intrinsics, *,
 
     prev_box = previous.box if previous is not None and previous.found else None
     boxes = [] if prev_box is None else [prev_box]
-    floor, parts, reason = _examine(depth, intrinsics, config, previous, boxes)
+    floor, above, parts, reason = _examine(depth, intrinsics, config, previous, boxes)
     if not parts:
         return not_found((h, w), reason, floor)
     scores = [part_score(pt, config, prev_box) for pt in parts]
@@ -104,18 +104,20 @@ def segment(depth_m: NDArray[np.floating], intrinsics: Intrinsics, *,
     if not ok:
         return not_found((h, w), REASON_NO_PERSON, floor)
     best = parts[max(ok, key=lambda k: scores[k])]
-    return _result(best, depth, valid, floor, config)
+    return _result(best, depth, valid, floor, above, config)
 
 
 def _result(part: Part, depth: NDArray[np.float32], valid: NDArray[np.bool_],
-            floor: NDArray[np.float64] | None, config: ForegroundConfig,
-            behind: bool = False) -> ForegroundResult:
-    """The foreground of one chosen part: its pixels completed (step 5), its median depth."""
+            floor: NDArray[np.float64] | None, above: NDArray[np.float32] | None,
+            config: ForegroundConfig, behind: bool = False) -> ForegroundResult:
+    """The foreground of one chosen part: its pixels completed (step 5) and grown down to the
+    floor (`grow_down`), its median depth."""
     mask = _part_mask(part, depth.shape)
     complete(mask, ~valid, part.box, config)
+    box = grow_down(mask, depth, above, part.box, config)
     zr = depth[mask]
     zr = zr[np.isfinite(zr)]
-    return ForegroundResult(mask=mask, box=part.box, depth_m=median(zr), found=True,
+    return ForegroundResult(mask=mask, box=box, depth_m=median(zr), found=True,
                             reason=REASON_OK, stability=part.variation, level=part.lo,
                             floor=floor, behind=behind)
 
@@ -187,7 +189,7 @@ def segment_people(depth_m: NDArray[np.floating], intrinsics: Intrinsics, *,
         # is missing beside a person found (gone behind them) or while the second look finds
         # someone
         picked += _behind(depth, intrinsics, config, above, drop, boxes, picked)
-    people = [_result(pt, depth, valid, floor, config, behind=k >= first)
+    people = [_result(pt, depth, valid, floor, above, config, behind=k >= first)
               for k, (pt, _) in enumerate(picked[:max_people])]
     # completion may add a pixel to two people: it stays with the better one (the masks are
     # these results' own, just made: changed in place)
@@ -350,14 +352,16 @@ def _floor(depth: NDArray[np.float32], intrinsics: Intrinsics, config: Foregroun
 
 def _examine(depth: NDArray[np.float32], intrinsics: Intrinsics, config: ForegroundConfig,
              previous: ForegroundResult | None, boxes: Sequence[tuple[int, int, int, int]]
-             ) -> tuple[NDArray[np.float64] | None, list[Part], str]:
+             ) -> tuple[NDArray[np.float64] | None, NDArray[np.float32] | None, list[Part],
+                        str]:
     """Floor, stable regions and their depth parts (the candidates `segment` chooses from;
     `boxes`: the previous person's, `_parts`).
 
-    Returns the floor plane (or None), the parts, and the reason when there are none.
+    Returns the floor plane (or None), every pixel's height above it (or None), the parts,
+    and the reason when there are none.
     """
     floor, above, drop = _floor(depth, intrinsics, config, previous)
-    return (floor, *_parts(depth, intrinsics, config, above, drop, boxes=boxes))
+    return (floor, above, *_parts(depth, intrinsics, config, above, drop, boxes=boxes))
 
 
 def _parts(depth: NDArray[np.float32], intrinsics: Intrinsics, config: ForegroundConfig,
