@@ -124,6 +124,11 @@ def test_agreement_counts_joints_within_the_share_of_height(tmp_path: Path) -> N
     assert table['joints'] == 13 and table['scored_frames'] == 1
     assert table['agree@0.1'] == pytest.approx(100 * 9 / 13, abs=0.1)
     assert table['agree@0.2'] == 100.0
+    # where ours lie, over the height, medians by group: the head 0.15 right, the left arm's
+    # joints too (the right's in place), the legs in place
+    assert table['offset_by_group'] == {
+        'head': [0.15, 0.0], 'shoulder': [0.075, 0.0], 'elbow': [0.075, 0.0],
+        'wrist': [0.075, 0.0], 'hip': [0.0, 0.0], 'knee': [0.0, 0.0], 'ankle': [0.0, 0.0]}
     assert 'labels' not in table
     labels = {'0001': [real.PersonLabel(box=(35, 5, 65, 115), head=(50, 10), feet=(50, 110))]}
     table = real.agreement([frame], [(ghost, _person(ours, track_id=1))], [ref], labels)

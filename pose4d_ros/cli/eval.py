@@ -426,7 +426,7 @@ def _unlabelled_bag(args: argparse.Namespace, kind: str) -> bool:
 
 def _stage_summary(table: dict) -> dict:
     """An agreement table's headline figures (`evaluation.real.agreement`), for a stage."""
-    keep = ('agree@0.1', 'agree@0.2', 'agree@0.1_by_group', 'people_per_frame')
+    keep = ('agree@0.1', 'agree@0.2', 'agree@0.1_by_group', 'offset_by_group', 'people_per_frame')
     out = {k: table[k] for k in keep}
     if 'labels' in table:
         out['found'], out['ghosts'] = table['labels']['ours'], table['labels']['ghosts']['ours']

@@ -201,6 +201,7 @@ def agreement(frames: Sequence[Frame], ours: Sequence[Sequence[JointSet]],
     names = [n for n in SKELETON_14 if n in reference[0].names] if reference else []
     within = {a: [] for a in ALPHAS}
     groups: dict[str, list[bool]] = {g: [] for g in JOINT_GROUPS}
+    offsets: dict[str, list[NDArray[np.float64]]] = {g: [] for g in JOINT_GROUPS}
     per_frame, no_height, scored = [], 0, 0
     people = {'ours': [], 'reference': [], 'labelled': []}
     found = {'ours': 0, 'reference': 0, 'labelled': 0, 'labelled_full': 0, 'ours_full': 0,
@@ -243,7 +244,13 @@ def agreement(frames: Sequence[Frame], ours: Sequence[Sequence[JointSet]],
             else:
                 scored += 1
                 idx = [n for n in names if ref_ok[ref.index(n)]]
-                d, _ = _best_match(ref, mine, idx, ALPHAS[0] * height)
+                d, chosen = _best_match(ref, mine, idx, ALPHAS[0] * height)
+                if chosen is not None:
+                    for n, dist in zip(idx, d, strict=True):
+                        if np.isfinite(dist):
+                            g = next(g for g, m in JOINT_GROUPS.items() if n in m)
+                            offsets[g].append((chosen.uv[chosen.index(n)] - ref.uv[ref.index(n)])
+                                              / height)
                 for a in ALPHAS:
                     within[a].extend(d <= a * height)
                 for n, ok in zip(idx, d <= ALPHAS[0] * height, strict=True):
@@ -260,6 +267,10 @@ def agreement(frames: Sequence[Frame], ours: Sequence[Sequence[JointSet]],
         'joints': len(within[ALPHAS[0]]),
         **{f'agree@{a}': pct(within[a]) for a in ALPHAS},
         'agree@0.1_by_group': {g: pct(v) for g, v in groups.items()},
+        # where ours lie from the reference's, (dx, dy) over the person's height (image y
+        # down), medians over the joints of the skeleton of ours agreeing best
+        'offset_by_group': {g: [round(float(x), 3) for x in np.median(v, axis=0)]
+                            for g, v in offsets.items() if v},
         'people_per_frame': {k: round(float(np.mean(v)), 3) for k, v in people.items() if v},
         'per_frame': per_frame,
     }
