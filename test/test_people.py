@@ -123,6 +123,8 @@ def test_nobody_and_bad_configs():
         TrackingConfig(occluded_width_m=-0.1)
     with pytest.raises(ValueError, match='trust_score'):
         TrackingConfig(trust_score=float('nan'))
+    with pytest.raises(ValueError, match='max_shoulders_m'):
+        TrackingConfig(max_shoulders_m=-0.5)
     for spans in ({'min_span_m': -0.1}, {'min_span_m': 3.0}, {'max_span_m': 0.0}):
         with pytest.raises(ValueError, match='min_span_m < max_span_m'):
             TrackingConfig(**spans)
@@ -940,6 +942,31 @@ def test_a_track_spanning_less_than_a_body_is_kept_but_not_published():
         for k in range(5):
             out = tr.step([_scored(person(1.0), 9.0), _scored(feet, 9.0)], k * DT, INTR)
         assert sorted(round(float(torso(t)[0][0]), 2) for t in out) == published
+
+
+def test_a_track_whose_shoulders_lie_a_metre_apart_is_kept_but_not_published():
+    """`max_shoulders_m`: a skeleton whose shoulders lie a metre apart in 3-D (on a real
+    recording, a track on a monitor and the chair beside it: one shoulder on each) is not
+    published, from its first frame; the person beside it is. A standing person's shoulders
+    lie well under the default apart."""
+    from pose4d_ros.core.people.tracker import shoulders_m
+
+    wide = person(0.0, z=3.0)
+    xyz = wide.xyz.copy()
+    left, right = wide.index('left_shoulder'), wide.index('right_shoulder')
+    apart = (xyz[left] - xyz[right]) / np.linalg.norm(xyz[left] - xyz[right])
+    xyz[left] += 0.35 * apart
+    xyz[right] -= 0.35 * apart
+    wide = JointSet(wide.names, project(xyz, INTR), xyz, source=wide.source,
+                    confidence=wide.confidence)
+    assert shoulders_m(person(1.0)) < 0.5 < TrackingConfig().max_shoulders_m < shoulders_m(wide)
+    for max_shoulders_m, published in ((0.9, [[1.0]] * 5), (0.0, [[0.0, 1.0]] * 5)):
+        tr = tracker(max_shoulders_m=max_shoulders_m)
+        seen = []
+        for k in range(5):
+            out = tr.step([_scored(person(1.0), 9.0), _scored(wide, 9.0)], k * DT, INTR)
+            seen.append(sorted(round(float(torso(t)[0][0]), 2) for t in out))
+        assert seen == published
 
 
 def test_people_from_labels_gives_each_label_from_the_lowest_up_the_highest_first():

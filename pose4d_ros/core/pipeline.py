@@ -29,7 +29,7 @@ from pose4d_ros.core.warm_up import warm_up_frame
 # One person, as the paper (`FramePipeline` without `people`): the several-person path with one
 # candidate searched, whose skeleton is published whatever its size (the least span,
 # `TrackingConfig.min_span_m`, tells pieces of bodies from people where several are tracked)
-ONE_PERSON = TrackingConfig(max_people=1, min_span_m=0.0)
+ONE_PERSON = TrackingConfig(max_people=1, min_span_m=0.0, max_shoulders_m=0.0)
 
 # The stages of `FramePipeline.step`, in order (the keys of `FrameResult.cpu_s` and `wall_s`)
 STAGES = ('foreground', 'detector', 'tracker', 'ik')

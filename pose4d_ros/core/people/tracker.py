@@ -39,6 +39,7 @@ class _Track:
     held: bool = False  # hidden behind another person: `last` is their last pose, kept
     held_s: float = math.nan  # since when
     behind: int = 0  # while held: the id of the track of the person hiding them
+    shoulders_m: list[float] = field(default_factory=list)  # every frame's, in 3-D
 
 
 class _FrameDepth:
@@ -236,16 +237,29 @@ class PeopleTracker:
         """The skeletons published, primary first: a pose held too long is mostly where
         nobody is, no person spans more than `max_span_m` or (with 3-D: `has_3d`, the
         camera's calibration known) less than `min_span_m`, and one body gets one skeleton
-        (`one_body_m`): those tracks are kept, not published."""
+        (`one_body_m`), and no person's shoulders lie `max_shoulders_m` apart: those tracks are
+        kept, not published."""
         cfg = self.config
         least = cfg.min_span_m if has_3d else 0.0
         published: list[_Track] = []
         for t in self._ordered(stamp_s):
+            wide = has_3d and self._too_wide(t)
             if not (t.held and stamp_s - t.held_s > cfg.max_held_s) \
-                    and least <= span_m(t.last) <= cfg.max_span_m \
+                    and least <= span_m(t.last) <= cfg.max_span_m and not wide \
                     and not self._on_body(t, published):
                 published.append(t)
         return [t.last for t in published]
+
+    def _too_wide(self, track: _Track) -> bool:
+        """Whether the track's shoulders have lain over `max_shoulders_m` apart in 3-D, the
+        median over its frames (this one's counted)."""
+        if not self.config.max_shoulders_m > 0:
+            return False
+        width = shoulders_m(track.last)
+        if math.isfinite(width):
+            track.shoulders_m.append(width)
+        return bool(track.shoulders_m) and \
+            float(np.median(track.shoulders_m)) > self.config.max_shoulders_m
 
     def _on_body(self, track: _Track, others: list[_Track]) -> bool:
         """Whether `track`'s torso lies where a piece of the body of one of `others` would:
@@ -545,6 +559,14 @@ def span_m(joints: JointSet) -> float:
     if len(xyz) < 2:
         return 0.0
     return float(np.sqrt(((xyz[:, None] - xyz[None]) ** 2).sum(axis=-1).max()))
+
+
+def shoulders_m(joints: JointSet) -> float:
+    """The 3-D distance between the skeleton's shoulders, metres (NaN without both)."""
+    left, right = joints.get('left_shoulder'), joints.get('right_shoulder')
+    if left is None or right is None:
+        return math.nan
+    return float(np.sqrt(((joints.xyz[left] - joints.xyz[right]) ** 2).sum()))
 
 
 def _finite(v: NDArray[np.float64]) -> bool:
