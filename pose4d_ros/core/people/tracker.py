@@ -255,8 +255,7 @@ class PeopleTracker:
         median over its frames (this one's counted)."""
         if not self.config.max_shoulders_m > 0:
             return False
-        width = shoulders_m(track.last)
-        if math.isfinite(width):
+        if math.isfinite(width := shoulders_m(track.last)):
             track.shoulders_m.append(width)
         return bool(track.shoulders_m) and \
             float(np.median(track.shoulders_m)) > self.config.max_shoulders_m
