@@ -125,6 +125,8 @@ def test_nobody_and_bad_configs():
         TrackingConfig(trust_score=float('nan'))
     with pytest.raises(ValueError, match='max_shoulders_m'):
         TrackingConfig(max_shoulders_m=-0.5)
+    with pytest.raises(ValueError, match='facing_away_m'):
+        TrackingConfig(facing_away_m=-0.1)
     for spans in ({'min_span_m': -0.1}, {'min_span_m': 3.0}, {'max_span_m': 0.0}):
         with pytest.raises(ValueError, match='min_span_m < max_span_m'):
             TrackingConfig(**spans)
@@ -967,6 +969,52 @@ def test_a_track_whose_shoulders_lie_a_metre_apart_is_kept_but_not_published():
             out = tr.step([_scored(person(1.0), 9.0), _scored(wide, 9.0)], k * DT, INTR)
             seen.append(sorted(round(float(torso(t)[0][0]), 2) for t in out))
         assert seen == published
+
+
+def _is_swapped(out: JointSet, det: JointSet) -> bool:
+    """Whether `out` (the tracker's) has `det`'s left and right shoulders exchanged."""
+    left, right = det.index('left_shoulder'), det.index('right_shoulder')
+    return bool(np.allclose(out.uv[left], det.uv[right], atol=5.0)
+                and np.allclose(out.uv[right], det.uv[left], atol=5.0))
+
+
+@pytest.mark.parametrize('facing_away_m', [TrackingConfig().facing_away_m, 0.0])
+def test_a_person_walking_away_is_published_by_their_own_sides(facing_away_m):
+    """`core.people.facing`: the part model names the parts by the image's sides. A person
+    walking away from the camera (1.2 m/s) faces away: published with left and right
+    exchanged once they walked `facing_away_m` within the window, until they walk back
+    towards the camera; walking across it or standing, nothing changes (`facing_away_m` 0:
+    never). A torso jumping faster than a walk is no walk."""
+    from pose4d_ros.core.people.facing import swapped
+
+    body = person(0.0)
+    twice = swapped(swapped(body))
+    assert np.array_equal(twice.uv, body.uv) and swapped(body).names == body.names
+    head = body.index('head')
+    assert np.array_equal(swapped(body).uv[head], body.uv[head])
+    tr = tracker(facing_away_m=facing_away_m)
+    path = ([(0.0, 2.0)] * 10 + [(0.0, 2.0 + 0.04 * k) for k in range(1, 31)]  # away
+            + [(0.0, 3.2)] * 20  # standing
+            + [(0.0, 3.2 - 0.04 * k) for k in range(1, 21)]  # back towards the camera
+            + [(0.04 * k, 2.4) for k in range(1, 21)])  # across
+    flags = []
+    for k, (x, z) in enumerate(path):
+        det = _scored(person(x, z=z), 9.0)
+        (out,) = tr.step([det], k * DT, INTR)
+        flags.append(_is_swapped(out, det))
+    away = [i for i, f in enumerate(flags) if f]
+    if not facing_away_m:
+        assert away == []
+        return
+    # swapped from about half a metre walked (the medians of the window's thirds apart by
+    # 0.45 m: 14 frames in) through the standing, until back towards the camera
+    assert away[0] in range(20, 27) and away[-1] in range(62, 70), away
+    assert away == list(range(away[0], away[-1] + 1)) and not any(flags[70:]), away
+    # a torso jumping 1.5 m away in a frame is no walk
+    tr = tracker(facing_away_m=facing_away_m)
+    jumps = [_is_swapped(tr.step([_scored(person(0.0, z=z), 9.0)], k * DT, INTR)[0],
+                         person(0.0, z=z)) for k, z in enumerate([2.0] * 12 + [3.5] * 12)]
+    assert not any(jumps)
 
 
 def test_people_from_labels_gives_each_label_from_the_lowest_up_the_highest_first():

@@ -223,6 +223,10 @@ class TrackingConfig:
         had left, had its shoulders 1.02-1.05 m apart for its four frames, its real people's
         tracks at most 0.44 (a track's running median); on validation renders no track's
         running median passes 0.83 (`valid60_people3b_high`; 0.39 on `valid60_people2`).
+    facing_away_m, facing_window_s : a track that walked this far away from the camera (more
+        than across the image) within the window faces away from it, and its published
+        skeletons have their left and right joints exchanged, until it walks as far towards
+        the camera (`core.people.facing`; 0: off, every person faces the camera).
 
     `confirm_frames`, `birth_score` and `trust_score`, and the foreground's second look, were
     chosen on validation renders (training subjects s01-s06, seed 201: `valid60_people2`, two
@@ -262,6 +266,8 @@ class TrackingConfig:
     min_span_m: float = 0.5
     one_body_m: float = 0.6
     max_shoulders_m: float = 0.9
+    facing_away_m: float = 0.45
+    facing_window_s: float = 0.6
 
     def __post_init__(self) -> None:
         if self.max_people < 1 or self.confirm_frames < 1 or self.quiet_frames < 0:
@@ -274,8 +280,9 @@ class TrackingConfig:
                 raise ValueError(f'{name} must be > 0, got {getattr(self, name)}')
         if not self.one_body_m >= 0:
             raise ValueError(f'one_body_m must be >= 0, got {self.one_body_m}')
-        if not self.max_shoulders_m >= 0:
-            raise ValueError(f'max_shoulders_m must be >= 0, got {self.max_shoulders_m}')
+        for name in ('max_shoulders_m', 'facing_away_m', 'facing_window_s'):
+            if not getattr(self, name) >= 0:
+                raise ValueError(f'{name} must be >= 0, got {getattr(self, name)}')
         if not 0 <= self.min_span_m < self.max_span_m:
             raise ValueError(f'need 0 <= min_span_m < max_span_m, got {self.min_span_m} and '
                              f'{self.max_span_m}')

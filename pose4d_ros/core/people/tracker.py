@@ -19,6 +19,7 @@ from pose4d_ros.core.foreground.person import seen_edges
 from pose4d_ros.core.joints import JointSet
 from pose4d_ros.core.people.assignment import _mahalanobis2_all, assign, torso, torso_px
 from pose4d_ros.core.people.config import TrackingConfig
+from pose4d_ros.core.people.facing import Facing
 from pose4d_ros.core.skeleton import tree_for
 from pose4d_ros.core.stages import TrackerStage
 
@@ -40,6 +41,7 @@ class _Track:
     held_s: float = math.nan  # since when
     behind: int = 0  # while held: the id of the track of the person hiding them
     shoulders_m: list[float] = field(default_factory=list)  # every frame's, in 3-D
+    facing: Facing = field(default_factory=Facing)
 
 
 class _FrameDepth:
@@ -140,10 +142,9 @@ class PeopleTracker:
         for det in detections:
             checker.check(det, intrinsics)
         self.born, self.ended = [], []
-        # a gap in the stream (no frame for over `max_gap_s`: a new video, a paused camera)
-        # ends every track, as the SLQE restarts after one; a track unseen longer than
-        # `max_unseen_s` (`max_hidden_s` held behind another) while frames came has ended and
-        # is matched no more
+        # a gap in the stream (over `max_gap_s`: a new video, a paused camera) ends every
+        # track, as the SLQE restarts after one; so does being unseen over `max_unseen_s`
+        # (`max_hidden_s` held behind another) while frames came
         gap = self.last_s is not None and not 0.0 <= stamp_s - self.last_s <= cfg.max_gap_s
         self._previous_s, self.last_s = self.last_s, stamp_s
         ended = [t for t in self.tracks if gap or stamp_s - t.seen_s > (
@@ -156,10 +157,9 @@ class PeopleTracker:
                                                           depth)
         while refused:
             # a pair the track refuses takes no part: the detection goes to the next track
-            # that fits, a tentative one among them (a person held behind another, offered the
-            # detection of someone walking by, would else take it from that person's young
-            # track frame after frame and refuse it: the person never confirmed); each round
-            # removes a pair, so this ends
+            # that fits, a tentative one too (a person held behind another, offered the
+            # detection of someone walking by, would else take it from their young track
+            # frame after frame: the person never confirmed); each round removes a pair
             cost[tuple(np.array(refused).T)] = np.nan
             matched, trusted, emerging, refused = self._match(detections, points, cost,
                                                               intrinsics, depth)
@@ -169,7 +169,8 @@ class PeopleTracker:
             if j not in matched and (_finite(points[j][0]) or _finite(torso_px(det)[0])) \
                     and (j in trusted or born):
                 stage = self.template.spawn()
-                self.tracks.append(_Track(stage, names=stage.check(det, intrinsics).names))
+                self.tracks.append(_Track(stage, names=stage.check(det, intrinsics).names,
+                                          facing=Facing(cfg.facing_away_m, cfg.facing_window_s)))
                 matched[j] = len(self.tracks) - 1
         seen = {i: j for j, i in matched.items()}
         gone: list[_Track] = []
@@ -216,8 +217,7 @@ class PeopleTracker:
                     track.id, self.next_id = self.next_id, self.next_id + 1
                     self.born.append(track.id)
             track.last = _with_track_id(out, track.id)
-        # a tentative track must be matched every frame (confirmed ones end at the next step
-        # once unseen over `max_unseen_s`)
+        # a tentative track must be matched every frame (a confirmed one: `max_unseen_s`)
         self.tracks = [t for t in self.tracks
                        if (t.id or t.seen_s == stamp_s) and t not in gone]
         self.ended += [t.id for t in gone]
@@ -234,11 +234,10 @@ class PeopleTracker:
         return stamp_s - track.seen_s > cfg.max_unseen_s
 
     def _published(self, stamp_s: float, *, has_3d: bool = True) -> list[JointSet]:
-        """The skeletons published, primary first: a pose held too long is mostly where
-        nobody is, no person spans more than `max_span_m` or (with 3-D: `has_3d`, the
-        camera's calibration known) less than `min_span_m`, and one body gets one skeleton
-        (`one_body_m`), and no person's shoulders lie `max_shoulders_m` apart: those tracks are
-        kept, not published."""
+        """The skeletons published (by their person's sides: `facing`), primary first; kept,
+        not published: a pose held too long (mostly where nobody is), a span over `max_span_m`
+        or (with 3-D) under `min_span_m`, a second skeleton on one body (`one_body_m`),
+        shoulders `max_shoulders_m` apart."""
         cfg = self.config
         least = cfg.min_span_m if has_3d else 0.0
         published: list[_Track] = []
@@ -248,7 +247,7 @@ class PeopleTracker:
                     and least <= span_m(t.last) <= cfg.max_span_m and not wide \
                     and not self._on_body(t, published):
                 published.append(t)
-        return [t.last for t in published]
+        return [t.facing.of(t.last) for t in published]
 
     def _too_wide(self, track: _Track) -> bool:
         """Whether the track's shoulders have lain over `max_shoulders_m` apart in 3-D, the
@@ -508,6 +507,7 @@ class PeopleTracker:
             if _finite(track.point) and 0 < dt <= self.config.max_unseen_s:
                 track.velocity = 0.7 * track.velocity + 0.3 * (point - track.point) / dt
             track.point, track.cov = point, cov
+            track.facing.update(stamp_s, point)
         track.hits += 1
         track.seen_s = stamp_s
 
