@@ -3,6 +3,7 @@ association on synthetic detections, and the whole core on rendered two-person f
 
 from __future__ import annotations
 
+import math
 from dataclasses import replace
 
 import numpy as np
@@ -641,8 +642,9 @@ def test_joints_on_a_nearer_persons_body_keep_their_last_estimate():
 @pytest.mark.parametrize('confirmed_first', [True, False])
 def test_a_track_just_started_does_not_take_a_confirmed_persons_detection(confirmed_first):
     """Two people confirmed; the right one's detection jumps 1 m for a frame (out of their
-    gate: a tentative track starts there), then comes back between the two. The confirmed
-    track takes it (`confirmed_first`), the tentative one ends, and no third id is given; in
+    gate: a tentative track starts there), then comes back between the two (the tentative
+    track not far nearer: `tentative_margin`). The confirmed track takes it
+    (`confirmed_first`), the tentative one ends, and no third id is given; in
     one assignment the nearer tentative track took it and went on as a new id while the
     right person's track went on unseen, predicted where nobody was."""
     tr = tracker(confirmed_first=confirmed_first)
@@ -652,14 +654,38 @@ def test_a_track_just_started_does_not_take_a_confirmed_persons_detection(confir
     tr.step([_scored(person(-0.6), 8.0), _scored(person(1.6), 8.0)], 6 * DT, INTR)
     assert len(tr.tracks) == 3  # the jump started a tentative track
     for k in range(7, 12):
-        out = tr.step([_scored(person(-0.6), 8.0), _scored(person(1.25), 8.0)], k * DT, INTR)
+        out = tr.step([_scored(person(-0.6), 8.0), _scored(person(1.15), 8.0)], k * DT, INTR)
     ids = ids_by_x(out)
     if confirmed_first:
-        assert sorted(ids) == [1, 2] and ids[right] == pytest.approx(1.25, abs=0.05)
+        assert sorted(ids) == [1, 2] and ids[right] == pytest.approx(1.15, abs=0.05)
         assert len(tr.tracks) == 2
     else:
-        assert ids[3] == pytest.approx(1.25, abs=0.1)
+        assert ids[3] == pytest.approx(1.15, abs=0.1)
         assert ids[right] == pytest.approx(0.6, abs=0.05)  # unseen, where nobody is
+
+
+@pytest.mark.parametrize('tentative_margin', [TrackingConfig().tentative_margin, math.inf])
+def test_a_track_whose_person_left_leaves_the_person_behind_them_their_own_track(
+        tentative_margin):
+    """`tentative_margin`: a person walks out (their last frame beside the one who walked in
+    0.6 m behind them, whose track starts); the confirmed track is still within the gate of
+    the newcomer's detection, and took it every frame when confirmed tracks always took
+    first: the newcomer was never confirmed and their skeleton published under the first
+    person's id. Now the newcomer's own track, fitting far better, keeps it: a new id."""
+    from pose4d_ros.core.people.assignment import yielded
+
+    costs = yielded(np.array([[15.3, 2.0, np.nan]]), np.array([[1.1, 1.5, np.nan]]), 9.0)
+    assert np.isnan(costs[0, 0]) and costs[0, 1] == 2.0 and np.isnan(costs[0, 2])
+    tr = tracker(tentative_margin=tentative_margin)
+    for k in range(10):
+        (first,) = tr.step([_scored(person(0.0, z=2.0), 9.0)], k * DT, INTR)
+    tr.step([_scored(person(0.0, z=2.0), 9.0), _scored(person(0.0, z=2.6), 9.0)], 10 * DT,
+            INTR)
+    ids = set()
+    for k in range(11, 16):
+        out = tr.step([_scored(person(0.0, z=2.6), 9.0)], k * DT, INTR)
+        ids |= {t.track_id for t in out if abs(torso(t)[0][2] - 2.6) < 0.1}
+    assert ids == ({first.track_id} if math.isinf(tentative_margin) else {first.track_id + 1})
 
 
 def _held_far(tr) -> int:
@@ -917,7 +943,7 @@ def test_a_track_spanning_more_than_a_body_is_kept_but_not_published():
     (a track coasting on after its person left, its predicted joints flung apart) is not
     published; its track goes on, and is published again, with its id, once its joints span a
     body's size. A standing person's skeleton spans well under the default."""
-    from pose4d_ros.core.people.tracker import span_m
+    from pose4d_ros.core.people.assignment import span_m
 
     body = span_m(person(0.0))
     assert 1.0 < body < TrackingConfig().max_span_m
@@ -951,7 +977,7 @@ def test_a_track_whose_shoulders_lie_a_metre_apart_is_kept_but_not_published():
     recording, a track on a monitor and the chair beside it: one shoulder on each) is not
     published, from its first frame; the person beside it is. A standing person's shoulders
     lie well under the default apart."""
-    from pose4d_ros.core.people.tracker import shoulders_m
+    from pose4d_ros.core.people.assignment import shoulders_m
 
     wide = person(0.0, z=3.0)
     xyz = wide.xyz.copy()

@@ -79,6 +79,35 @@ def assign(cost: NDArray[np.float64], gate: float) -> list[tuple[int, int]]:
 _solve = _umath_linalg.solve
 
 
+def yielded(confirmed: NDArray[np.float64], tentative: NDArray[np.float64], margin: float
+            ) -> NDArray[np.float64]:
+    """The confirmed tracks' costs (tracks x detections) with NaN (no pair) where a tentative
+    track's cost for the same detection is lower by more than `margin`: a confirmed track
+    whose person has left, still within the gate of someone who walked in behind them and
+    started a track of their own, leaves that person's detection to that track."""
+    best = np.full(confirmed.shape[1], np.inf)
+    if tentative.size:
+        best = np.fmin.reduce(np.where(np.isnan(tentative), np.inf, tentative), axis=0)
+    return np.where(confirmed > best + margin, np.nan, confirmed)
+
+
+def span_m(joints: JointSet) -> float:
+    """The largest 3-D distance between two of the skeleton's located joints, metres (0 with
+    fewer than two)."""
+    xyz = joints.xyz[np.logical_and.reduce(np.isfinite(joints.xyz), axis=1)]
+    if len(xyz) < 2:
+        return 0.0
+    return float(np.sqrt(((xyz[:, None] - xyz[None]) ** 2).sum(axis=-1).max()))
+
+
+def shoulders_m(joints: JointSet) -> float:
+    """The 3-D distance between the skeleton's shoulders, metres (NaN without both)."""
+    left, right = joints.get('left_shoulder'), joints.get('right_shoulder')
+    if left is None or right is None:
+        return math.nan
+    return float(np.sqrt(((joints.xyz[left] - joints.xyz[right]) ** 2).sum()))
+
+
 def _mahalanobis2(d: NDArray[np.float64], s: NDArray[np.float64]) -> float:
     try:
         return float(d @ np.linalg.solve(s, d))

@@ -17,7 +17,15 @@ from pose4d_ros.core import joints as cj
 from pose4d_ros.core.camera import Intrinsics, project
 from pose4d_ros.core.foreground.person import seen_edges
 from pose4d_ros.core.joints import JointSet
-from pose4d_ros.core.people.assignment import _mahalanobis2_all, assign, torso, torso_px
+from pose4d_ros.core.people.assignment import (
+    _mahalanobis2_all,
+    assign,
+    shoulders_m,
+    span_m,
+    torso,
+    torso_px,
+    yielded,
+)
 from pose4d_ros.core.people.config import TrackingConfig
 from pose4d_ros.core.people.facing import Facing
 from pose4d_ros.core.skeleton import tree_for
@@ -328,13 +336,15 @@ class PeopleTracker:
     def _assign(self, cost: NDArray[np.float64]) -> list[tuple[int, int]]:
         """`assign` for the confirmed tracks first, then for the tentative ones on the
         detections left: a track just started beside a confirmed one never takes its person's
-        detection from it (the confirmed one would go on unseen, predicted where nobody is)."""
+        detection from it (the confirmed one would go on unseen, predicted where nobody is),
+        unless it fits it far better (`yielded`: `tentative_margin`)."""
         gate = self.config.gate_chi2
         tentative = [i for i, t in enumerate(self.tracks) if not t.id]
         if not (self.config.confirmed_first and tentative):
             return assign(cost, gate)
         rows = [i for i, t in enumerate(self.tracks) if t.id]
-        pairs = [(rows[r], c) for r, c in assign(cost[rows], gate)]
+        first = yielded(cost[rows], cost[tentative], self.config.tentative_margin)
+        pairs = [(rows[r], c) for r, c in assign(first, gate)]
         taken = {c for _, c in pairs}
         left = [c for c in range(cost.shape[1]) if c not in taken]
         if left:
@@ -549,23 +559,6 @@ def _out_from_behind(track: _Track, fronts: set[int] | None, own_front: bool) ->
     would: with `own_front`, for a track held behind a person, from behind that person only
     (not seen this frame, nobody comes out from behind them); otherwise from behind anyone."""
     return bool(fronts) and (not (own_front and track.held) or track.behind in fronts)
-
-
-def span_m(joints: JointSet) -> float:
-    """The largest 3-D distance between two of the skeleton's located joints, metres (0 with
-    fewer than two)."""
-    xyz = joints.xyz[np.logical_and.reduce(np.isfinite(joints.xyz), axis=1)]
-    if len(xyz) < 2:
-        return 0.0
-    return float(np.sqrt(((xyz[:, None] - xyz[None]) ** 2).sum(axis=-1).max()))
-
-
-def shoulders_m(joints: JointSet) -> float:
-    """The 3-D distance between the skeleton's shoulders, metres (NaN without both)."""
-    left, right = joints.get('left_shoulder'), joints.get('right_shoulder')
-    if left is None or right is None:
-        return math.nan
-    return float(np.sqrt(((joints.xyz[left] - joints.xyz[right]) ** 2).sum()))
 
 
 def _finite(v: NDArray[np.float64]) -> bool:
