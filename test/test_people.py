@@ -901,6 +901,23 @@ def test_an_unseen_person_predicted_out_of_the_image_has_left():
     assert tr.step([], 25 * DT, INTR, _wall(None)) == [] and tr.ended == [1]
 
 
+@pytest.mark.parametrize('max_unseen_at_side_s', [TrackingConfig().max_unseen_at_side_s, math.inf])
+def test_an_unseen_person_at_the_images_side_is_kept_but_not_published(max_unseen_at_side_s):
+    """`max_unseen_at_side_s`: a person last seen reaching the image's side and unseen since
+    has most often walked out (on lab_walk, ghosts at the border): kept, not published after
+    that long, and published again under their id when seen. Unseen in the middle of the
+    image, a person is published as before (predicted)."""
+    for x, at_side in ((-1.0, True), (0.0, False)):  # the image spans about -1.2..1.2 m at 2.5
+        tr = tracker(max_unseen_at_side_s=max_unseen_at_side_s)
+        for k in range(6):
+            (first,) = tr.step([person(x)], k * DT, INTR)
+        unseen = [len(tr.step([], k * DT, INTR)) for k in range(6, 10)]
+        hidden = at_side and math.isfinite(max_unseen_at_side_s)
+        assert unseen == ([1, 1, 0, 0] if hidden else [1] * 4), (x, unseen)
+        out = tr.step([person(x)], 10 * DT, INTR)
+        assert [t.track_id for t in out] == [first.track_id]
+
+
 def test_a_setting_changed_live_reaches_every_persons_stage_and_the_next_person():
     """`configure` on the several-person stages (what the nodes and `FramePipeline.configure`
     call on a live parameter change) sets the template and every person's stage; a person

@@ -229,7 +229,7 @@ class PeopleTracker:
         self.tracks = [t for t in self.tracks
                        if (t.id or t.seen_s == stamp_s) and t not in gone]
         self.ended += [t.id for t in gone]
-        return self._published(stamp_s, has_3d=intrinsics is not None)
+        return self._published(stamp_s, intrinsics)
 
     def _released(self, track: _Track, stamp_s: float) -> bool:
         """`held_needs_front`: a held track unseen with nobody seen in front of it any more
@@ -241,18 +241,20 @@ class PeopleTracker:
         track.held = False
         return stamp_s - track.seen_s > cfg.max_unseen_s
 
-    def _published(self, stamp_s: float, *, has_3d: bool = True) -> list[JointSet]:
+    def _published(self, stamp_s: float, intrinsics: Intrinsics | None) -> list[JointSet]:
         """The skeletons published (by their person's sides: `facing`), primary first; kept,
         not published: a pose held too long (mostly where nobody is), a span over `max_span_m`
         or (with 3-D) under `min_span_m`, a second skeleton on one body (`one_body_m`),
-        shoulders `max_shoulders_m` apart."""
-        cfg = self.config
+        shoulders `max_shoulders_m` apart, unseen at the image's side (`max_unseen_at_side_s`)."""
+        cfg, has_3d = self.config, intrinsics is not None
         least = cfg.min_span_m if has_3d else 0.0
         published: list[_Track] = []
         for t in self._ordered(stamp_s):
             wide = has_3d and self._too_wide(t)
-            if not (t.held and stamp_s - t.held_s > cfg.max_held_s) \
-                    and least <= span_m(t.last) <= cfg.max_span_m and not wide \
+            out = has_3d and not t.held and stamp_s - t.seen_s > cfg.max_unseen_at_side_s \
+                and not _clear_of_sides(t.last, intrinsics)  # most often walked out
+            if not (t.held and stamp_s - t.held_s > cfg.max_held_s or wide or out) \
+                    and least <= span_m(t.last) <= cfg.max_span_m \
                     and not self._on_body(t, published):
                 published.append(t)
         return [t.facing.of(t.last) for t in published]
