@@ -604,7 +604,7 @@ def test_diagnose_summary_splits_by_placement_and_tilt() -> None:
     """Left and right swapped by name, the middle parts kept (`mirror_index`, which the tool
     and mirrored positives use); tools/lspet_diagnose's summary averages the found pose's
     PCK@0.2 over the photographs it lies on the person in and by torso tilt."""
-    from pose4d_ros.training.dpm.samples import mirror_index
+    from pose4d_ros.core.skeleton import mirror_index
 
     tool = _diagnose_tool()
     names = PARTS_14.names

@@ -37,10 +37,11 @@ from pose4d_ros.core.dpm.infer import Detector, SearchPlan
 from pose4d_ros.core.dpm.model import PartModel, load_model
 from pose4d_ros.core.files import write_json
 from pose4d_ros.core.metrics import pck_per_frame, reference_size
+from pose4d_ros.core.skeleton import mirror_index
 from pose4d_ros.datasets.lspet import read_frames
 from pose4d_ros.models import model_path
 from pose4d_ros.training.dpm.diagnose import labelled_score
-from pose4d_ros.training.dpm.samples import TrainConfig, mirror_index, person_scale
+from pose4d_ros.training.dpm.samples import TrainConfig, person_scale
 
 
 def pck(uv: np.ndarray, truth: np.ndarray, alpha: float = 0.1) -> float:

@@ -31,6 +31,7 @@ from pose4d_ros.core.convnet import (
     quantize,
     save_convnet,
 )
+from pose4d_ros.core.skeleton import mirror_index
 from pose4d_ros.datasets import lspet
 from pose4d_ros.datasets.sources import open_source, parse_ranges, source_kind
 from pose4d_ros.models import model_path
@@ -42,7 +43,6 @@ from pose4d_ros.training.convnet_torch import (
     render_crops,
     train,
 )
-from pose4d_ros.training.dpm.samples import mirror_index
 from pose4d_ros.util.machine import command_line, machine
 from pose4d_ros.util.progress import log
 

@@ -13,6 +13,7 @@ Conventions (the one place they are defined):
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 # CAD-60 skeleton files, joints 1..15 in file order (Kinect v1 / OpenNI).
@@ -195,3 +196,20 @@ def limb_bones() -> list[tuple[int, int]]:
         bones.append((names.index(f'{side}_shoulder'), names.index(f'{side}_hip')))
     bones.append((names.index('left_hip'), names.index('right_hip')))
     return bones
+
+
+_LEFT_RIGHT = (('left_', 'right_'), ('right_', 'left_'))
+
+
+def mirror_name(name: str) -> str:
+    """'left_wrist' <-> 'right_wrist'; other names unchanged."""
+    for a, b in _LEFT_RIGHT:
+        if name.startswith(a):
+            return b + name[len(a):]
+    return name
+
+
+def mirror_index(names: Sequence[str]) -> list[int]:
+    """Index in `names` of each name's left/right counterpart (itself for the middle parts)."""
+    names = list(names)
+    return [names.index(mirror_name(n)) for n in names]

@@ -60,7 +60,7 @@ from numpy.typing import NDArray
 from pose4d_ros.core.camera import Intrinsics, cad60_intrinsics, depth_to_metres, project
 from pose4d_ros.core.files import write_atomic
 from pose4d_ros.core.joints import DETECTED, MISSING, JointSet
-from pose4d_ros.core.skeleton import CAD60_JOINTS
+from pose4d_ros.core.skeleton import CAD60_JOINTS, mirror_index
 from pose4d_ros.datasets.frame import Frame
 
 N_JOINTS = 15
@@ -80,21 +80,9 @@ FRAME_PERIOD_NS = 1_000_000_000 // 30 + 1  # 33.333... ms, rounded up so stamps 
 VIDEO_GAP_NS = 1_000_000_000
 
 
-def _mirror_permutation() -> tuple[int, ...]:
-    """Index map between file slots and anatomical joints: joint i <-> slot _MIRROR[i]."""
-    perm = []
-    for name in CAD60_JOINTS:
-        if name.startswith('left_'):
-            name = 'right_' + name[5:]
-        elif name.startswith('right_'):
-            name = 'left_' + name[6:]
-        perm.append(CAD60_JOINTS.index(name))
-    return tuple(perm)
-
-
 # OpenNI's mirrored labels: anatomical joint i is stored in file slot _MIRROR[i] (an involution,
 # so the same map converts both ways). Joints 1-11 are mapped onto joints 1-11 only.
-_MIRROR = _mirror_permutation()
+_MIRROR = tuple(mirror_index(CAD60_JOINTS))
 
 
 @dataclass(frozen=True)

@@ -29,24 +29,20 @@ import numpy as np
 from numpy.typing import NDArray
 
 from pose4d_ros.core.joints import JointSet
+from pose4d_ros.core.skeleton import mirror_index
 
 MAX_WALK_MPS = 2.5  # faster is a track jumping between bodies, not a walk
 
 
 @functools.cache
-def _mirror(names: tuple[str, ...]) -> tuple[int, ...]:
-    """Each joint's index after the sides are exchanged (`left_*` <-> `right_*`)."""
-    def other(name: str) -> str:
-        for side, twin in (('left_', 'right_'), ('right_', 'left_')):
-            if name.startswith(side):
-                return twin + name[len(side):]
-        return name
-    return tuple(names.index(other(n)) if other(n) in names else i for i, n in enumerate(names))
+def _mirror(names: tuple[str, ...]) -> list[int]:
+    """`mirror_index` of a skeleton's names, made once per set of names (every frame asks)."""
+    return mirror_index(names)
 
 
 def swapped(joints: JointSet) -> JointSet:
     """`joints` with every left joint and its right twin exchanged (names kept in place)."""
-    perm = list(_mirror(joints.names))
+    perm = _mirror(joints.names)
     return JointSet.of_arrays(joints.names, joints.uv[perm], joints.xyz[perm],
                               joints.confidence[perm], joints.source[perm],
                               joints.covariance[perm], score=joints.score,

@@ -14,7 +14,7 @@ from numpy.typing import NDArray
 
 from pose4d_ros.core.camera import Intrinsics, cad60_intrinsics
 from pose4d_ros.core.hog import Level, depth_image, feature_pyramid
-from pose4d_ros.core.skeleton import PART_TREES, PartTree
+from pose4d_ros.core.skeleton import PART_TREES, PartTree, mirror_index
 
 Progress = Callable[[Iterable, str, int | None], Iterable]
 Log = Callable[[str], None]
@@ -148,23 +148,6 @@ class TrainConfig:
         saved = json.loads(metadata.get('train_config', '{}'))
         return cls(**{k: tuple(v) if isinstance(v, list) else v for k, v in saved.items()
                       if k in cls.__dataclass_fields__})
-
-
-_LEFT_RIGHT = (('left_', 'right_'), ('right_', 'left_'))
-
-
-def mirror_name(name: str) -> str:
-    """'left_wrist' <-> 'right_wrist'; other names unchanged."""
-    for a, b in _LEFT_RIGHT:
-        if name.startswith(a):
-            return b + name[len(a):]
-    return name
-
-
-def mirror_index(names: Sequence[str]) -> list[int]:
-    """Index in `names` of each name's left/right counterpart (itself for the middle parts)."""
-    names = list(names)
-    return [names.index(mirror_name(n)) for n in names]
 
 
 def part_joints(frame, names: Sequence[str]) -> tuple[NDArray[np.float64], NDArray[np.bool_]]:
