@@ -199,6 +199,7 @@ def agreement(frames: Sequence[Frame], ours: Sequence[Sequence[JointSet]],
     """The agreement table of our skeletons (every person's, a tuple a frame) with the
     reference's (one a frame) and, with `labels`, people found and ghosts (module docstring)."""
     names = [n for n in SKELETON_14 if n in reference[0].names] if reference else []
+    group = {n: g for g, members in JOINT_GROUPS.items() for n in members}
     within = {a: [] for a in ALPHAS}
     groups: dict[str, list[bool]] = {g: [] for g in JOINT_GROUPS}
     offsets: dict[str, list[NDArray[np.float64]]] = {g: [] for g in JOINT_GROUPS}
@@ -248,13 +249,12 @@ def agreement(frames: Sequence[Frame], ours: Sequence[Sequence[JointSet]],
                 if chosen is not None:
                     for n, dist in zip(idx, d, strict=True):
                         if np.isfinite(dist):
-                            g = next(g for g, m in JOINT_GROUPS.items() if n in m)
-                            offsets[g].append((chosen.uv[chosen.index(n)] - ref.uv[ref.index(n)])
-                                              / height)
+                            offsets[group[n]].append(
+                                (chosen.uv[chosen.index(n)] - ref.uv[ref.index(n)]) / height)
                 for a in ALPHAS:
                     within[a].extend(d <= a * height)
                 for n, ok in zip(idx, d <= ALPHAS[0] * height, strict=True):
-                    groups[next(g for g, m in JOINT_GROUPS.items() if n in m)].append(bool(ok))
+                    groups[group[n]].append(bool(ok))
                 entry['agree'] = round(100 * float(np.mean(d <= ALPHAS[0] * height)), 1)
                 entry['height_px'] = round(height, 1)
         per_frame.append(entry)

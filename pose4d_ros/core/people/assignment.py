@@ -85,9 +85,10 @@ def yielded(confirmed: NDArray[np.float64], tentative: NDArray[np.float64], marg
     track's cost for the same detection is lower by more than `margin`: a confirmed track
     whose person has left, still within the gate of someone who walked in behind them and
     started a track of their own, leaves that person's detection to that track."""
-    best = np.full(confirmed.shape[1], np.inf)
-    if tentative.size:
-        best = np.fmin.reduce(np.where(np.isnan(tentative), np.inf, tentative), axis=0)
+    if not tentative.size:
+        return confirmed
+    # NaN where no tentative track reaches a detection: no comparison holds, the cost stays
+    best = np.fmin.reduce(tentative, axis=0)
     return np.where(confirmed > best + margin, np.nan, confirmed)
 
 
