@@ -44,6 +44,7 @@ from std_msgs.msg import Header
 
 from pose4d_ros import wire
 from pose4d_ros.core.malloc import keep_freed_memory
+from pose4d_ros.core.registration import shift_image
 from pose4d_ros.core.sync import TIME_JUMP_S, StampJumps, StampSync
 from pose4d_ros.core.threads import set_blas_threads
 from pose4d_ros.nodes import qos
@@ -641,3 +642,18 @@ class _Pivot:
                   else [wire.joints_from_cdr(data)])
         return cls(Header(stamp=Time(sec=sec, nanosec=nanosec), frame_id=frame_id),
                    lambda: people, several)
+
+
+def pixel_pair(value: list) -> str | None:
+    """The rule of `foreground.depth_shift_px` and `tracker.depth_shift_px`: two whole numbers
+    of pixels."""
+    if len(value) == 2 and all(isinstance(v, int) for v in value):
+        return None
+    return f'{list(value)}: give two whole numbers of pixels, [dx, dy]'
+
+
+def camera_depth(msg: Image, shift: list[int]) -> np.ndarray:
+    """The camera's depth image (metres), moved by `foreground.depth_shift_px` onto its
+    colour image (`core.registration.shift_image`; as it is at [0, 0])."""
+    depth = wire.depth_from_msg(msg)
+    return shift_image(depth, *shift) if any(shift) else depth

@@ -47,12 +47,13 @@ from std_msgs.msg import Header
 from pose4d_ros.core.camera import backproject, cad60_intrinsics, depth_to_millimetres
 from pose4d_ros.core.foreground import ForegroundConfig
 from pose4d_ros.core.people import people_labels
-from pose4d_ros.core.registration import shift_image
 from pose4d_ros.core.stages import ForegroundStage
 from pose4d_ros.nodes import qos
 from pose4d_ros.nodes.common import (
     PairedInputs,
     StageMonitor,
+    camera_depth,
+    pixel_pair,
     run,
 )
 from pose4d_ros.nodes.convert import cloud_to_msg
@@ -61,7 +62,6 @@ from pose4d_ros.nodes.params import Param
 from pose4d_ros.nodes.polled import RecentImages
 from pose4d_ros.wire import (
     color_from_msg,
-    depth_from_msg,
     image_to_cdr,
     intrinsics_from_msg,
     stamp_to_ns,
@@ -70,14 +70,6 @@ from pose4d_ros.wire import (
 _F = ForegroundConfig()
 # Person regions published at most per frame (the detector's max_people bounds its work)
 MAX_PEOPLE = 16
-
-
-def pixel_pair(value: list) -> str | None:
-    """`foreground.depth_shift_px`'s (and `tracker.depth_shift_px`'s) rule: two whole numbers
-    of pixels."""
-    if len(value) == 2 and all(isinstance(v, int) for v in value):
-        return None
-    return f'{list(value)}: give two whole numbers of pixels, [dx, dy]'
 
 
 PARAMS = (
@@ -120,13 +112,6 @@ CAMERA_TOPICS = [(Image, 'camera/color/image_raw', qos.SENSOR_QOS),
                  (CameraInfo, 'camera/color/camera_info', qos.SENSOR_QOS)]
 # the foreground node's: the colour camera's calibration (the pivot) and the depth image
 DEPTH_TOPICS = [CAMERA_TOPICS[2], CAMERA_TOPICS[1]]
-
-
-def camera_depth(msg: Image, shift: list[int]) -> np.ndarray:
-    """The camera's depth image (metres), moved by `foreground.depth_shift_px` onto its
-    colour image (`core.registration.shift_image`; as it is at [0, 0])."""
-    depth = depth_from_msg(msg)
-    return shift_image(depth, *shift) if any(shift) else depth
 
 
 def foreground_settings(p: dict[str, Any]) -> dict[str, Any]:

@@ -36,7 +36,7 @@ from pose4d_ros.core.camera import cad60_intrinsics
 from pose4d_ros.core.people import people_labels
 from pose4d_ros.core.pipeline import FramePipeline
 from pose4d_ros.nodes import detector, foreground, ik, qos, tracker
-from pose4d_ros.nodes.common import PairedInputs, StageMonitor, run
+from pose4d_ros.nodes.common import PairedInputs, StageMonitor, camera_depth, run
 from pose4d_ros.nodes.lifecycle import AUTOSTART, ManagedNode
 from pose4d_ros.nodes.params import Param
 from pose4d_ros.wire import (
@@ -118,7 +118,7 @@ class PipelineNode(ManagedNode):
         try:
             intrinsics = intrinsics_from_msg(info_msg)
             out = self.pipeline.step(color_from_msg(color_msg),
-                                     foreground.camera_depth(depth_msg, self.depth_shift),
+                                     camera_depth(depth_msg, self.depth_shift),
                                      intrinsics, stamp * 1e-9)
         except ValueError as exc:
             self.monitor.bad_input(f'frame at {stamp} ns refused: {exc}')

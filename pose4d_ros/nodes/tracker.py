@@ -49,9 +49,10 @@ from pose4d_ros.nodes import qos
 from pose4d_ros.nodes.common import (
     PeopleInputs,
     StageMonitor,
+    camera_depth,
+    pixel_pair,
     run,
 )
-from pose4d_ros.nodes.foreground import camera_depth, pixel_pair
 from pose4d_ros.nodes.lifecycle import AUTOSTART, ManagedNode
 from pose4d_ros.nodes.params import Param
 from pose4d_ros.nodes.polled import LatestIntrinsics, RecentImages
